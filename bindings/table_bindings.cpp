@@ -1,0 +1,141 @@
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <cstring>
+#include <memory>
+
+#include "bindings.hpp"
+#include "tofmat/core/bin_spec.hpp"
+#include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/core/npy.hpp"
+#include "tofmat/core/table_file.hpp"
+
+namespace tofmat::py {
+
+namespace {
+
+using Table = std::shared_ptr<ExemplarTable>;  // pybind11 holders cannot be const; nothing mutates a table
+
+pyb::array_t<double> bin_edges(const BinSpec& b) {
+  pyb::array_t<double> out(b.count + 1);
+  auto v = out.mutable_unchecked<1>();
+  for (std::uint32_t j = 0; j <= b.count; ++j) v(j) = b.lower_edge_mm(j);
+  return out;
+}
+
+pyb::array_t<double> bin_centres(const BinSpec& b) {
+  pyb::array_t<double> out(b.count);
+  auto v = out.mutable_unchecked<1>();
+  for (std::uint32_t j = 0; j < b.count; ++j) v(j) = b.centre_mm(j);
+  return out;
+}
+
+std::vector<RowSpec> rows_from(const std::vector<std::pair<int, int>>& rows) {
+  std::vector<RowSpec> out;
+  for (const auto& [f, ref] : rows) {
+    if (f < 0 || f > 65535 || ref < 0 || ref > 65535) throw pyb::value_error("row frequencies must be 0..65535 MHz");
+    out.push_back(RowSpec{static_cast<std::uint16_t>(f), static_cast<std::uint16_t>(ref)});
+  }
+  return out;
+}
+
+}  // namespace
+
+void register_table(pyb::module_& m) {
+  pyb::class_<BinSpec>(m, "BinSpec", "Depth bins: `count` bins of `width_mm` starting at `start_mm`.")
+      .def(pyb::init([](double start, double width, std::uint32_t count) {
+             BinSpec b{start, width, count};
+             b.validate();
+             return b;
+           }),
+           pyb::arg("start_mm"), pyb::arg("width_mm"), pyb::arg("count"))
+      .def_static("linspace", &BinSpec::linspace, pyb::arg("start_mm"), pyb::arg("stop_mm"), pyb::arg("count"),
+                  "Bins whose left edges are numpy.linspace(start_mm, stop_mm, count).")
+      .def_readonly("start_mm", &BinSpec::start_mm)
+      .def_readonly("width_mm", &BinSpec::width_mm)
+      .def_readonly("count", &BinSpec::count)
+      .def("index_of", &BinSpec::index_of, pyb::arg("depth_mm"), "Bin index of a depth, -1 outside.")
+      .def_property_readonly("edges_mm", &bin_edges)
+      .def_property_readonly("centres_mm", &bin_centres)
+      .def("__eq__", &BinSpec::operator==)
+      .def("__repr__", [](const BinSpec& b) {
+        return "BinSpec(start_mm=" + std::to_string(b.start_mm) + ", width_mm=" + std::to_string(b.width_mm) +
+               ", count=" + std::to_string(b.count) + ")";
+      });
+
+  pyb::class_<ExemplarTable, Table>(m, "ExemplarTable",
+                                    "Per-material relative-distortion curves (materials x rows x bins), NaN missing.")
+      .def(pyb::init([](std::vector<std::string> materials, const pyb::handle& features, BinSpec bins,
+                        std::vector<std::pair<int, int>> rows) {
+             const auto n_m = static_cast<pyb::ssize_t>(materials.size());
+             const auto n_r = static_cast<pyb::ssize_t>(rows.size());
+             auto a = as_float32(features, {n_m, n_r, static_cast<pyb::ssize_t>(bins.count)}, "features");
+             std::vector<float> values(a.data(), a.data() + a.size());
+             return std::make_shared<ExemplarTable>(std::move(materials), rows_from(rows), bins,
+                                                          std::move(values));
+           }),
+           pyb::arg("materials"), pyb::arg("features"), pyb::arg("bins"), pyb::arg("rows"),
+           "features: float array (len(materials), len(rows), bins.count), NaN = missing. "
+           "rows: (freq_mhz, ref_freq_mhz) per row; a row holds d(freq) - d(ref).")
+      .def_static(
+          "from_npy_dir",
+          [](const std::filesystem::path& dir, double start, double stop) {
+            return std::make_shared<ExemplarTable>(ExemplarTable::from_npy_dir(dir, start, stop));
+          },
+          pyb::arg("path"), pyb::arg("bin_start_mm") = 600.0, pyb::arg("bin_stop_mm") = 1200.0,
+          "Import a folder of <material>.npy curves (the real database's layout). Bins are "
+          "numpy.linspace(bin_start_mm, bin_stop_mm, n_bins), as the authors built them.")
+      .def_static(
+          "load", [](const std::filesystem::path& p) { return std::make_shared<ExemplarTable>(load_table(p)); },
+          pyb::arg("path"), "Load a compact table file (.tmx).")
+      .def(
+          "save", [](const ExemplarTable& t, const std::filesystem::path& p) { save_table(t, p); }, pyb::arg("path"),
+          "Save as a compact table file (.tmx), atomically.")
+      .def_property_readonly("materials", &ExemplarTable::materials)
+      .def_property_readonly("bins", &ExemplarTable::bins)
+      .def_property_readonly("bin_edges_mm", [](const ExemplarTable& t) { return bin_edges(t.bins()); })
+      .def_property_readonly("bin_centres_mm", [](const ExemplarTable& t) { return bin_centres(t.bins()); })
+      .def_property_readonly("rows",
+                             [](const ExemplarTable& t) {
+                               std::vector<std::pair<int, int>> out;
+                               for (const auto& r : t.rows()) out.emplace_back(r.freq_mhz, r.ref_freq_mhz);
+                               return out;
+                             })
+      .def_property_readonly("n_rows", &ExemplarTable::n_rows)
+      .def_property_readonly("n_bins", &ExemplarTable::n_bins)
+      .def_property_readonly("quant_step_mm", &ExemplarTable::quant_step_mm,
+                             "Step of the int16 quantisation the values went through (0: never quantised).")
+      .def_property_readonly("features",
+                             [](const ExemplarTable& t) {
+                               pyb::array_t<float> out({static_cast<pyb::ssize_t>(t.n_materials()),
+                                                        static_cast<pyb::ssize_t>(t.n_rows()),
+                                                        static_cast<pyb::ssize_t>(t.n_bins())});
+                               std::memcpy(out.mutable_data(), t.values().data(), t.values().size() * sizeof(float));
+                               return out;
+                             })
+      .def_property_readonly("valid_counts",
+                             [](const ExemplarTable& t) {
+                               std::vector<std::size_t> out;
+                               for (std::size_t i = 0; i < t.n_materials(); ++i) out.push_back(t.valid_count(i));
+                               return out;
+                             })
+      .def("index_of", &ExemplarTable::index_of, pyb::arg("material"))
+      .def("__len__", &ExemplarTable::n_materials)
+      .def("__repr__", [](const ExemplarTable& t) {
+        return "<ExemplarTable " + std::to_string(t.n_materials()) + " materials x " + std::to_string(t.n_rows()) +
+               " rows x " + std::to_string(t.n_bins()) + " bins>";
+      });
+
+  m.def(
+      "read_npy",
+      [](const std::filesystem::path& p) {
+        NpyArray a = read_npy_file(p);
+        std::vector<pyb::ssize_t> shape(a.shape.begin(), a.shape.end());
+        pyb::array_t<double> out(shape);
+        std::memcpy(out.mutable_data(), a.data.data(), a.data.size() * sizeof(double));
+        return out;
+      },
+      pyb::arg("path"), "Read a float .npy file with the core's bounded reader (Python 2 headers accepted).");
+}
+
+}  // namespace tofmat::py

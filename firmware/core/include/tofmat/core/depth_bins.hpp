@@ -1,0 +1,45 @@
+// Accumulation of per-frame feature observations into depth bins. A hand-held
+// sweep adds one observation per frame; the current query (mean per bin, NaN
+// where a bin has too few observations) is a partial feature vector that the
+// classifier matches as it grows (Eq. (12) partial matching).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "tofmat/core/bin_spec.hpp"
+
+namespace tofmat {
+
+class DepthBinAccumulator {
+ public:
+  DepthBinAccumulator(BinSpec bins, std::uint32_t n_rows);
+
+  // Adds row_values[0..n_rows) at the bin holding depth_mm (the combined,
+  // unwrapped depth). NaN row values are skipped; an Inf value throws
+  // std::invalid_argument. Returns the bin index, or -1 when the depth is
+  // outside the bins (nothing is added).
+  std::int32_t add(double depth_mm, const float* row_values);
+
+  // n_rows x n_bins means, NaN where a bin holds fewer than min_count observations.
+  std::vector<float> query(std::uint64_t min_count = 1) const;
+
+  // Observations in one row and bin; throws std::out_of_range outside the table.
+  std::uint64_t count(std::uint32_t row, std::uint32_t bin) const;
+  // Bins where at least one row has min_count observations.
+  std::uint32_t bins_covered(std::uint64_t min_count = 1) const;
+  void reset();
+
+  const BinSpec& bins() const { return bins_; }
+  std::uint32_t n_rows() const { return n_rows_; }
+
+ private:
+  std::size_t index(std::uint32_t row, std::uint32_t bin) const { return static_cast<std::size_t>(row) * bins_.count + bin; }
+
+  BinSpec bins_;
+  std::uint32_t n_rows_;
+  std::vector<double> sum_;
+  std::vector<std::uint64_t> count_;
+};
+
+}  // namespace tofmat

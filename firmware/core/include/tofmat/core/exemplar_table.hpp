@@ -1,0 +1,77 @@
+// The exemplar table: for each material, a curve of relative distortions
+// (n_rows frequency pairs x n_bins depth bins), NaN where it was not observed.
+// This is the database the nearest-neighbour classifier of Eq. (12) searches.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "tofmat/core/bin_spec.hpp"
+
+namespace tofmat {
+
+inline constexpr std::size_t kMaxMaterials = 4096;
+inline constexpr std::uint32_t kMaxRows = 16;
+inline constexpr std::size_t kMaxNameBytes = 64;
+
+// What one row holds: d(freq) - d(ref_freq) in mm (the database's sign, i.e.
+// Eq. (10) negated). 0/0 means "unknown".
+struct RowSpec {
+  std::uint16_t freq_mhz = 0;
+  std::uint16_t ref_freq_mhz = 0;
+  bool operator==(const RowSpec& o) const { return freq_mhz == o.freq_mhz && ref_freq_mhz == o.ref_freq_mhz; }
+};
+
+class ExemplarTable {
+ public:
+  // values: n_materials x n_rows x n_bins, C order, NaN = missing, everything
+  // else finite. Throws std::invalid_argument on any inconsistency.
+  ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins,
+                std::vector<float> values, double quant_step_mm = 0.0);
+
+  // A folder of <material>.npy files, each (n_rows, n_bins) float64 in mm,
+  // all the same shape; a bin where every row is exactly 0.0 is missing (the
+  // real database's convention, see its README). Materials sorted by name.
+  // The files do not carry their binning: bins are BinSpec::linspace(
+  // bin_start_mm, bin_stop_mm, n_bins), as the authors built them. Empty
+  // `rows` means the Kinect v2 database rows when there are two rows, else
+  // rows of unknown frequency.
+  static ExemplarTable from_npy_dir(const std::filesystem::path& dir, double bin_start_mm, double bin_stop_mm,
+                                    std::vector<RowSpec> rows = {});
+
+  std::size_t n_materials() const { return materials_.size(); }
+  std::uint32_t n_rows() const { return static_cast<std::uint32_t>(rows_.size()); }
+  std::uint32_t n_bins() const { return bins_.count; }
+  std::size_t elements_per_material() const { return static_cast<std::size_t>(n_rows()) * n_bins(); }
+
+  const std::vector<std::string>& materials() const { return materials_; }
+  const std::vector<RowSpec>& rows() const { return rows_; }
+  const BinSpec& bins() const { return bins_; }
+  // Step of the int16 quantisation this table went through (0 = never quantised).
+  double quant_step_mm() const { return quant_step_mm_; }
+
+  const std::vector<float>& values() const { return values_; }
+  const float* material_values(std::size_t m) const { return values_.data() + m * elements_per_material(); }
+  std::size_t valid_count(std::size_t m) const;
+
+  // Index of a material name, or -1.
+  std::int64_t index_of(const std::string& name) const;
+
+ private:
+  std::vector<std::string> materials_;
+  std::vector<RowSpec> rows_;
+  BinSpec bins_;
+  std::vector<float> values_;
+  double quant_step_mm_;
+};
+
+// The Kinect v2 database's rows: 16 vs 120 MHz, then 80 vs 120 MHz.
+std::vector<RowSpec> kinect2_database_rows();
+
+// Throws std::invalid_argument unless the name is 1..64 bytes of printable ASCII.
+void validate_material_name(const std::string& name);
+
+}  // namespace tofmat

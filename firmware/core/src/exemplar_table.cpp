@@ -1,0 +1,124 @@
+#include "tofmat/core/exemplar_table.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <stdexcept>
+
+#include "tofmat/core/error.hpp"
+#include "tofmat/core/npy.hpp"
+
+namespace tofmat {
+
+std::vector<RowSpec> kinect2_database_rows() { return {{16, 120}, {80, 120}}; }
+
+void validate_material_name(const std::string& name) {
+  if (name.empty() || name.size() > kMaxNameBytes) {
+    throw std::invalid_argument("material name must be 1.." + std::to_string(kMaxNameBytes) + " bytes: '" + name + "'");
+  }
+  for (char c : name) {
+    if (c <= 0x20 || c >= 0x7f) {
+      throw std::invalid_argument("material name must be printable ASCII without spaces: '" + name + "'");
+    }
+  }
+}
+
+ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins,
+                             std::vector<float> values, double quant_step_mm)
+    : materials_(std::move(materials)),
+      rows_(std::move(rows)),
+      bins_(bins),
+      values_(std::move(values)),
+      quant_step_mm_(quant_step_mm) {
+  if (materials_.empty()) throw std::invalid_argument("an exemplar table needs at least one material");
+  if (materials_.size() > kMaxMaterials) {
+    throw std::invalid_argument("too many materials: " + std::to_string(materials_.size()) + " (limit " +
+                                std::to_string(kMaxMaterials) + ")");
+  }
+  if (rows_.empty() || rows_.size() > kMaxRows) {
+    throw std::invalid_argument("an exemplar table needs 1.." + std::to_string(kMaxRows) + " rows, got " +
+                                std::to_string(rows_.size()));
+  }
+  bins_.validate();
+  std::set<std::string> seen;
+  for (const auto& name : materials_) {
+    validate_material_name(name);
+    if (!seen.insert(name).second) throw std::invalid_argument("duplicate material name '" + name + "'");
+  }
+  const std::size_t expected = materials_.size() * elements_per_material();
+  if (values_.size() != expected) {
+    throw std::invalid_argument("values hold " + std::to_string(values_.size()) + " elements, expected " +
+                                std::to_string(expected) + " (materials x rows x bins)");
+  }
+  for (float v : values_) {
+    if (std::isinf(v)) throw std::invalid_argument("table values must be finite or NaN (missing), found Inf");
+  }
+  if (!std::isfinite(quant_step_mm_) || quant_step_mm_ < 0.0) {
+    throw std::invalid_argument("quantisation step must be finite and >= 0");
+  }
+}
+
+std::size_t ExemplarTable::valid_count(std::size_t m) const {
+  const float* v = material_values(m);
+  return static_cast<std::size_t>(
+      std::count_if(v, v + elements_per_material(), [](float x) { return !std::isnan(x); }));
+}
+
+std::int64_t ExemplarTable::index_of(const std::string& name) const {
+  const auto it = std::find(materials_.begin(), materials_.end(), name);
+  return it == materials_.end() ? -1 : static_cast<std::int64_t>(it - materials_.begin());
+}
+
+ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, double bin_start_mm, double bin_stop_mm,
+                                          std::vector<RowSpec> rows) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec)) throw IoError("not a directory: " + dir.string());
+  std::vector<std::filesystem::path> files;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.is_regular_file() && entry.path().extension() == ".npy") files.push_back(entry.path());
+  }
+  std::sort(files.begin(), files.end());
+  if (files.empty()) throw IoError("no .npy files in " + dir.string());
+  if (files.size() > kMaxMaterials) throw std::invalid_argument("too many .npy files in " + dir.string());
+
+  std::vector<std::string> names;
+  std::vector<float> values;
+  std::size_t n_rows = 0, n_bins = 0;
+  for (const auto& f : files) {
+    const NpyArray a = read_npy_file(f);
+    if (a.shape.size() != 2) {
+      throw FormatError(f.string() + ": expected a 2-D array (rows x bins), got " + std::to_string(a.shape.size()) +
+                        " dimensions");
+    }
+    if (names.empty()) {
+      n_rows = a.shape[0];
+      n_bins = a.shape[1];
+    } else if (a.shape[0] != n_rows || a.shape[1] != n_bins) {
+      throw FormatError(f.string() + ": shape (" + std::to_string(a.shape[0]) + ", " + std::to_string(a.shape[1]) +
+                        ") differs from the other files' (" + std::to_string(n_rows) + ", " + std::to_string(n_bins) +
+                        ")");
+    }
+    names.push_back(f.stem().string());
+    const std::size_t base = values.size();
+    values.resize(base + n_rows * n_bins);
+    for (std::size_t b = 0; b < n_bins; ++b) {
+      bool all_zero = true;
+      for (std::size_t r = 0; r < n_rows; ++r) all_zero = all_zero && a.data[r * n_bins + b] == 0.0;
+      for (std::size_t r = 0; r < n_rows; ++r) {
+        const double v = a.data[r * n_bins + b];
+        if (!std::isfinite(v) && !std::isnan(v)) throw FormatError(f.string() + ": holds an infinite value");
+        values[base + r * n_bins + b] = all_zero ? NAN : static_cast<float>(v);
+      }
+    }
+  }
+  if (rows.empty()) rows = n_rows == 2 ? kinect2_database_rows() : std::vector<RowSpec>(n_rows);
+  if (rows.size() != n_rows) {
+    throw std::invalid_argument("row descriptions given for " + std::to_string(rows.size()) + " rows, files have " +
+                                std::to_string(n_rows));
+  }
+  if (n_bins < 2 || n_bins > kMaxBins) throw FormatError(dir.string() + ": files hold " + std::to_string(n_bins) + " bins, need 2..65535");
+  const BinSpec bins = BinSpec::linspace(bin_start_mm, bin_stop_mm, static_cast<std::uint32_t>(n_bins));
+  return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values));
+}
+
+}  // namespace tofmat

@@ -1,0 +1,158 @@
+#include "tofmat/core/table_file.hpp"
+
+#include <zlib.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "tofmat/core/byte_reader.hpp"
+#include "tofmat/core/byte_writer.hpp"
+#include "tofmat/core/error.hpp"
+#include "tofmat/core/file_io.hpp"
+
+namespace tofmat {
+namespace {
+
+[[noreturn]] void fail(const std::string& msg) { throw FormatError("table file: " + msg); }
+
+std::uint32_t crc32_of(const std::uint8_t* p, std::size_t n) {
+  uLong c = crc32(0L, Z_NULL, 0);
+  // zlib takes uInt lengths; feed in chunks so any size is safe.
+  while (n > 0) {
+    const uInt chunk = static_cast<uInt>(std::min<std::size_t>(n, 1u << 30));
+    c = crc32(c, p, chunk);
+    p += chunk;
+    n -= chunk;
+  }
+  return static_cast<std::uint32_t>(c);
+}
+
+}  // namespace
+
+double choose_quant_step_mm(const ExemplarTable& table) {
+  double max_abs = 0.0;
+  for (float v : table.values()) {
+    if (!std::isnan(v)) max_abs = std::max(max_abs, static_cast<double>(std::fabs(v)));
+  }
+  // Smallest 2^e (e >= -24) with round(max_abs / 2^e) <= 32767.
+  for (int e = -24; e < 1000; ++e) {
+    const double step = std::ldexp(1.0, e);
+    if (std::nearbyint(max_abs / step) <= kTableMaxAbs) return step;
+  }
+  return std::ldexp(1.0, 1000);  // unreachable for finite float values
+}
+
+std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
+  const double step = choose_quant_step_mm(table);
+  ByteWriter w;
+  w.bytes(std::string_view(kTableMagic, sizeof kTableMagic));
+  w.u16(kTableVersionMajor);
+  w.u16(kTableVersionMinor);
+  w.u32(static_cast<std::uint32_t>(table.n_materials()));
+  w.u32(table.n_rows());
+  w.u32(table.n_bins());
+  w.f64(table.bins().start_mm);
+  w.f64(table.bins().width_mm);
+  w.f64(step);
+  for (const RowSpec& r : table.rows()) {
+    w.u16(r.freq_mhz);
+    w.u16(r.ref_freq_mhz);
+  }
+  for (const std::string& name : table.materials()) {
+    w.u8(static_cast<std::uint8_t>(name.size()));
+    w.bytes(name);
+  }
+  for (float v : table.values()) {
+    const std::int16_t q =
+        std::isnan(v) ? kTableMissing : static_cast<std::int16_t>(std::nearbyint(static_cast<double>(v) / step));
+    w.u16(static_cast<std::uint16_t>(q));
+  }
+  const std::uint32_t crc = crc32_of(w.data().data(), w.data().size());
+  w.u32(crc);
+  return w.take();
+}
+
+ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
+  if (size > kTableMaxFileBytes) fail("file is larger than the " + std::to_string(kTableMaxFileBytes) + "-byte limit");
+  ByteReader in(bytes, size, "table file");
+  if (std::memcmp(in.take(sizeof kTableMagic, "magic"), kTableMagic, sizeof kTableMagic) != 0) {
+    fail("bad magic (not a tofmat table file)");
+  }
+  const std::uint16_t major = in.u16("version");
+  const std::uint16_t minor = in.u16("version");
+  if (major != kTableVersionMajor) {
+    fail("unsupported version " + std::to_string(major) + "." + std::to_string(minor) + " (this build reads " +
+         std::to_string(kTableVersionMajor) + ".x)");
+  }
+  const std::uint32_t n_materials = in.u32("material count");
+  const std::uint32_t n_rows = in.u32("row count");
+  const std::uint32_t n_bins = in.u32("bin count");
+  if (n_materials < 1 || n_materials > kMaxMaterials) {
+    fail("material count " + std::to_string(n_materials) + " is outside 1.." + std::to_string(kMaxMaterials));
+  }
+  if (n_rows < 1 || n_rows > kMaxRows) fail("row count " + std::to_string(n_rows) + " is outside 1..16");
+  if (n_bins < 1 || n_bins > kMaxBins) fail("bin count " + std::to_string(n_bins) + " is outside 1..65535");
+  const std::size_t n_values = std::size_t{n_materials} * n_rows * n_bins;
+  if (n_values * 2 > kTableMaxFileBytes) fail("dimensions describe a table larger than the file size limit");
+
+  BinSpec bins;
+  bins.start_mm = in.f64("bin start");
+  bins.width_mm = in.f64("bin width");
+  bins.count = n_bins;
+  const double step = in.f64("quantisation step");
+  if (!std::isfinite(step) || !(step > 0.0)) fail("quantisation step is not a finite positive number");
+
+  std::vector<RowSpec> rows(n_rows);
+  for (auto& r : rows) {
+    r.freq_mhz = in.u16("row frequency");
+    r.ref_freq_mhz = in.u16("row reference frequency");
+  }
+  std::vector<std::string> names(n_materials);
+  for (auto& name : names) {
+    const std::uint8_t len = in.u8("name length");
+    if (len == 0 || len > kMaxNameBytes) fail("material name length " + std::to_string(len) + " is outside 1..64");
+    const auto* p = in.take(len, "material name");
+    name.assign(reinterpret_cast<const char*>(p), len);
+  }
+  const std::size_t expected_rest = n_values * 2 + 4;
+  if (in.remaining() < expected_rest) {
+    fail("truncated: " + std::to_string(in.remaining()) + " bytes left for values and checksum, need " +
+         std::to_string(expected_rest));
+  }
+  if (in.remaining() > expected_rest) {
+    fail(std::to_string(in.remaining() - expected_rest) + " unexpected trailing bytes");
+  }
+  const std::uint8_t* raw = in.take(n_values * 2, "values");
+  const std::size_t crc_offset = in.offset();
+  const std::uint32_t stored_crc = in.u32("checksum");
+  const std::uint32_t actual_crc = crc32_of(bytes, crc_offset);
+  if (stored_crc != actual_crc) fail("checksum mismatch: the file is corrupted");
+
+  std::vector<float> values(n_values);
+  for (std::size_t i = 0; i < n_values; ++i) {
+    const auto q = static_cast<std::int16_t>(static_cast<std::uint16_t>(raw[2 * i] | (raw[2 * i + 1] << 8)));
+    values[i] = q == kTableMissing ? NAN : static_cast<float>(q * step);
+  }
+  try {
+    return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step);
+  } catch (const std::invalid_argument& e) {
+    fail(std::string("inconsistent content: ") + e.what());
+  }
+}
+
+void save_table(const ExemplarTable& table, const std::filesystem::path& path) {
+  write_file_atomic(path, encode_table(table));
+}
+
+ExemplarTable load_table(const std::filesystem::path& path) {
+  const auto bytes = read_file_bounded(path, kTableMaxFileBytes);
+  try {
+    return decode_table(bytes.data(), bytes.size());
+  } catch (const FormatError& e) {
+    throw FormatError(path.string() + ": " + e.what());
+  }
+}
+
+}  // namespace tofmat
