@@ -31,14 +31,21 @@ Classification FloatClassifier::classify(const float* query, std::size_t n) cons
                                 std::to_string(table_->n_rows()) + " x " + std::to_string(table_->n_bins()) + " = " +
                                 std::to_string(len));
   }
-  std::size_t query_valid = 0;
+  // Gather the query's valid elements once: a partial query (a few bins of a
+  // sweep) then costs O(valid) per candidate instead of O(n_rows * n_bins).
+  std::vector<std::uint32_t> idx;
+  std::vector<double> qv;
+  idx.reserve(len);
+  qv.reserve(len);
   for (std::size_t k = 0; k < len; ++k) {
     if (std::isinf(query[k])) {
       throw std::invalid_argument("query element " + std::to_string(k) + " is infinite (use NaN for missing)");
     }
-    query_valid += !std::isnan(query[k]);
+    if (std::isnan(query[k])) continue;
+    idx.push_back(static_cast<std::uint32_t>(k));
+    qv.push_back(query[k]);
   }
-  if (query_valid == 0) throw std::invalid_argument("query has no valid element (all NaN): nothing to classify");
+  if (idx.empty()) throw std::invalid_argument("query has no valid element (all NaN): nothing to classify");
 
   Classification out;
   out.ranking.reserve(candidates_.size());
@@ -46,10 +53,10 @@ Classification FloatClassifier::classify(const float* query, std::size_t n) cons
     const float* ex = table_->material_values(p);
     double sum = 0.0;
     std::uint32_t valid = 0;
-    for (std::size_t k = 0; k < len; ++k) {
-      // NaN on either side fails the comparison's validity: skip (Eq. (12) "N/A").
-      if (std::isnan(query[k]) || std::isnan(ex[k])) continue;
-      const double d = static_cast<double>(query[k]) - static_cast<double>(ex[k]);
+    for (std::size_t i = 0; i < idx.size(); ++i) {
+      const float e = ex[idx[i]];
+      if (std::isnan(e)) continue;  // missing in the exemplar: Eq. (12) "N/A"
+      const double d = qv[i] - static_cast<double>(e);
       sum += d * d;
       ++valid;
     }

@@ -82,9 +82,9 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
   }
   const std::uint16_t major = in.u16("version");
   const std::uint16_t minor = in.u16("version");
-  if (major != kTableVersionMajor) {
+  if (major != kTableVersionMajor || minor != kTableVersionMinor) {
     fail("unsupported version " + std::to_string(major) + "." + std::to_string(minor) + " (this build reads " +
-         std::to_string(kTableVersionMajor) + ".x)");
+         std::to_string(kTableVersionMajor) + "." + std::to_string(kTableVersionMinor) + ")");
   }
   const std::uint32_t n_materials = in.u32("material count");
   const std::uint32_t n_rows = in.u32("row count");

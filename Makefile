@@ -1,0 +1,80 @@
+# tofmat: the entry point. `make demo` and `make test` do all set-up themselves.
+SHELL    := /bin/bash
+PYTHON   ?= python3
+JOBS     ?= 2
+DB       ?= $(abspath ../shared/data/tanaka2017_kinect2_db)
+BUILD    := build/release
+ASAN     := build/asan
+FUZZDIR  := build/fuzz
+TABLE    := build/tanaka2017.tmx
+FUZZ_SECONDS ?= 30
+TOFMAT   = $(PYTHON) -m tofmat
+SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
+
+# Debian 12 packages: compilers and build tools, GoogleTest, zlib (CRC-32),
+# clang and its runtime for libFuzzer.
+APT_PACKAGES := build-essential cmake ninja-build libgtest-dev zlib1g-dev clang libclang-rt-14-dev
+
+.PHONY: all setup build build-cpp build-python test test-cpp test-sanitize test-python fuzz demo bench clean check-db
+
+all: build
+
+# Idempotent: apt runs only when a package is missing; pip pins live in sdk/requirements.txt.
+setup:
+	@missing=$$(for p in $(APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "setup: installing $$missing"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing >/dev/null; \
+	fi
+	$(PYTHON) -m pip install -q --disable-pip-version-check -r sdk/requirements.txt
+
+build: setup build-cpp build-python
+
+build-cpp:
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake --build $(BUILD) -j$(JOBS)
+
+# The SDK builds the extension from this CMake project (scikit-build-core);
+# build/sdk-* keeps its build tree so a rebuild is incremental.
+build-python:
+	$(PYTHON) -m pip install -q --disable-pip-version-check --no-build-isolation ./sdk
+
+check-db:
+	@test -d "$(DB)" || { echo "error: real database not found at $(DB) (set DB=...)" >&2; exit 1; }
+
+test: setup check-db build-cpp build-python test-cpp test-sanitize test-python
+
+test-cpp:
+	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
+
+# The same C++ suites under AddressSanitizer + UndefinedBehaviorSanitizer.
+test-sanitize:
+	cmake -S . -B $(ASAN) -G Ninja -DCMAKE_BUILD_TYPE=Debug -DTOFMAT_SANITIZE=ON -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake --build $(ASAN) -j$(JOBS)
+	ctest --test-dir $(ASAN) --output-on-failure -j$(JOBS)
+
+test-python:
+	TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python -q
+
+# libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus.
+fuzz: setup
+	cmake -S . -B $(FUZZDIR) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DTOFMAT_FUZZ=ON -DTOFMAT_BUILD_TESTS=OFF >/dev/null
+	cmake --build $(FUZZDIR) -j$(JOBS)
+	@for t in $(FUZZDIR)/tests/fuzz/fuzz_*; do \
+	  name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
+	  echo "fuzz: $$name for $(FUZZ_SECONDS) s"; \
+	  $$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1 | grep -E "stat::number_of_executed_units|ERROR|SUMMARY" ; \
+	  test $${PIPESTATUS[0]} -eq 0 || exit 1; \
+	done
+
+$(TABLE): check-db
+	$(TOFMAT) table import $(DB) -o $(TABLE)
+
+demo: setup check-db build-python $(TABLE)
+	$(TOFMAT) demo --table $(TABLE)
+
+bench: setup check-db build-python $(TABLE)
+	$(TOFMAT) bench --table $(TABLE)
+
+clean:
+	rm -rf build

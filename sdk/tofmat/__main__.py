@@ -1,0 +1,5 @@
+"""`python -m tofmat` is the `tofmat` command line."""
+
+from .cli import main
+
+main()

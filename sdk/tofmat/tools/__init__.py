@@ -1,0 +1,1 @@
+"""Tools built on the core: simulated sweeps, benchmarks, plots, the demo."""

@@ -1,0 +1,84 @@
+"""Accuracy and run time of the classifier on noisy windows of the real curves.
+
+Error and latency are always reported together (DESIGN.md section 6). This is a
+benchmark: it prints figures and never asserts on time.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .. import Classifier, ExemplarTable
+from .sweeps import random_windows
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    backend: str
+    window_bins: int
+    queries: int
+    accuracy: float  # fraction of windows labelled with their own material
+    us_per_query: float  # median of single classify() calls, Python call included
+    us_per_query_batch: float  # classify_batch() wall time / queries
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        return asdict(self)
+
+
+def bench_windows(
+    table: ExemplarTable,
+    windows: list[int],
+    noise_mm: float = 0.3,
+    per_material: int = 40,
+    seed: int = 0,
+    backend: str = "float",
+) -> list[BenchRow]:
+    clf = Classifier(table, backend=backend)
+    rows: list[BenchRow] = []
+    for length in windows:
+        rng = np.random.default_rng(seed + length)
+        ws = list(random_windows(table, length, noise_mm, per_material, rng))
+        queries = np.stack([w.query for w in ws])
+        truth = np.array([w.material for w in ws])
+        times = np.empty(len(ws))
+        labels = np.empty(len(ws), dtype=np.int64)
+        for i, q in enumerate(queries):
+            t0 = time.perf_counter_ns()
+            labels[i] = clf.classify(q).index
+            times[i] = time.perf_counter_ns() - t0
+        t0 = time.perf_counter_ns()
+        batch = clf.classify_batch(queries)
+        batch_ns = time.perf_counter_ns() - t0
+        if any(b.index != lab for b, lab in zip(batch, labels)):
+            raise RuntimeError("classify_batch disagrees with classify")
+        rows.append(
+            BenchRow(
+                backend=backend,
+                window_bins=length,
+                queries=len(ws),
+                accuracy=float(np.mean(labels == truth)),
+                us_per_query=float(np.median(times) / 1e3),
+                us_per_query_batch=batch_ns / 1e3 / len(ws),
+            )
+        )
+    return rows
+
+
+def format_markdown(rows: list[BenchRow], noise_mm: float) -> str:
+    lines = [
+        f"host: {platform.machine()} {platform.processor() or ''}".rstrip(),
+        f"noise: N(0, {noise_mm} mm) on every element of the window",
+        "",
+        "| backend | window (bins) | queries | accuracy | us/query (single) | us/query (batch) |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.backend} | {r.window_bins} | {r.queries} | {100 * r.accuracy:.1f} % "
+            f"| {r.us_per_query:.1f} | {r.us_per_query_batch:.1f} |"
+        )
+    return "\n".join(lines)
