@@ -1,5 +1,8 @@
 #include <pybind11/stl.h>
 
+#include <cfloat>
+#include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "bindings.hpp"
@@ -53,6 +56,23 @@ FloatArray as_float32(const pyb::handle& obj, const std::vector<pyb::ssize_t>& s
   for (std::size_t i = 0; ok && i < shape.size(); ++i) ok = shape[i] < 0 || shape[i] == actual[i];
   if (!ok) {
     throw pyb::value_error(std::string(what) + " has shape " + shape_text(actual) + ", expected " + shape_text(shape));
+  }
+  if (a.dtype().itemsize() > 4) {
+    // A float64 value beyond float32's range would silently become Inf in the
+    // cast and then be reported as "infinite": name the real problem instead.
+    using DoubleArray = pyb::array_t<double, pyb::array::c_style | pyb::array::forcecast>;
+    const DoubleArray d = DoubleArray::ensure(a);
+    if (!d) throw pyb::error_already_set();
+    for (pyb::ssize_t i = 0; i < d.size(); ++i) {
+      const double v = d.data()[i];
+      if (std::isfinite(v) && std::fabs(v) > static_cast<double>(FLT_MAX)) {
+        char text[48];
+        std::snprintf(text, sizeof text, "%g", v);
+        throw pyb::value_error(std::string(what) + " element " + std::to_string(i) + " = " + text +
+                               " is outside the float32 range");
+      }
+    }
+    return FloatArray::ensure(d);
   }
   return FloatArray::ensure(a);
 }

@@ -26,9 +26,17 @@ void BinSpec::validate() const {
 
 std::int32_t BinSpec::index_of(double depth_mm) const {
   if (!std::isfinite(depth_mm)) return -1;
-  const double x = std::floor((depth_mm - start_mm) / width_mm);
-  if (!(x >= 0.0) || x >= static_cast<double>(count)) return -1;
-  return static_cast<std::int32_t>(x);
+  const double q = std::floor((depth_mm - start_mm) / width_mm);
+  if (!(q >= -1.0) || q > static_cast<double>(count)) return -1;  // far outside; also keeps the cast defined
+  auto j = static_cast<std::int64_t>(q);
+  // The division can round across an edge: settle on the edges exactly as
+  // lower_edge_mm() computes them, so bin j is [lower_edge(j), lower_edge(j+1)).
+  if (j >= 0 && depth_mm < lower_edge_mm(static_cast<std::uint32_t>(j))) {
+    --j;
+  } else if (depth_mm >= lower_edge_mm(static_cast<std::uint32_t>(j + 1))) {
+    ++j;
+  }
+  return j >= 0 && j < static_cast<std::int64_t>(count) ? static_cast<std::int32_t>(j) : -1;
 }
 
 }  // namespace tofmat

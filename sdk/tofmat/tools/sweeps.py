@@ -40,12 +40,22 @@ def window_query(
 def random_windows(
     table: ExemplarTable, length: int, noise_mm: float, per_material: int, rng: np.random.Generator
 ) -> Iterator[Window]:
-    """`per_material` windows of `length` bins at random positions for every material."""
+    """`per_material` windows of `length` bins at random positions for every material.
+
+    Only windows holding at least one observed element of the curve are drawn
+    (a hand-held sweep over bins the material was never measured in has nothing
+    to classify); a material with no such window yields none.
+    """
     features = table.features
     n_bins = table.n_bins
     if not 1 <= length <= n_bins:
         raise ValueError(f"window length must be 1..{n_bins}, got {length}")
     for m in range(len(table.materials)):
+        observed = np.isfinite(features[m]).any(axis=0).astype(np.int64)
+        in_window = np.convolve(observed, np.ones(length, dtype=np.int64), mode="valid")
+        starts = np.flatnonzero(in_window > 0)
+        if starts.size == 0:
+            continue
         for _ in range(per_material):
-            start = int(rng.integers(0, n_bins - length + 1))
+            start = int(starts[rng.integers(0, starts.size)])
             yield Window(m, start, length, window_query(features[m], start, length, noise_mm, rng))

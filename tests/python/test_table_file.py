@@ -1,0 +1,333 @@
+"""The compact table file (.tmx): round trip, byte layout (docs/table-format.md), damaged files,
+atomic saving."""
+
+from __future__ import annotations
+
+import math
+import os
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tofmat
+
+HEADER = struct.Struct("<8sHHIIIddd")  # magic, major, minor, n_materials, n_rows, n_bins, start, width, step
+MISSING = -32768
+
+
+def parse_tmx(data: bytes) -> dict:
+    """An independent reader of the documented layout (no validation beyond what it needs)."""
+    magic, major, minor, n_m, n_r, n_b, start, width, step = HEADER.unpack_from(data, 0)
+    off = HEADER.size
+    rows = [struct.unpack_from("<HH", data, off + 4 * i) for i in range(n_r)]
+    off += 4 * n_r
+    names = []
+    for _ in range(n_m):
+        n = data[off]
+        names.append(data[off + 1 : off + 1 + n].decode("ascii"))
+        off += 1 + n
+    names_end = off
+    values = np.frombuffer(data, "<i2", n_m * n_r * n_b, off).reshape(n_m, n_r, n_b)
+    off += 2 * values.size
+    (crc,) = struct.unpack_from("<I", data, off)
+    return dict(
+        magic=magic, major=major, minor=minor, start=start, width=width, step=step, rows=rows,
+        names=names, values=values, crc=crc, crc_offset=off, names_end=names_end, size=off + 4,
+    )
+
+
+def with_crc(body: bytes) -> bytes:
+    """Bytes before the checksum + a correct CRC-32: damage that only the field checks can catch."""
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def patch(data: bytes, offset: int, fmt: str, value) -> bytes:
+    """Overwrite one field and fix the checksum."""
+    b = bytearray(data[:-4])
+    struct.pack_into(fmt, b, offset, value)
+    return with_crc(bytes(b))
+
+
+def load_bytes(tmp_path: Path, data: bytes, name: str = "bad.tmx") -> tofmat.ExemplarTable:
+    p = tmp_path / name
+    p.write_bytes(data)
+    return tofmat.ExemplarTable.load(p)
+
+
+def is_power_of_two(x: float) -> bool:
+    m, _ = math.frexp(x)
+    return x > 0 and m == 0.5
+
+
+# ---------------------------------------------------------------------------------------------
+# Round trip of the real database
+# ---------------------------------------------------------------------------------------------
+def test_round_trip_real_database(real_table, real_tmx) -> None:
+    t2 = tofmat.ExemplarTable.load(real_tmx)
+    assert t2.materials == real_table.materials
+    assert t2.rows == real_table.rows
+    assert t2.bins == real_table.bins
+    assert (t2.bins.start_mm, t2.bins.width_mm, t2.bins.count) == (
+        real_table.bins.start_mm, real_table.bins.width_mm, real_table.bins.count)
+    step = t2.quant_step_mm
+    assert step > 0 and is_power_of_two(step)
+    a, b = real_table.features, t2.features
+    assert b.dtype == np.float32 and b.shape == a.shape
+    assert np.array_equal(np.isnan(a), np.isnan(b))
+    assert t2.valid_counts == real_table.valid_counts
+    ok = ~np.isnan(a)
+    assert np.max(np.abs(a[ok].astype(np.float64) - b[ok])) <= step / 2
+    # The step is the smallest power of two that fits the largest value in int16.
+    max_abs = np.max(np.abs(a[ok]).astype(np.float64))
+    assert round(max_abs / step) <= 32767 < round(max_abs / (step / 2))
+    assert real_tmx.stat().st_size < 24 * 1024
+
+
+def test_loaded_table_classifies_like_the_original(real_table, real_tmx) -> None:
+    t2 = tofmat.ExemplarTable.load(real_tmx)
+    clf = tofmat.Classifier(t2)
+    for i, name in enumerate(real_table.materials):
+        r = clf.classify(real_table.features[i])
+        assert r.material == name
+        assert r.distance <= (t2.quant_step_mm / 2) ** 2
+
+
+def test_resaving_a_loaded_table_is_byte_identical(real_tmx, tmp_path) -> None:
+    t2 = tofmat.ExemplarTable.load(real_tmx)
+    again = tmp_path / "again.tmx"
+    t2.save(again)
+    assert again.read_bytes() == real_tmx.read_bytes()
+
+
+def test_byte_layout_matches_the_documentation(real_table, real_tmx) -> None:
+    data = real_tmx.read_bytes()
+    f = parse_tmx(data)
+    assert f["magic"] == b"TOFMATBL"
+    assert (f["major"], f["minor"]) == (1, 0)
+    assert f["size"] == len(data)
+    assert f["start"] == real_table.bins.start_mm and f["width"] == real_table.bins.width_mm
+    assert f["rows"] == real_table.rows
+    assert f["names"] == real_table.materials
+    assert f["crc"] == zlib.crc32(data[: f["crc_offset"]])
+    step = f["step"]
+    feats = real_table.features.astype(np.float64)
+    expected = np.where(np.isnan(feats), MISSING, np.rint(np.nan_to_num(feats) / step)).astype(np.int16)
+    np.testing.assert_array_equal(f["values"], expected)
+    assert np.all(np.abs(f["values"][f["values"] != MISSING].astype(int)) <= 32767)
+
+
+@pytest.mark.parametrize("scale", [1e-9, 1e-3, 1.0, 250.0, 1e6, 3e37])
+def test_round_trip_synthetic_scales(tmp_path, rng, scale) -> None:
+    feats = (rng.normal(0, 1, (3, 2, 17)) * scale).astype(np.float32)
+    feats[1, 0, 5:9] = np.nan
+    feats[2] = np.nan  # a material with no valid value survives the round trip
+    bins = tofmat.BinSpec(-12.5, 0.75, 17)
+    t = tofmat.ExemplarTable(["a", "b", "c"], feats, bins, [(20, 100), (0, 0)])
+    p = tmp_path / "s.tmx"
+    t.save(p)
+    t2 = tofmat.ExemplarTable.load(p)
+    step = t2.quant_step_mm
+    assert is_power_of_two(step) and step >= 2.0**-24
+    assert t2.materials == ["a", "b", "c"] and t2.rows == [(20, 100), (0, 0)] and t2.bins == bins
+    assert np.array_equal(np.isnan(t2.features), np.isnan(feats))
+    ok = ~np.isnan(feats)
+    assert np.max(np.abs(feats[ok].astype(np.float64) - t2.features[ok])) <= step / 2 * (1 + 1e-6)
+    max_abs = float(np.max(np.abs(feats[ok])))
+    assert round(max_abs / step) <= 32767
+    if step > 2.0**-24:
+        assert round(max_abs / (step / 2)) > 32767
+
+
+def test_round_trip_all_missing_table(tmp_path) -> None:
+    t = tofmat.ExemplarTable(["a"], np.full((1, 1, 4), np.nan, np.float32), tofmat.BinSpec(0.0, 1.0, 4), [(16, 120)])
+    t.save(tmp_path / "n.tmx")
+    t2 = tofmat.ExemplarTable.load(tmp_path / "n.tmx")
+    assert np.isnan(t2.features).all() and t2.valid_counts == [0]
+
+
+# ---------------------------------------------------------------------------------------------
+# Damaged files
+# ---------------------------------------------------------------------------------------------
+def test_truncated_files(real_tmx, tmp_path) -> None:
+    data = real_tmx.read_bytes()
+    names_end = parse_tmx(data)["names_end"]
+    for cut in [0, 1, 7, 8, 9, 11, 20, 47, 48, 55, names_end - 3, names_end, names_end + 1, len(data) // 2, len(data) - 5, len(data) - 1]:
+        with pytest.raises(tofmat.FormatError, match="truncated") as e:
+            load_bytes(tmp_path, data[:cut])
+        assert "bad.tmx" in str(e.value), cut
+
+
+def test_flipped_byte_is_a_checksum_error(real_tmx, tmp_path) -> None:
+    data = bytearray(real_tmx.read_bytes())
+    for pos in (len(data) // 2, len(data) // 3, len(data) - 5):
+        bad = bytearray(data)
+        bad[pos] ^= 0x01
+        with pytest.raises(tofmat.FormatError, match="checksum"):
+            load_bytes(tmp_path, bytes(bad))
+    bad = bytearray(data)
+    bad[-1] ^= 0x80  # the checksum itself
+    with pytest.raises(tofmat.FormatError, match="checksum"):
+        load_bytes(tmp_path, bytes(bad))
+
+
+def test_wrong_magic(real_tmx, tmp_path) -> None:
+    data = real_tmx.read_bytes()
+    for magic in (b"TOFMATBX", b"\x00" * 8, b"\x93NUMPY\x01\x00"):
+        with pytest.raises(tofmat.FormatError, match="magic"):
+            load_bytes(tmp_path, with_crc(magic + data[8:-4]))
+    with pytest.raises(tofmat.FormatError, match="magic"):
+        load_bytes(tmp_path, b"PK\x03\x04" + b"\x00" * 200)
+
+
+@pytest.mark.parametrize("major", [0, 2, 0xFFFF])
+def test_wrong_major_version(real_tmx, tmp_path, major) -> None:
+    data = real_tmx.read_bytes()
+    with pytest.raises(tofmat.FormatError, match="version"):
+        load_bytes(tmp_path, patch(data, 8, "<H", major))
+
+
+def test_unknown_minor_version(real_tmx, tmp_path) -> None:
+    # docs/table-format.md: minor version must be 0, else "unsupported version".
+    data = real_tmx.read_bytes()
+    with pytest.raises(tofmat.FormatError, match="version"):
+        load_bytes(tmp_path, patch(data, 10, "<H", 1))
+
+
+def test_trailing_bytes(real_tmx, tmp_path) -> None:
+    data = real_tmx.read_bytes()
+    with pytest.raises(tofmat.FormatError, match="trailing"):
+        load_bytes(tmp_path, data + b"\x00")
+    with pytest.raises(tofmat.FormatError, match="trailing"):
+        load_bytes(tmp_path, with_crc(data[:-4] + b"\x00\x00"))
+
+
+def small_tmx(tmp_path: Path) -> bytes:
+    t = tofmat.ExemplarTable(
+        ["ab", "cd"], np.arange(2 * 1 * 3, dtype=np.float32).reshape(2, 1, 3), tofmat.BinSpec(600.0, 3.0, 3), [(16, 120)]
+    )
+    t.save(tmp_path / "small.tmx")
+    return (tmp_path / "small.tmx").read_bytes()
+
+
+@pytest.mark.parametrize(
+    "offset, fmt, value",
+    [
+        (12, "<I", 0),  # no material
+        (12, "<I", 4097),
+        (12, "<I", 0xFFFFFFFF),
+        (16, "<I", 0),  # no row
+        (16, "<I", 17),
+        (20, "<I", 0),  # no bin
+        (20, "<I", 70000),
+        (32, "<d", 0.0),  # bin width
+        (32, "<d", -3.0),
+        (32, "<d", float("nan")),
+        (24, "<d", float("inf")),  # bin start
+        (40, "<d", 0.0),  # quantisation step
+        (40, "<d", -0.5),
+        (40, "<d", float("nan")),
+        (40, "<d", float("inf")),
+        (52, "<B", 0),  # first name length
+        (52, "<B", 200),
+        (53, "<2s", b"cd"),  # duplicate name
+        (53, "<2s", b"a "),  # name with a space
+        (53, "<2s", b"\x00x"),
+    ],
+)
+def test_bad_fields_with_a_valid_checksum(tmp_path, offset, fmt, value) -> None:
+    data = small_tmx(tmp_path)
+    assert data[52] == 2 and data[53:55] == b"ab"  # layout of this small file
+    with pytest.raises(tofmat.FormatError) as e:
+        load_bytes(tmp_path, patch(data, offset, fmt, value))
+    assert "bad.tmx" in str(e.value)
+
+
+def test_huge_dimensions_are_refused_quickly(tmp_path) -> None:
+    data = small_tmx(tmp_path)
+    b = patch(data, 12, "<I", 4096)
+    b = patch(b, 16, "<I", 16)
+    b = patch(b, 20, "<I", 65535)
+    with pytest.raises(tofmat.FormatError):
+        load_bytes(tmp_path, b)
+
+
+def test_missing_file_is_oserror(tmp_path) -> None:
+    with pytest.raises(OSError) as e:
+        tofmat.ExemplarTable.load(tmp_path / "nope.tmx")
+    assert not isinstance(e.value, ValueError)
+    with pytest.raises(OSError):
+        tofmat.ExemplarTable.load(tmp_path)  # a folder
+
+
+def test_empty_file_is_format_error(tmp_path) -> None:
+    with pytest.raises(tofmat.FormatError, match="truncated"):
+        load_bytes(tmp_path, b"")
+
+
+# ---------------------------------------------------------------------------------------------
+# Saving
+# ---------------------------------------------------------------------------------------------
+def test_save_replaces_existing_file_and_leaves_no_temporaries(real_table, tmp_path) -> None:
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    target = out_dir / "table.tmx"
+    small = tofmat.ExemplarTable(["x"], np.zeros((1, 2, 5), np.float32), tofmat.BinSpec(0.0, 1.0, 5), real_table.rows)
+    small.save(target)
+    assert tofmat.ExemplarTable.load(target).materials == ["x"]
+    real_table.save(target)
+    assert tofmat.ExemplarTable.load(target).materials == real_table.materials
+    assert os.listdir(out_dir) == ["table.tmx"]
+    assert (target.stat().st_mode & 0o777) == 0o644
+    # Saving over a plain (non-table) file replaces it too.
+    target.write_bytes(b"old junk")
+    small.save(str(target))
+    assert tofmat.ExemplarTable.load(target).materials == ["x"]
+    assert os.listdir(out_dir) == ["table.tmx"]
+
+
+def test_save_relative_path(real_table, tmp_path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    real_table.save("rel.tmx")
+    assert sorted(os.listdir(tmp_path)) == ["rel.tmx"]
+    assert tofmat.ExemplarTable.load("rel.tmx").materials == real_table.materials
+
+
+def test_save_into_missing_directory_is_oserror(real_table, tmp_path) -> None:
+    target = tmp_path / "no" / "such" / "dir" / "t.tmx"
+    with pytest.raises(OSError):
+        real_table.save(target)
+    assert not (tmp_path / "no").exists()
+    assert os.listdir(tmp_path) == []
+
+
+def test_save_over_a_directory_is_oserror_and_cleans_up(real_table, tmp_path) -> None:
+    (tmp_path / "t.tmx").mkdir()
+    with pytest.raises(OSError):
+        real_table.save(tmp_path / "t.tmx")
+    assert os.listdir(tmp_path) == ["t.tmx"]
+    assert (tmp_path / "t.tmx").is_dir()
+
+
+def test_oversized_file_is_refused_before_reading(tmp_path) -> None:
+    p = tmp_path / "big.tmx"
+    with open(p, "wb") as f:
+        f.truncate(64 * 1024 * 1024 + 1)  # sparse: one byte over the 64 MiB limit
+    with pytest.raises(tofmat.FormatError, match="limit"):
+        tofmat.ExemplarTable.load(p)
+
+
+def test_longest_names_and_many_materials_round_trip(tmp_path) -> None:
+    names = ["x" * 64] + [f"m{i}" for i in range(4095)]  # 4096 materials: the limit
+    feats = np.arange(4096, dtype=np.float32).reshape(4096, 1, 1)
+    t = tofmat.ExemplarTable(names, feats, tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)])
+    t.save(tmp_path / "many.tmx")
+    t2 = tofmat.ExemplarTable.load(tmp_path / "many.tmx")
+    assert t2.materials == names
+    np.testing.assert_array_equal(t2.features, feats)  # integers up to 4095: exact with any step <= 1
+    with pytest.raises(ValueError, match="4096"):
+        tofmat.ExemplarTable(names + ["one_more"], np.zeros((4097, 1, 1), np.float32), tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)])
+    with pytest.raises(ValueError, match="ASCII"):
+        tofmat.ExemplarTable(["café"], np.zeros((1, 1, 1), np.float32), tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)])
