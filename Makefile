@@ -63,7 +63,8 @@ fuzz: setup
 	@for t in $(FUZZDIR)/tests/fuzz/fuzz_*; do \
 	  name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
 	  echo "fuzz: $$name for $(FUZZ_SECONDS) s"; \
-	  $$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1 | grep -E "stat::number_of_executed_units|ERROR|SUMMARY" ; \
+	  $$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 -dict=tests/fuzz/$${name#fuzz_}.dict \
+	    $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1 | grep -E "stat::number_of_executed_units|ERROR|SUMMARY|Test unit written" ; \
 	  test $${PIPESTATUS[0]} -eq 0 || exit 1; \
 	done
 

@@ -1,6 +1,7 @@
 #include "tofmat/core/exemplar_table.hpp"
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <set>
 #include <stdexcept>
@@ -106,7 +107,8 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
       for (std::size_t r = 0; r < n_rows; ++r) all_zero = all_zero && a.data[r * n_bins + b] == 0.0;
       for (std::size_t r = 0; r < n_rows; ++r) {
         const double v = a.data[r * n_bins + b];
-        if (!std::isfinite(v) && !std::isnan(v)) throw FormatError(f.string() + ": holds an infinite value");
+        if (std::isinf(v)) throw FormatError(f.string() + ": holds an infinite value");
+        if (std::fabs(v) > static_cast<double>(FLT_MAX)) throw FormatError(f.string() + ": holds a value beyond the float32 range");
         values[base + r * n_bins + b] = all_zero ? NAN : static_cast<float>(v);
       }
     }

@@ -3,6 +3,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -36,10 +37,12 @@ double choose_quant_step_mm(const ExemplarTable& table) {
   for (float v : table.values()) {
     if (!std::isnan(v)) max_abs = std::max(max_abs, static_cast<double>(std::fabs(v)));
   }
-  // Smallest 2^e (e >= -24) with round(max_abs / 2^e) <= 32767.
+  // Smallest 2^e (e >= -24) with round(max_abs / 2^e) <= 32767 whose rounded
+  // values still decode to finite floats (near FLT_MAX rounding can reach 2^128).
   for (int e = -24; e < 1000; ++e) {
     const double step = std::ldexp(1.0, e);
-    if (std::nearbyint(max_abs / step) <= kTableMaxAbs) return step;
+    const double q = std::nearbyint(max_abs / step);
+    if (q <= kTableMaxAbs && q * step <= static_cast<double>(FLT_MAX)) return step;
   }
   return std::ldexp(1.0, 1000);  // unreachable for finite float values
 }
@@ -133,7 +136,13 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
   std::vector<float> values(n_values);
   for (std::size_t i = 0; i < n_values; ++i) {
     const auto q = static_cast<std::int16_t>(static_cast<std::uint16_t>(raw[2 * i] | (raw[2 * i + 1] << 8)));
-    values[i] = q == kTableMissing ? NAN : static_cast<float>(q * step);
+    if (q == kTableMissing) {
+      values[i] = NAN;
+      continue;
+    }
+    const double v = q * step;
+    if (std::fabs(v) > static_cast<double>(FLT_MAX)) fail("a value times the quantisation step exceeds the float range");
+    values[i] = static_cast<float>(v);
   }
   try {
     return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step);
