@@ -15,7 +15,7 @@ SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 # clang and its runtime for libFuzzer.
 APT_PACKAGES := build-essential cmake ninja-build libgtest-dev zlib1g-dev clang libclang-rt-14-dev
 
-.PHONY: all setup build build-cpp build-python test test-cpp test-sanitize test-python fuzz demo bench clean check-db
+.PHONY: all setup build build-cpp build-python typecheck test test-cpp test-sanitize test-python fuzz demo bench clean check-db
 
 all: build
 
@@ -42,7 +42,11 @@ build-python:
 check-db:
 	@test -d "$(DB)" || { echo "error: real database not found at $(DB) (set DB=...)" >&2; exit 1; }
 
-test: setup check-db build-cpp build-python test-cpp test-sanitize test-python
+test: setup check-db build-cpp build-python typecheck test-cpp test-sanitize test-python
+
+# The SDK is fully typed (the extension through sdk/tofmat/_tofmat.pyi).
+typecheck:
+	cd sdk && $(PYTHON) -m mypy --strict tofmat
 
 test-cpp:
 	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
