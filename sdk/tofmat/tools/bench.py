@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import platform
 import time
-from dataclasses import asdict, dataclass
+from collections import Counter
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -24,8 +25,10 @@ class BenchRow:
     accuracy: float  # fraction of windows labelled with their own material
     us_per_query: float  # median of single classify() calls, Python call included (best of `repeats`)
     us_per_query_batch: float  # classify_batch() wall time / queries (best of `repeats`)
+    # Most frequent confused pairs (material a, material b, count), either direction.
+    confusions: list[tuple[str, str, int]] = field(default_factory=list)
 
-    def as_dict(self) -> dict[str, float | int | str]:
+    def as_dict(self) -> dict[str, object]:
         return asdict(self)
 
 
@@ -61,6 +64,11 @@ def bench_windows(
             batch_ns = min(batch_ns, time.perf_counter_ns() - t0)
         if any(b.index != lab for b, lab in zip(batch, labels)):
             raise RuntimeError("classify_batch disagrees with classify")
+        pairs: Counter[tuple[str, str]] = Counter()
+        for t, lab in zip(truth, labels):
+            if t != lab:
+                a, b = sorted((table.materials[t], table.materials[lab]))
+                pairs[(a, b)] += 1
         rows.append(
             BenchRow(
                 backend=backend,
@@ -69,6 +77,7 @@ def bench_windows(
                 accuracy=float(np.mean(labels == truth)),
                 us_per_query=single_ns / 1e3,
                 us_per_query_batch=batch_ns / 1e3 / len(ws),
+                confusions=[(a, b, n) for (a, b), n in pairs.most_common(5)],
             )
         )
     return rows
@@ -87,4 +96,9 @@ def format_markdown(rows: list[BenchRow], noise_mm: float) -> str:
             f"| {r.backend} | {r.window_bins} | {r.queries} | {100 * r.accuracy:.1f} % "
             f"| {r.us_per_query:.1f} | {r.us_per_query_batch:.1f} |"
         )
+    lines.append("")
+    for r in rows:
+        if r.confusions:
+            pairs = ", ".join(f"{a}/{b} {n}" for a, b, n in r.confusions)
+            lines.append(f"most confused at {r.window_bins} bins: {pairs}")
     return "\n".join(lines)
