@@ -13,7 +13,7 @@ SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 # Debian 12 packages: compilers and build tools, GoogleTest, zlib (CRC-32),
 # clang and its runtime for libFuzzer.
-APT_PACKAGES := build-essential cmake ninja-build libgtest-dev zlib1g-dev clang libclang-rt-14-dev
+APT_PACKAGES := build-essential cmake ninja-build libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev
 
 .PHONY: all setup build build-cpp build-python typecheck test test-cpp test-sanitize test-python fuzz demo bench clean check-db
 
