@@ -6,4 +6,6 @@ PYBIND11_MODULE(_tofmat, m) {
   tofmat::py::register_table(m);
   tofmat::py::register_classifier(m);
   tofmat::py::register_features(m);
+  tofmat::py::register_decode(m);
+  tofmat::py::register_sim(m);
 }

@@ -1,0 +1,59 @@
+#include <cstring>
+
+#include "bindings.hpp"
+#include "tofmat/core/frame_decode.hpp"
+
+namespace tofmat::py {
+
+namespace {
+pyb::array_t<float> stack3(const std::array<std::vector<float>, 3>& planes, std::size_t pixels) {
+  pyb::array_t<float> out(std::vector<pyb::ssize_t>{3, static_cast<pyb::ssize_t>(pixels)});
+  for (std::size_t g = 0; g < 3; ++g) std::memcpy(out.mutable_data() + g * pixels, planes[g].data(), pixels * sizeof(float));
+  return out;
+}
+}  // namespace
+
+void register_decode(pyb::module_& m) {
+  pyb::class_<DecodedFrame>(m, "DecodedFrame", "Per-frequency phase/amplitude/depth and combined depth (numpy).")
+      .def_readonly("pixels", &DecodedFrame::pixels)
+      .def_property_readonly("phase_rad", [](const DecodedFrame& d) { return stack3(d.phase_rad, d.pixels); })
+      .def_property_readonly("amplitude", [](const DecodedFrame& d) { return stack3(d.amplitude, d.pixels); })
+      .def_property_readonly("depth_mm", [](const DecodedFrame& d) { return stack3(d.depth_mm, d.pixels); })
+      .def_property_readonly("combined_mm",
+                             [](const DecodedFrame& d) {
+                               pyb::array_t<float> out(static_cast<pyb::ssize_t>(d.pixels));
+                               std::memcpy(out.mutable_data(), d.combined_mm.data(), d.pixels * sizeof(float));
+                               return out;
+                             })
+      .def_property_readonly("flags", [](const DecodedFrame& d) {
+        pyb::array_t<std::uint8_t> out(static_cast<pyb::ssize_t>(d.pixels));
+        std::memcpy(out.mutable_data(), d.flags.data(), d.pixels);
+        return out;
+      });
+  m.attr("DECODE_SATURATED") = kDecodeSaturated;
+  m.attr("DECODE_DARK") = kDecodeDark;
+
+  m.def(
+      "decode_frame",
+      [](const pyb::handle& raw_obj, const pyb::object& p0_obj, double min_amplitude) {
+        auto raw = pyb::array_t<std::int16_t, pyb::array::c_style>::ensure(raw_obj);
+        if (!raw || raw.ndim() < 2 || raw.shape(0) != 9) {
+          throw pyb::value_error("raw must be an int16 array of shape (9, ...) (the nine phase-step images)");
+        }
+        const auto pixels = static_cast<std::size_t>(raw.size() / 9);
+        std::vector<float> p0;
+        if (!p0_obj.is_none()) {
+          auto a = as_float32(p0_obj, {3, -1}, "p0_rad");
+          if (static_cast<std::size_t>(a.shape(1)) != pixels) throw pyb::value_error("p0_rad must be (3, pixels)");
+          p0.assign(a.data(), a.data() + a.size());
+        }
+        DecodeOptions opt;
+        opt.min_amplitude = min_amplitude;
+        pyb::gil_scoped_release nogil;
+        return decode_frame(raw.data(), pixels, p0, opt);
+      },
+      pyb::arg("raw"), pyb::arg("p0_rad") = pyb::none(), pyb::arg("min_amplitude") = 3.0,
+      "Decode raw (9, ...) int16 samples; p0_rad (3, pixels) per-pixel corrections. Outputs are flat per pixel.");
+}
+
+}  // namespace tofmat::py

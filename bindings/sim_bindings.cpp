@@ -1,0 +1,172 @@
+#include <pybind11/complex.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+
+#include <cstring>
+
+#include "bindings.hpp"
+#include "tofmat/core/decode.hpp"
+#include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/sim/curve.hpp"
+#include "tofmat/sim/profile_io.hpp"
+#include "tofmat/sim/renderer.hpp"
+
+namespace tofmat::py {
+
+namespace {
+
+using namespace tofmat::sim;
+
+// Dicts cross the boundary as JSON text: one schema, parsed and checked in C++.
+pyb::object json_module() { return pyb::module_::import("json"); }
+std::string dumps(const pyb::dict& d) { return pyb::cast<std::string>(json_module().attr("dumps")(d)); }
+pyb::object loads(const std::string& s) { return json_module().attr("loads")(s); }
+
+CurveMethod method_from(const std::string& name) {
+  if (name == "interp") return CurveMethod::kInterpolate;
+  if (name == "bin") return CurveMethod::kBinMean;
+  throw pyb::value_error("method must be 'interp' or 'bin', got '" + name + "'");
+}
+
+template <typename T>
+pyb::array_t<T> image(const std::vector<T>& v, std::vector<pyb::ssize_t> shape) {
+  pyb::array_t<T> out(shape);
+  std::memcpy(out.mutable_data(), v.data(), v.size() * sizeof(T));
+  return out;
+}
+
+}  // namespace
+
+void register_sim(pyb::module_& parent) {
+  auto m = parent.def_submodule("sim", "Physically based Kinect v2 simulator (firmware/sim).");
+
+  pyb::class_<Material>(m, "Material", "A material's temporal response parameters (closed forms).")
+      .def_static("from_dict", [](const pyb::dict& d) { return material_from_json(dumps(d)); }, pyb::arg("params"))
+      .def("to_dict", [](const Material& x) { return loads(material_to_json(x)); })
+      .def_readonly("name", &Material::name)
+      .def_property_readonly("kind", [](const Material& x) { return std::string(response_kind_name(x.kind)); })
+      .def(
+          "response",
+          [](const Material& x, double freq_hz, double incidence_deg) {
+            return material_response(x, freq_hz, incidence_deg * kPi / 180.0);
+          },
+          pyb::arg("freq_hz"), pyb::arg("incidence_deg") = 0.0, "R(nu, alpha), the response's Fourier coefficient.")
+      .def("__repr__", [](const Material& x) { return "<sim.Material " + x.name + " (" + response_kind_name(x.kind) + ")>"; });
+
+  pyb::class_<DeviceProfile>(m, "DeviceProfile", "A ToF camera's parameters (harmonics, errors, noise, optics).")
+      .def_static("from_dict", [](const pyb::dict& d) { return device_from_json(dumps(d)); }, pyb::arg("params"))
+      .def_static("ideal_kinect2", &DeviceProfile::ideal_kinect2)
+      .def_static("load", &load_device, pyb::arg("name_or_path"), pyb::arg("data_dir"))
+      .def("to_dict", [](const DeviceProfile& d) { return loads(device_to_json(d)); })
+      .def_readonly("name", &DeviceProfile::name)
+      .def("__repr__", [](const DeviceProfile& d) { return "<sim.DeviceProfile " + d.name + ">"; });
+
+  pyb::class_<MaterialLibrary>(m, "MaterialLibrary", "Named materials, loaded from a versioned JSON file.")
+      .def_static("from_dict", [](const pyb::dict& d) { return library_from_json(dumps(d)); }, pyb::arg("params"))
+      .def_static("load", &load_library, pyb::arg("name_or_path"), pyb::arg("data_dir"))
+      .def("to_dict", [](const MaterialLibrary& l) { return loads(library_to_json(l)); })
+      .def_readonly("name", &MaterialLibrary::name)
+      .def_readonly("materials", &MaterialLibrary::materials)
+      .def_property_readonly("names",
+                             [](const MaterialLibrary& l) {
+                               std::vector<std::string> out;
+                               for (const auto& x : l.materials) out.push_back(x.name);
+                               return out;
+                             })
+      .def("__getitem__", &MaterialLibrary::find, pyb::arg("material"))
+      .def("__len__", [](const MaterialLibrary& l) { return l.materials.size(); });
+
+  m.def(
+      "distortion_curves",
+      [](const DeviceProfile& device, const std::vector<Material>& materials, const BinSpec& bins,
+         double incidence_deg, const std::string& method) {
+        const CurveMethod cm = method_from(method);
+        const auto rows = kinect2_database_rows();
+        std::vector<std::vector<float>> curves(materials.size());
+        {
+          pyb::gil_scoped_release nogil;
+          for (std::size_t i = 0; i < materials.size(); ++i) {
+            curves[i] = distortion_curve(device, materials[i], bins, rows, incidence_deg * kPi / 180.0, cm);
+          }
+        }
+        pyb::array_t<float> out({static_cast<pyb::ssize_t>(materials.size()), static_cast<pyb::ssize_t>(rows.size()),
+                                 static_cast<pyb::ssize_t>(bins.count)});
+        for (std::size_t i = 0; i < curves.size(); ++i) {
+          std::memcpy(out.mutable_data() + i * curves[i].size(), curves[i].data(), curves[i].size() * sizeof(float));
+        }
+        return out;
+      },
+      pyb::arg("device"), pyb::arg("materials"), pyb::arg("bins"), pyb::arg("incidence_deg") = 0.0,
+      pyb::arg("method") = "interp",
+      "Noise-free relative-distortion curves (n, 2, bins): rows d16-d120, d80-d120 vs combined depth.");
+
+  pyb::class_<Target>(m, "Target", "A planar (optionally folded) target covering a pixel rectangle.")
+      .def(pyb::init([](std::string material, double depth_mm, double yaw_deg, double pitch_deg, double fold_deg,
+                        std::array<int, 4> rect) {
+             Target t;
+             t.material = std::move(material);
+             t.depth_mm = depth_mm;
+             t.yaw_deg = yaw_deg;
+             t.pitch_deg = pitch_deg;
+             t.fold_deg = fold_deg;
+             t.x0 = rect[0];
+             t.y0 = rect[1];
+             t.x1 = rect[2];
+             t.y1 = rect[3];
+             return t;
+           }),
+           pyb::arg("material"), pyb::arg("depth_mm"), pyb::arg("yaw_deg") = 0.0, pyb::arg("pitch_deg") = 0.0,
+           pyb::arg("fold_deg") = 0.0, pyb::arg("rect") = std::array<int, 4>{196, 152, 316, 272},
+           "rect = (x0, y0, x1, y1), exclusive ends.")
+      .def_readwrite("material", &Target::material)
+      .def_readwrite("depth_mm", &Target::depth_mm)
+      .def_readwrite("yaw_deg", &Target::yaw_deg)
+      .def_readwrite("pitch_deg", &Target::pitch_deg)
+      .def_readwrite("fold_deg", &Target::fold_deg);
+
+  pyb::class_<Scene>(m, "Scene")
+      .def(pyb::init([](std::vector<Target> targets, std::string background_material, double background_depth_mm) {
+             Scene s;
+             s.targets = std::move(targets);
+             s.background_material = std::move(background_material);
+             s.background_depth_mm = background_depth_mm;
+             return s;
+           }),
+           pyb::arg("targets"), pyb::arg("background_material") = "", pyb::arg("background_depth_mm") = 3000.0)
+      .def_readwrite("targets", &Scene::targets)
+      .def_static("centred_target", &Scene::centred_target, pyb::arg("material"), pyb::arg("depth_mm"),
+                  pyb::arg("yaw_deg") = 0.0, pyb::arg("size") = 120);
+
+  pyb::class_<Frame>(m, "Frame", "A rendered raw frame and its ground truth (numpy arrays).")
+      .def_property_readonly("raw", [](const Frame& f) { return image(f.raw, {9, f.height, f.width}); })
+      .def_property_readonly("range_mm", [](const Frame& f) { return image(f.range_mm, {f.height, f.width}); })
+      .def_property_readonly("depth_mm", [](const Frame& f) { return image(f.depth_mm, {f.height, f.width}); })
+      .def_property_readonly("target", [](const Frame& f) { return image(f.target, {f.height, f.width}); })
+      .def_property_readonly("incidence_deg", [](const Frame& f) { return image(f.incidence_deg, {f.height, f.width}); });
+
+  pyb::class_<Renderer>(m, "Renderer")
+      .def(pyb::init<DeviceProfile, MaterialLibrary>(), pyb::arg("device"), pyb::arg("library"))
+      .def(
+          "render",
+          [](const Renderer& r, const Scene& s, std::uint64_t seed, bool noise) {
+            pyb::gil_scoped_release nogil;
+            return r.render(s, seed, noise);
+          },
+          pyb::arg("scene"), pyb::arg("seed") = 0, pyb::arg("noise") = true)
+      .def(
+          "pixel_phase",
+          [](const Renderer& r) {
+            const auto& c = r.device().camera;
+            pyb::array_t<float> out(std::vector<pyb::ssize_t>{3, c.height, c.width});
+            for (int g = 0; g < 3; ++g) {
+              const auto& p = r.pixel_phase(g);
+              std::memcpy(out.mutable_data() + static_cast<std::size_t>(g) * p.size(), p.data(), p.size() * sizeof(float));
+            }
+            return out;
+          },
+          "Per-pixel phase (3, H, W) the P0 tables correct; decode with p0 = -pixel_phase.")
+      .def_property_readonly("device", &Renderer::device)
+      .def_property_readonly("library", &Renderer::library);
+}
+
+}  // namespace tofmat::py

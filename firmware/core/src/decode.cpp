@@ -1,0 +1,38 @@
+#include "tofmat/core/decode.hpp"
+
+#include <cmath>
+
+#include "tofmat/core/features.hpp"
+
+namespace tofmat {
+
+std::complex<double> phasor_from_samples(const double m[3], double p0_rad) {
+  std::complex<double> z{0.0, 0.0};
+  for (int j = 0; j < 3; ++j) z += m[j] * std::polar(1.0, -(p0_rad + kPhaseStepsRad[j]));
+  return z;
+}
+
+double phase_of(std::complex<double> z) {
+  double p = std::atan2(z.imag(), z.real());
+  if (p < 0.0) p += 2.0 * kPi;
+  if (p >= 2.0 * kPi) p = 0.0;
+  return p;
+}
+
+UnwrappedDepth unwrap_depths(const std::array<double, 3>& d) {
+  const double r80 = unambiguous_range_mm(kGroupFrequenciesMhz[kGroup80]);
+  const double r120 = unambiguous_range_mm(kGroupFrequenciesMhz[kGroup120]);
+  UnwrappedDepth u{};
+  u.depth_mm[kGroup16] = d[kGroup16];
+  u.depth_mm[kGroup80] = d[kGroup80] + r80 * std::nearbyint((u.depth_mm[kGroup16] - d[kGroup80]) / r80);
+  u.depth_mm[kGroup120] = d[kGroup120] + r120 * std::nearbyint((u.depth_mm[kGroup80] - d[kGroup120]) / r120);
+  double num = 0.0, den = 0.0;
+  for (int g = 0; g < 3; ++g) {
+    num += kGroupFrequenciesMhz[g] * u.depth_mm[g];
+    den += kGroupFrequenciesMhz[g];
+  }
+  u.combined_mm = num / den;
+  return u;
+}
+
+}  // namespace tofmat

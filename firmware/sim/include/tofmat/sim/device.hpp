@@ -1,0 +1,68 @@
+// A ToF camera's parameters (docs/simulator-model.md, section 2), loaded from
+// a versioned device profile (data/devices/*.json).
+#pragma once
+
+#include <array>
+#include <complex>
+#include <cstdint>
+#include <string>
+
+namespace tofmat::sim {
+
+inline constexpr int kMaxHarmonic = 7;
+
+// One modulation frequency's illumination/demodulation and phase-step errors.
+struct FrequencyModel {
+  double freq_mhz = 0.0;          // nominal (what the decode assumes)
+  double scale_error = 0.0;       // true frequency = nominal * (1 + scale_error)
+  double phase_offset_rad = 0.0;  // delay of the reference
+  // G_h for h = 0..7 (index 0 unused, G_1 = 1): correlation waveform harmonics.
+  std::array<std::complex<double>, kMaxHarmonic + 1> harmonics{};
+  std::array<double, 3> step_gain{1.0, 1.0, 1.0};
+  std::array<double, 3> step_offset{0.0, 0.0, 0.0};  // relative to the signal scale A
+
+  double true_freq_hz() const { return freq_mhz * 1e6 * (1.0 + scale_error); }
+};
+
+// The per-pixel phase pattern the P0 tables correct: mean + radial term +
+// seeded pixel-to-pixel scatter, per frequency group.
+struct PixelPhasePattern {
+  std::array<double, 3> mean_rad{0.0, 0.0, 0.0};
+  std::array<double, 3> radial_rad{0.0, 0.0, 0.0};  // at the image corner (r = 1)
+  double scatter_rad = 0.0;
+  std::uint64_t seed = 1;
+};
+
+struct NoiseModel {
+  double read_noise = 0.0;  // counts, per raw sample
+  double shot_gain = 0.0;   // variance per count of (signal + ambient)
+  double ambient = 0.0;     // counts of ambient light per sample (noise only)
+};
+
+struct SignalModel {
+  double counts_at_1m = 3000.0;        // fundamental amplitude, albedo 1, normal incidence, 1 m
+  double saturation = 16320.0;         // |raw| beyond this reads as saturated (32767)
+};
+
+// Pinhole intrinsics of the depth camera (nominal Kinect v2 IR values).
+struct Camera {
+  int width = 512;
+  int height = 424;
+  double fx = 365.0, fy = 365.0, cx = 256.0, cy = 212.0;
+};
+
+struct DeviceProfile {
+  std::string name;
+  int version = 1;
+  std::array<FrequencyModel, 3> groups;  // raw sub-image groups: 80, 16, 120 MHz
+  PixelPhasePattern pixel_phase;
+  NoiseModel noise;
+  SignalModel signal;
+  Camera camera;
+
+  // Ideal Kinect v2: 80/16/120 MHz, pure sinusoids, no errors, no noise.
+  static DeviceProfile ideal_kinect2();
+  void validate() const;  // throws std::invalid_argument
+};
+
+}  // namespace tofmat::sim

@@ -1,0 +1,45 @@
+// Material temporal responses in closed form (docs/simulator-model.md, section 1).
+// The Fourier coefficient r^(nu) of a material's impulse response shifts the
+// phase of every modulation frequency and harmonic: Eq. (5) of the paper.
+#pragma once
+
+#include <complex>
+#include <string>
+
+namespace tofmat::sim {
+
+enum class ResponseKind { kOpaque, kExponential, kGamma, kSlab };
+
+struct Material {
+  std::string name;
+  ResponseKind kind = ResponseKind::kOpaque;
+  double albedo = 0.5;            // amplitude only, never phase
+  double subsurface = 0.0;        // b: share of light returned after subsurface transport
+  double tau_ps = 0.0;            // time constant of the subsurface kernel
+  double gamma_k = 1.0;           // shape of the gamma kernel (1 = exponential)
+  double refractive_index = 1.5;  // Fresnel share at incidence and slab transit
+  double thickness_mm = 0.0;      // slab only
+  double path_factor = 1.0;       // slab only: effective path / geometric round trip
+  double backing = 0.0;           // slab only: backing reflection, relative
+
+  // Throws std::invalid_argument for a parameter outside its physical range.
+  void validate() const;
+};
+
+ResponseKind response_kind_from_name(const std::string& name);
+const char* response_kind_name(ResponseKind kind);
+
+// Kernels, each 1 at nu = 0 and accurate for omega*tau from 0 to 1e6 (no
+// cancellation, no overflow, never NaN for finite inputs).
+std::complex<double> exponential_kernel(double omega, double tau_s);
+std::complex<double> gamma_kernel(double omega, double tau_s, double k);
+// Exponential truncated at round-trip time T, plus the backing's reflection delayed by T.
+std::complex<double> slab_kernel(double omega, double tau_s, double transit_s, double backing);
+
+// Fresnel (Schlick) reflectance at incidence alpha for refractive index n.
+double schlick_reflectance(double n, double incidence_rad);
+
+// R(nu, alpha) = albedo * ((1 - b_eff) + b_eff * K(nu)); see the spec.
+std::complex<double> material_response(const Material& m, double freq_hz, double incidence_rad);
+
+}  // namespace tofmat::sim

@@ -1,0 +1,47 @@
+#include "tofmat/sim/device.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace tofmat::sim {
+
+DeviceProfile DeviceProfile::ideal_kinect2() {
+  DeviceProfile d;
+  d.name = "ideal_kinect2";
+  const double freqs[3] = {80.0, 16.0, 120.0};
+  for (std::size_t g = 0; g < 3; ++g) {
+    d.groups[g].freq_mhz = freqs[g];
+    d.groups[g].harmonics.fill(0.0);
+    d.groups[g].harmonics[1] = 1.0;
+  }
+  return d;
+}
+
+void DeviceProfile::validate() const {
+  auto bad = [&](const std::string& what) { throw std::invalid_argument("device '" + name + "': " + what); };
+  for (std::size_t g = 0; g < 3; ++g) {
+    const auto& f = groups[g];
+    const std::string tag = "group " + std::to_string(g) + ": ";
+    if (!(f.freq_mhz > 0.0 && f.freq_mhz < 1e4)) bad(tag + "freq_mhz must be in (0, 10000)");
+    if (!(std::fabs(f.scale_error) < 0.5)) bad(tag + "scale_error must be in (-0.5, 0.5)");
+    if (!std::isfinite(f.phase_offset_rad)) bad(tag + "phase_offset_rad must be finite");
+    if (f.harmonics[1] != 1.0) bad(tag + "the fundamental's coefficient must be 1");
+    for (int h = 2; h <= kMaxHarmonic; ++h) {
+      if (!(std::abs(f.harmonics[static_cast<std::size_t>(h)]) <= 1.0)) bad(tag + "harmonic amplitudes must be <= 1");
+    }
+    for (int j = 0; j < 3; ++j) {
+      if (!(f.step_gain[static_cast<std::size_t>(j)] > 0.5 && f.step_gain[static_cast<std::size_t>(j)] < 2.0)) bad(tag + "step gains must be in (0.5, 2)");
+      if (!(std::fabs(f.step_offset[static_cast<std::size_t>(j)]) < 1.0)) bad(tag + "step offsets must be in (-1, 1)");
+    }
+  }
+  if (!(noise.read_noise >= 0.0 && noise.shot_gain >= 0.0 && noise.ambient >= 0.0)) bad("noise terms must be >= 0");
+  if (!(signal.counts_at_1m > 0.0) || !(signal.saturation > 0.0 && signal.saturation <= 16320.0)) {
+    bad("signal needs counts_at_1m > 0 and 0 < saturation <= 16320");
+  }
+  if (camera.width < 1 || camera.height < 1 || camera.width > 4096 || camera.height > 4096 || !(camera.fx > 0) ||
+      !(camera.fy > 0)) {
+    bad("camera needs 1..4096 pixels a side and positive focal lengths");
+  }
+}
+
+}  // namespace tofmat::sim

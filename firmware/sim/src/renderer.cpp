@@ -1,0 +1,225 @@
+#include "tofmat/sim/renderer.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <stdexcept>
+
+#include "tofmat/core/decode.hpp"
+#include "tofmat/core/raw_lut.hpp"
+#include "tofmat/sim/gaussian.hpp"
+#include "tofmat/sim/measurement.hpp"
+
+namespace tofmat::sim {
+namespace {
+
+constexpr double kTwoPi = 6.283185307179586476925286766559;
+constexpr double kDegToRad = kTwoPi / 360.0;
+constexpr double kCTrueMmPerNs = 299.792458;
+
+using Vec3 = Renderer::Vec3;
+double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+
+Vec3 ray(const Camera& c, double px, double py) {
+  const Vec3 v{(px + 0.5 - c.cx) / c.fx, (py + 0.5 - c.cy) / c.fy, 1.0};
+  const double n = std::sqrt(dot(v, v));
+  return {v.x / n, v.y / n, v.z / n};
+}
+
+// Normal facing the camera, turned by yaw about y, then pitch about x.
+Vec3 normal(double yaw_deg, double pitch_deg) {
+  const double y = yaw_deg * kDegToRad, p = pitch_deg * kDegToRad;
+  return {std::sin(y) * std::cos(p), -std::sin(p), -std::cos(y) * std::cos(p)};
+}
+
+struct Plane {
+  Vec3 point;
+  Vec3 n;
+  const Material* material;
+  // This frame's waveforms by incidence step, so the locked cache is visited
+  // once per step and plane, not once per pixel.
+  mutable std::array<const Waveform*, 91> by_step{};
+};
+
+// Quantisation to the values the 11-bit code can carry, by integer magnitude.
+const std::vector<std::int16_t>& quantised_magnitudes() {
+  static const std::vector<std::int16_t> table = [] {
+    std::vector<std::int16_t> t(kRawMaxMagnitude + 1);
+    for (int v = 0; v <= kRawMaxMagnitude; ++v) t[static_cast<std::size_t>(v)] = raw_code_value(raw_code_nearest(v));
+    return t;
+  }();
+  return table;
+}
+
+}  // namespace
+
+Renderer::Renderer(DeviceProfile device, MaterialLibrary library) : device_(std::move(device)), library_(std::move(library)) {
+  device_.validate();
+  for (const auto& m : library_.materials) m.validate();
+  const auto& c = device_.camera;
+  rays_.resize(static_cast<std::size_t>(c.width) * static_cast<std::size_t>(c.height));
+  for (int y = 0; y < c.height; ++y) {
+    for (int x = 0; x < c.width; ++x) rays_[static_cast<std::size_t>(y * c.width + x)] = ray(c, x, y);
+  }
+  const auto& pp = device_.pixel_phase;
+  std::mt19937_64 rng(pp.seed);
+  std::normal_distribution<double> normal01(0.0, 1.0);
+  for (std::size_t g = 0; g < 3; ++g) {
+    auto& pat = pixel_phase_[g];
+    pat.resize(rays_.size());
+    for (int y = 0; y < c.height; ++y) {
+      for (int x = 0; x < c.width; ++x) {
+        const double rx = (x + 0.5 - c.cx) / c.cx, ry = (y + 0.5 - c.cy) / c.cy;
+        const double r2 = 0.5 * (rx * rx + ry * ry);  // 1 at the corners
+        pat[static_cast<std::size_t>(y * c.width + x)] =
+            static_cast<float>(pp.mean_rad[g] + pp.radial_rad[g] * r2 + pp.scatter_rad * normal01(rng));
+      }
+    }
+  }
+}
+
+const Waveform& Renderer::waveform(const Material& m, int incidence_step) const {
+  std::lock_guard<std::mutex> lock(cache_mutex_);
+  auto& slot = cache_[{&m, incidence_step}];
+  if (slot) return *slot;
+  auto w = std::make_unique<Waveform>();
+  const double incidence = incidence_step * kIncidenceStepDeg * kDegToRad;
+  w->reflectance = std::abs(material_response(m, device_.groups[1].true_freq_hz(), incidence));
+  for (std::size_t g = 0; g < 3; ++g) {
+    const auto& fm = device_.groups[g];
+    const HarmonicWeights hw = harmonic_weights(fm, m, incidence);
+    auto& tab = w->samples[g];
+    tab.resize(3 * kWaveformPoints);
+    for (int k = 0; k < kWaveformPoints; ++k) {
+      // raw_samples at a range whose phase is 2 pi k / N: pass the phase as a
+      // negative pixel phase at range 0.
+      const auto s = raw_samples(fm, hw, 0.0, -kTwoPi * k / kWaveformPoints, 1.0);
+      for (std::size_t j = 0; j < 3; ++j) tab[static_cast<std::size_t>(k) * 3 + j] = static_cast<float>(s[j]);
+    }
+  }
+  slot = std::move(w);
+  return *slot;
+}
+
+Frame Renderer::render(const Scene& scene, std::uint64_t seed, bool noise) const {
+  const auto& cam = device_.camera;
+  const int w = cam.width, h = cam.height;
+  const std::size_t n_px = rays_.size();
+
+  // Planes: one per target (two when folded), split at the target's centre column.
+  struct TargetPlanes {
+    Plane left, right;
+    double split_x;
+  };
+  std::vector<TargetPlanes> planes;
+  for (const auto& t : scene.targets) {
+    if (t.x0 < 0 || t.y0 < 0 || t.x1 > w || t.y1 > h || t.x0 >= t.x1 || t.y0 >= t.y1) {
+      throw std::invalid_argument("target '" + t.material + "' rectangle is empty or outside the image");
+    }
+    if (!(t.depth_mm > 0.0) || !(std::fabs(t.yaw_deg) <= 89.0) || !(std::fabs(t.pitch_deg) <= 89.0) ||
+        !(std::fabs(t.fold_deg) <= 178.0)) {
+      throw std::invalid_argument("target '" + t.material + "': depth must be > 0, |yaw|, |pitch| <= 89, |fold| <= 178");
+    }
+    const Material* m = &library_.find(t.material);
+    const double cxp = 0.5 * (t.x0 + t.x1 - 1), cyp = 0.5 * (t.y0 + t.y1 - 1);
+    const Vec3 r = ray(cam, cxp, cyp);
+    const Vec3 p{r.x * t.depth_mm / r.z, r.y * t.depth_mm / r.z, t.depth_mm};
+    planes.push_back({Plane{p, normal(t.yaw_deg + 0.5 * t.fold_deg, t.pitch_deg), m},
+                      Plane{p, normal(t.yaw_deg - 0.5 * t.fold_deg, t.pitch_deg), m}, cxp});
+  }
+  const bool has_wall = !scene.background_material.empty();
+  Plane wall{};
+  if (has_wall) {
+    if (!(scene.background_depth_mm > 0.0)) throw std::invalid_argument("background depth must be > 0");
+    wall = Plane{{0.0, 0.0, scene.background_depth_mm}, {0.0, 0.0, -1.0}, &library_.find(scene.background_material)};
+  }
+
+  Frame f;
+  f.width = w;
+  f.height = h;
+  f.raw.assign(9 * n_px, 0);
+  f.range_mm.assign(n_px, NAN);
+  f.depth_mm.assign(n_px, NAN);
+  f.target.assign(n_px, -2);
+  f.incidence_deg.assign(n_px, NAN);
+
+  FastNormal gauss(seed);
+  const auto& qmag = quantised_magnitudes();
+  const double sat = device_.signal.saturation;
+  const auto& nm = device_.noise;
+  const double points_per_rad = kWaveformPoints / kTwoPi;
+  std::array<double, 3> omega_per_mm{};  // phase per mm of range
+  for (std::size_t g = 0; g < 3; ++g) {
+    omega_per_mm[g] = kTwoPi * device_.groups[g].true_freq_hz() * 1e-9 * 2.0 / kCTrueMmPerNs;
+  }
+
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+      const Vec3& d = rays_[i];
+      const Plane* s = nullptr;
+      int target = -2;
+      for (int k = static_cast<int>(scene.targets.size()) - 1; k >= 0; --k) {
+        const auto& t = scene.targets[static_cast<std::size_t>(k)];
+        if (x >= t.x0 && x < t.x1 && y >= t.y0 && y < t.y1) {
+          const auto& tp = planes[static_cast<std::size_t>(k)];
+          s = x < tp.split_x ? &tp.left : &tp.right;
+          target = k;
+          break;
+        }
+      }
+      if (!s && has_wall) {
+        s = &wall;
+        target = -1;
+      }
+      double range = 0.0, cos_inc = 0.0;
+      if (s) {
+        const double nd = dot(s->n, d);
+        range = nd < 0.0 ? dot(s->n, s->point) / nd : -1.0;
+        cos_inc = -nd;
+        if (!(range > 0.0)) s = nullptr;  // facing away: no return
+      }
+      const Waveform* wf = nullptr;
+      double amp = 0.0;
+      if (s) {
+        const double inc_deg = static_cast<double>(std::acos(static_cast<float>(std::min(1.0, cos_inc)))) / kDegToRad;
+        f.range_mm[i] = static_cast<float>(range);
+        f.depth_mm[i] = static_cast<float>(range * d.z);
+        f.target[i] = static_cast<std::int16_t>(target);
+        f.incidence_deg[i] = static_cast<float>(inc_deg);
+        const auto step = static_cast<std::size_t>(inc_deg / kIncidenceStepDeg + 0.5);
+        if (!s->by_step[step]) s->by_step[step] = &waveform(*s->material, static_cast<int>(step));
+        wf = s->by_step[step];
+        amp = device_.signal.counts_at_1m * cos_inc * (1000.0 / range) * (1000.0 / range);
+      }
+      const double sigma =
+          noise ? std::sqrt(nm.read_noise * nm.read_noise + nm.shot_gain * (amp * (wf ? wf->reflectance : 0.0) + nm.ambient))
+                : 0.0;
+      for (std::size_t g = 0; g < 3; ++g) {
+        double m[3] = {0.0, 0.0, 0.0};
+        if (wf) {
+          double t = (omega_per_mm[g] * range - pixel_phase_[g][i]) * points_per_rad;
+          t -= std::floor(t / kWaveformPoints) * kWaveformPoints;
+          auto k0 = static_cast<std::size_t>(t);
+          if (k0 >= static_cast<std::size_t>(kWaveformPoints)) k0 = 0;
+          const double fr = t - static_cast<double>(k0);
+          const std::size_t k1 = (k0 + 1) % kWaveformPoints;
+          const float* a = &wf->samples[g][k0 * 3];
+          const float* b = &wf->samples[g][k1 * 3];
+          for (std::size_t j = 0; j < 3; ++j) m[j] = amp * (a[j] + fr * (b[j] - a[j]));
+        }
+        for (std::size_t j = 0; j < 3; ++j) {
+          const double v = m[j] + (noise ? sigma * gauss() : 0.0);
+          const double av = std::fabs(v);
+          // Branch-free on the sign: with noise it is a coin flip per sample.
+          const std::int16_t q = qmag[static_cast<std::size_t>(std::min(av, static_cast<double>(kRawMaxMagnitude)) + 0.5)];
+          const std::int16_t out = v < 0 ? static_cast<std::int16_t>(-q) : q;
+          f.raw[(g * 3 + j) * n_px + i] = av > sat ? kRawSaturated : out;
+        }
+      }
+    }
+  }
+  return f;
+}
+
+}  // namespace tofmat::sim

@@ -1,0 +1,66 @@
+"""The physically based Kinect v2 simulator (C++ core in firmware/sim).
+
+Device profiles and material libraries are versioned JSON files shipped with
+the package and loaded by name::
+
+    from tofmat import sim
+    device = sim.load_device()                  # the calibrated Kinect v2
+    library = sim.load_library()                # the 29 calibrated materials
+    frame = sim.Renderer(device, library).render(sim.Scene.centred_target("cork", 900.0))
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .._tofmat import sim as _sim
+
+DeviceProfile = _sim.DeviceProfile
+Material = _sim.Material
+MaterialLibrary = _sim.MaterialLibrary
+Target = _sim.Target
+Scene = _sim.Scene
+Frame = _sim.Frame
+Renderer = _sim.Renderer
+distortion_curves = _sim.distortion_curves
+
+DEFAULT_DEVICE = "kinect2_tanaka2017"
+DEFAULT_LIBRARY = "tanaka2017"
+
+
+def data_dir() -> Path:
+    """Folder holding devices/*.json and materials/*.json."""
+    installed = Path(__file__).resolve().parent.parent / "sim_data"
+    if installed.is_dir():
+        return installed
+    source = Path(__file__).resolve().parents[3] / "firmware" / "sim" / "data"  # editable install
+    if source.is_dir():
+        return source
+    raise FileNotFoundError(f"simulator data not found (looked in {installed} and {source})")
+
+
+def load_device(name_or_path: str = DEFAULT_DEVICE) -> DeviceProfile:
+    """A device profile by name (data/devices/<name>.json) or path."""
+    return DeviceProfile.load(name_or_path, data_dir())
+
+
+def load_library(name_or_path: str = DEFAULT_LIBRARY) -> MaterialLibrary:
+    """A material library by name (data/materials/<name>.json) or path."""
+    return MaterialLibrary.load(name_or_path, data_dir())
+
+
+__all__ = [
+    "DEFAULT_DEVICE",
+    "DEFAULT_LIBRARY",
+    "DeviceProfile",
+    "Frame",
+    "Material",
+    "MaterialLibrary",
+    "Renderer",
+    "Scene",
+    "Target",
+    "data_dir",
+    "distortion_curves",
+    "load_device",
+    "load_library",
+]
