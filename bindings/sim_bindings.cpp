@@ -10,6 +10,7 @@
 #include "tofmat/sim/curve.hpp"
 #include "tofmat/sim/profile_io.hpp"
 #include "tofmat/sim/renderer.hpp"
+#include "tofmat/sim/stage.hpp"
 
 namespace tofmat::py {
 
@@ -137,7 +138,9 @@ void register_sim(pyb::module_& parent) {
       .def_static("centred_target", &Scene::centred_target, pyb::arg("material"), pyb::arg("depth_mm"),
                   pyb::arg("yaw_deg") = 0.0, pyb::arg("size") = 120);
 
-  pyb::class_<Frame>(m, "Frame", "A rendered raw frame and its ground truth (numpy arrays).")
+  pyb::class_<Frame>(m, "Frame", "A rendered raw frame (or region) and its ground truth (numpy arrays).")
+      .def_readonly("x0", &Frame::x0)
+      .def_readonly("y0", &Frame::y0)
       .def_property_readonly("raw", [](const Frame& f) { return image(f.raw, {9, f.height, f.width}); })
       .def_property_readonly("range_mm", [](const Frame& f) { return image(f.range_mm, {f.height, f.width}); })
       .def_property_readonly("depth_mm", [](const Frame& f) { return image(f.depth_mm, {f.height, f.width}); })
@@ -154,6 +157,13 @@ void register_sim(pyb::module_& parent) {
           },
           pyb::arg("scene"), pyb::arg("seed") = 0, pyb::arg("noise") = true)
       .def(
+          "render_region",
+          [](const Renderer& r, const Scene& s, std::uint64_t seed, bool noise, std::array<int, 4> rect) {
+            pyb::gil_scoped_release nogil;
+            return r.render_region(s, seed, noise, PixelRect{rect[0], rect[1], rect[2], rect[3]});
+          },
+          pyb::arg("scene"), pyb::arg("seed"), pyb::arg("noise"), pyb::arg("rect"), "rect = (x0, y0, x1, y1).")
+      .def(
           "pixel_phase",
           [](const Renderer& r) {
             const auto& c = r.device().camera;
@@ -167,6 +177,32 @@ void register_sim(pyb::module_& parent) {
           "Per-pixel phase (3, H, W) the P0 tables correct; decode with p0 = -pixel_phase.")
       .def_property_readonly("device", &Renderer::device)
       .def_property_readonly("library", &Renderer::library);
+
+  m.def(
+      "stage_sweep",
+      [](const Renderer& r, const Target& target, std::array<int, 4> roi, const std::vector<double>& stage_mm,
+         int frames, std::uint64_t seed, bool noise) {
+        StageCapture c;
+        {
+          pyb::gil_scoped_release nogil;
+          c = stage_sweep(r, target, PixelRect{roi[0], roi[1], roi[2], roi[3]}, stage_mm, frames, seed, noise);
+        }
+        pyb::dict out;
+        const auto n = static_cast<pyb::ssize_t>(c.stage_mm.size());
+        out["stage_mm"] = pyb::array_t<double>(n, c.stage_mm.data());
+        pyb::array_t<double> depth(std::vector<pyb::ssize_t>{3, n});
+        for (std::size_t g = 0; g < 3; ++g) {
+          std::memcpy(depth.mutable_data() + g * c.stage_mm.size(), c.depth_mm[g].data(), c.stage_mm.size() * sizeof(double));
+        }
+        out["depth_mm"] = depth;
+        out["combined_mm"] = pyb::array_t<double>(n, c.combined_mm.data());
+        out["samples"] = pyb::array_t<std::uint32_t>(n, c.samples.data());
+        return out;
+      },
+      pyb::arg("renderer"), pyb::arg("target"), pyb::arg("roi"), pyb::arg("stage_mm"), pyb::arg("frames") = 1,
+      pyb::arg("seed") = 0, pyb::arg("noise") = true,
+      "A translation-stage capture: dict of stage_mm, depth_mm (3, n: 80/16/120 MHz, unwrapped ROI means), "
+      "combined_mm, samples.");
 }
 
 }  // namespace tofmat::py

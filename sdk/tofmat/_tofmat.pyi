@@ -187,6 +187,8 @@ class sim:
         def centred_target(material: str, depth_mm: float, yaw_deg: float = 0.0, size: int = 120) -> sim.Scene: ...
 
     class Frame:
+        x0: int
+        y0: int
         @property
         def raw(self) -> npt.NDArray[np.int16]: ...
         @property
@@ -201,6 +203,9 @@ class sim:
     class Renderer:
         def __init__(self, device: sim.DeviceProfile, library: sim.MaterialLibrary) -> None: ...
         def render(self, scene: sim.Scene, seed: int = 0, noise: bool = True) -> sim.Frame: ...
+        def render_region(
+            self, scene: sim.Scene, seed: int, noise: bool, rect: tuple[int, int, int, int]
+        ) -> sim.Frame: ...
         def pixel_phase(self) -> npt.NDArray[np.float32]: ...
         @property
         def device(self) -> sim.DeviceProfile: ...
@@ -215,3 +220,14 @@ class sim:
         incidence_deg: float = 0.0,
         method: str = "interp",
     ) -> npt.NDArray[np.float32]: ...
+
+    @staticmethod
+    def stage_sweep(
+        renderer: sim.Renderer,
+        target: sim.Target,
+        roi: tuple[int, int, int, int],
+        stage_mm: Sequence[float],
+        frames: int = 1,
+        seed: int = 0,
+        noise: bool = True,
+    ) -> dict[str, Any]: ...

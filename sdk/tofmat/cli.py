@@ -186,5 +186,13 @@ def demo(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: int, no
     run_demo(open_table(table_path), sweeps, sweep_bins, frames_per_bin, noise, seed, echo=click.echo)
 
 
+def _register_sim() -> None:
+    from .sim.cli import sim_cli
+
+    main.add_command(sim_cli)
+
+
+_register_sim()
+
 if __name__ == "__main__":
     sys.exit(main())

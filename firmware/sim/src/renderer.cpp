@@ -102,9 +102,18 @@ const Waveform& Renderer::waveform(const Material& m, int incidence_step) const 
 }
 
 Frame Renderer::render(const Scene& scene, std::uint64_t seed, bool noise) const {
+  return render_region(scene, seed, noise, PixelRect{0, 0, device_.camera.width, device_.camera.height});
+}
+
+Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise, const PixelRect& region) const {
   const auto& cam = device_.camera;
   const int w = cam.width, h = cam.height;
-  const std::size_t n_px = rays_.size();
+  if (region.x0 < 0 || region.y0 < 0 || region.x1 > w || region.y1 > h || region.x0 >= region.x1 ||
+      region.y0 >= region.y1) {
+    throw std::invalid_argument("render region is empty or outside the image");
+  }
+  const int rw = region.x1 - region.x0, rh = region.y1 - region.y0;
+  const std::size_t n_px = static_cast<std::size_t>(rw) * static_cast<std::size_t>(rh);
 
   // Planes: one per target (two when folded), split at the target's centre column.
   struct TargetPlanes {
@@ -135,8 +144,10 @@ Frame Renderer::render(const Scene& scene, std::uint64_t seed, bool noise) const
   }
 
   Frame f;
-  f.width = w;
-  f.height = h;
+  f.x0 = region.x0;
+  f.y0 = region.y0;
+  f.width = rw;
+  f.height = rh;
   f.raw.assign(9 * n_px, 0);
   f.range_mm.assign(n_px, NAN);
   f.depth_mm.assign(n_px, NAN);
@@ -153,10 +164,13 @@ Frame Renderer::render(const Scene& scene, std::uint64_t seed, bool noise) const
     omega_per_mm[g] = kTwoPi * device_.groups[g].true_freq_hz() * 1e-9 * 2.0 / kCTrueMmPerNs;
   }
 
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      const std::size_t i = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-      const Vec3& d = rays_[i];
+  for (int y = region.y0; y < region.y1; ++y) {
+    for (int x = region.x0; x < region.x1; ++x) {
+      // i: index in the output region; gi: index in the camera's full grid.
+      const std::size_t i = static_cast<std::size_t>(y - region.y0) * static_cast<std::size_t>(rw) +
+                            static_cast<std::size_t>(x - region.x0);
+      const std::size_t gi = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+      const Vec3& d = rays_[gi];
       const Plane* s = nullptr;
       int target = -2;
       for (int k = static_cast<int>(scene.targets.size()) - 1; k >= 0; --k) {
@@ -198,7 +212,7 @@ Frame Renderer::render(const Scene& scene, std::uint64_t seed, bool noise) const
       for (std::size_t g = 0; g < 3; ++g) {
         double m[3] = {0.0, 0.0, 0.0};
         if (wf) {
-          double t = (omega_per_mm[g] * range - pixel_phase_[g][i]) * points_per_rad;
+          double t = (omega_per_mm[g] * range - pixel_phase_[g][gi]) * points_per_rad;
           t -= std::floor(t / kWaveformPoints) * kWaveformPoints;
           auto k0 = static_cast<std::size_t>(t);
           if (k0 >= static_cast<std::size_t>(kWaveformPoints)) k0 = 0;

@@ -23,6 +23,7 @@ Scene = _sim.Scene
 Frame = _sim.Frame
 Renderer = _sim.Renderer
 distortion_curves = _sim.distortion_curves
+stage_sweep = _sim.stage_sweep
 
 DEFAULT_DEVICE = "kinect2_tanaka2017"
 DEFAULT_LIBRARY = "tanaka2017"
@@ -63,4 +64,5 @@ __all__ = [
     "distortion_curves",
     "load_device",
     "load_library",
+    "stage_sweep",
 ]

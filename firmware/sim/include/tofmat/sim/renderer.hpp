@@ -16,7 +16,14 @@
 
 namespace tofmat::sim {
 
+// A pixel rectangle [x0, x1) x [y0, y1).
+struct PixelRect {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
+// A rendered frame, or a region of one (origin x0, y0 in the full image).
 struct Frame {
+  int x0 = 0, y0 = 0;
   int width = 0, height = 0;
   std::vector<std::int16_t> raw;     // 9 x height x width: sub-image-major, rows top to bottom
   std::vector<float> range_mm;       // truth: distance along each pixel's ray, NaN where nothing
@@ -47,6 +54,8 @@ class Renderer {
   // Noise is seeded: the same seed gives the same frame. Safe to call from
   // several threads (the waveform cache is locked).
   Frame render(const Scene& scene, std::uint64_t seed, bool noise = true) const;
+  // Only the pixels of `region`: what a stage capture or an ROI profile needs.
+  Frame render_region(const Scene& scene, std::uint64_t seed, bool noise, const PixelRect& region) const;
 
   // Incidence is tabulated in steps of this many degrees: below 50 degrees the
   // Fresnel share changes the response by < 1e-3 per degree.
