@@ -13,6 +13,7 @@ std::complex<double> phasor_from_samples(const double m[3], double p0_rad) {
 }
 
 double phase_of(std::complex<double> z) {
+  if (z.real() == 0.0 && z.imag() == 0.0) return 0.0;  // also -0.0: atan2 would say pi
   double p = std::atan2(z.imag(), z.real());
   if (p < 0.0) p += 2.0 * kPi;
   if (p >= 2.0 * kPi) p = 0.0;

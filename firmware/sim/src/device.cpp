@@ -11,8 +11,9 @@ DeviceProfile DeviceProfile::ideal_kinect2() {
   const double freqs[3] = {80.0, 16.0, 120.0};
   for (std::size_t g = 0; g < 3; ++g) {
     d.groups[g].freq_mhz = freqs[g];
-    d.groups[g].harmonics.fill(0.0);
-    d.groups[g].harmonics[1] = 1.0;
+    d.groups[g].harmonic_amplitude.fill(0.0);
+    d.groups[g].harmonic_phase_rad.fill(0.0);
+    d.groups[g].harmonic_amplitude[1] = 1.0;
   }
   return d;
 }
@@ -25,9 +26,13 @@ void DeviceProfile::validate() const {
     if (!(f.freq_mhz > 0.0 && f.freq_mhz < 1e4)) bad(tag + "freq_mhz must be in (0, 10000)");
     if (!(std::fabs(f.scale_error) < 0.5)) bad(tag + "scale_error must be in (-0.5, 0.5)");
     if (!std::isfinite(f.phase_offset_rad)) bad(tag + "phase_offset_rad must be finite");
-    if (f.harmonics[1] != 1.0) bad(tag + "the fundamental's coefficient must be 1");
+    if (f.harmonic_amplitude[1] != 1.0 || f.harmonic_phase_rad[1] != 0.0) {
+      bad(tag + "the fundamental's coefficient must be 1");
+    }
     for (int h = 2; h <= kMaxHarmonic; ++h) {
-      if (!(std::abs(f.harmonics[static_cast<std::size_t>(h)]) <= 1.0)) bad(tag + "harmonic amplitudes must be <= 1");
+      const auto k = static_cast<std::size_t>(h);
+      if (!(f.harmonic_amplitude[k] >= 0.0 && f.harmonic_amplitude[k] <= 1.0)) bad(tag + "harmonic amplitudes must be in [0, 1]");
+      if (!std::isfinite(f.harmonic_phase_rad[k])) bad(tag + "harmonic phases must be finite");
     }
     for (int j = 0; j < 3; ++j) {
       if (!(f.step_gain[static_cast<std::size_t>(j)] > 0.5 && f.step_gain[static_cast<std::size_t>(j)] < 2.0)) bad(tag + "step gains must be in (0.5, 2)");

@@ -56,7 +56,7 @@ void Material::validate() const {
   if (!(albedo >= 0.0 && albedo <= 1.0)) bad("albedo must be in [0, 1]");
   if (!(subsurface >= 0.0 && subsurface <= 1.0)) bad("subsurface must be in [0, 1]");
   if (kind != ResponseKind::kOpaque && !(tau_ps > 0.0 && tau_ps <= 1e6)) bad("tau_ps must be in (0, 1e6]");
-  if (kind == ResponseKind::kGamma && !(gamma_k > 0.0 && gamma_k <= 1e3)) bad("gamma_k must be in (0, 1000]");
+  if (kind == ResponseKind::kGamma && !(gamma_k >= 1e-2 && gamma_k <= 1e3)) bad("gamma_k must be in [0.01, 1000]");
   if (!(refractive_index >= 1.0 && refractive_index <= 4.0)) bad("refractive_index must be in [1, 4]");
   if (kind == ResponseKind::kSlab) {
     if (!(thickness_mm > 0.0 && thickness_mm <= 1e3)) bad("thickness_mm must be in (0, 1000]");
@@ -76,6 +76,9 @@ std::complex<double> gamma_kernel(double omega, double tau_s, double k) {
 }
 
 std::complex<double> slab_kernel(double omega, double tau_s, double transit_s, double backing) {
+  // Beyond T/tau = 745, e^{-T/tau} underflows: the slab is optically thick (this
+  // also covers an infinite transit at grazing refraction).
+  if (!(transit_s / tau_s < 745.0)) return one_over_one_plus_ix(omega * tau_s);
   // z = T (1/tau + i omega); 1 - e^{-z} = -expm1(-z)
   const std::complex<double> z{transit_s / tau_s, omega * transit_s};
   const std::complex<double> one_minus = -expm1_complex(-z);

@@ -15,7 +15,7 @@ HarmonicWeights harmonic_weights(const FrequencyModel& f, const Material& m, dou
   HarmonicWeights w{};
   const double nu = f.true_freq_hz();
   for (int h = 1; h <= kMaxHarmonic; ++h) {
-    const auto g = f.harmonics[static_cast<std::size_t>(h)];
+    const auto g = f.harmonic(h);
     if (g == 0.0) continue;
     w[static_cast<std::size_t>(h)] =
         g * std::conj(material_response(m, h * nu, incidence_rad)) * std::polar(1.0, -h * f.phase_offset_rad);

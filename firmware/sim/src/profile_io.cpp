@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstdint>
 #include <set>
 #include <stdexcept>
 
@@ -31,6 +32,20 @@ double num(const json& j, const std::string& where, const char* key, double fall
   if (!v.is_number()) fail(where + "." + key, "expected a number");
   const double x = v.get<double>();
   if (!std::isfinite(x)) fail(where + "." + key, "must be finite");
+  return x;
+}
+
+// An integer-typed JSON number in [lo, hi] (never read through a double, so
+// every bit of a 64-bit seed survives).
+std::uint64_t integer(const json& j, const std::string& where, const char* key, std::uint64_t fallback,
+                      std::uint64_t lo, std::uint64_t hi) {
+  if (!j.contains(key)) return fallback;
+  const auto& v = j.at(key);
+  if (!v.is_number_integer() || (v.is_number_integer() && !v.is_number_unsigned() && v.get<std::int64_t>() < 0)) {
+    fail(where + "." + key, "expected a non-negative integer");
+  }
+  const auto x = v.get<std::uint64_t>();
+  if (x < lo || x > hi) fail(where + "." + key, "must be in " + std::to_string(lo) + ".." + std::to_string(hi));
   return x;
 }
 
@@ -147,8 +162,8 @@ DeviceProfile device_from(const std::string& text) {
         only_keys(h, hw, {"h", "amplitude", "phase_rad"});
         const double order = num(h, hw, "h", 0);
         if (order != std::floor(order) || order < 2 || order > kMaxHarmonic) fail(hw, "h must be an integer 2..7");
-        m.harmonics[static_cast<std::size_t>(order)] =
-            std::polar(num(h, hw, "amplitude", 0.0), num(h, hw, "phase_rad", 0.0));
+        m.harmonic_amplitude[static_cast<std::size_t>(order)] = num(h, hw, "amplitude", 0.0);
+        m.harmonic_phase_rad[static_cast<std::size_t>(order)] = num(h, hw, "phase_rad", 0.0);
       }
     }
   }
@@ -159,7 +174,7 @@ DeviceProfile device_from(const std::string& text) {
     d.pixel_phase.mean_rad = triple(p, pw, "mean_rad", d.pixel_phase.mean_rad);
     d.pixel_phase.radial_rad = triple(p, pw, "radial_rad", d.pixel_phase.radial_rad);
     d.pixel_phase.scatter_rad = num(p, pw, "scatter_rad", 0.0);
-    d.pixel_phase.seed = static_cast<std::uint64_t>(num(p, pw, "seed", 1));
+    d.pixel_phase.seed = integer(p, pw, "seed", 1, 0, UINT64_MAX);
   }
   if (j.contains("noise")) {
     const json& n = j.at("noise");
@@ -177,8 +192,8 @@ DeviceProfile device_from(const std::string& text) {
   if (j.contains("camera")) {
     const json& c = j.at("camera");
     only_keys(c, w + ".camera", {"width", "height", "fx", "fy", "cx", "cy"});
-    d.camera.width = static_cast<int>(num(c, w + ".camera", "width", d.camera.width));
-    d.camera.height = static_cast<int>(num(c, w + ".camera", "height", d.camera.height));
+    d.camera.width = static_cast<int>(integer(c, w + ".camera", "width", 512, 1, 4096));
+    d.camera.height = static_cast<int>(integer(c, w + ".camera", "height", 424, 1, 4096));
     d.camera.fx = num(c, w + ".camera", "fx", d.camera.fx);
     d.camera.fy = num(c, w + ".camera", "fy", d.camera.fy);
     d.camera.cx = num(c, w + ".camera", "cx", d.camera.cx);
@@ -197,8 +212,8 @@ std::string device_to_json(const DeviceProfile& d) {
   for (const auto& f : d.groups) {
     json hs = json::array();
     for (int h = 2; h <= kMaxHarmonic; ++h) {
-      const auto g = f.harmonics[static_cast<std::size_t>(h)];
-      hs.push_back({{"h", h}, {"amplitude", std::abs(g)}, {"phase_rad", std::arg(g)}});
+      const auto k = static_cast<std::size_t>(h);
+      hs.push_back({{"h", h}, {"amplitude", f.harmonic_amplitude[k]}, {"phase_rad", f.harmonic_phase_rad[k]}});
     }
     freqs.push_back({{"freq_mhz", f.freq_mhz},
                      {"scale_error", f.scale_error},

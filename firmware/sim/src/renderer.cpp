@@ -41,14 +41,32 @@ struct Plane {
   mutable std::array<const Waveform*, 91> by_step{};
 };
 
-// Quantisation to the values the 11-bit code can carry, by integer magnitude.
-const std::vector<std::int16_t>& quantised_magnitudes() {
-  static const std::vector<std::int16_t> table = [] {
-    std::vector<std::int16_t> t(kRawMaxMagnitude + 1);
-    for (int v = 0; v <= kRawMaxMagnitude; ++v) t[static_cast<std::size_t>(v)] = raw_code_value(raw_code_nearest(v));
-    return t;
-  }();
-  return table;
+// The magnitudes the 11-bit code can carry, bracketing each integer: for
+// floor(|v|) = k, below[k] is the largest code magnitude <= k and above[k] the
+// smallest > k, so the nearest code of |v| is one of the two (ties go down,
+// as raw_code_nearest does). Two lookups instead of a search per sample.
+struct CodeGrid {
+  std::vector<std::int16_t> below, above;
+  CodeGrid() : below(kRawMaxMagnitude + 1), above(kRawMaxMagnitude + 1) {
+    std::int16_t lo = 0;
+    std::uint16_t c = 0;
+    for (int k = 0; k <= kRawMaxMagnitude; ++k) {
+      while (c < 1023 && raw_code_value(static_cast<std::uint16_t>(c + 1)) <= k) ++c;
+      lo = raw_code_value(c);
+      below[static_cast<std::size_t>(k)] = lo;
+      above[static_cast<std::size_t>(k)] = c < 1023 ? raw_code_value(static_cast<std::uint16_t>(c + 1)) : lo;
+    }
+  }
+  std::int16_t nearest(double av) const {
+    const auto k = static_cast<std::size_t>(av);
+    const double lo = below[k], hi = above[k];
+    return av - lo <= hi - av ? below[k] : above[k];
+  }
+};
+
+const CodeGrid& code_grid() {
+  static const CodeGrid grid;
+  return grid;
 }
 
 }  // namespace
@@ -155,7 +173,7 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
   f.incidence_deg.assign(n_px, NAN);
 
   FastNormal gauss(seed);
-  const auto& qmag = quantised_magnitudes();
+  const auto& codes = code_grid();
   const double sat = device_.signal.saturation;
   const auto& nm = device_.noise;
   const double points_per_rad = kWaveformPoints / kTwoPi;
@@ -226,9 +244,12 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
           const double v = m[j] + (noise ? sigma * gauss() : 0.0);
           const double av = std::fabs(v);
           // Branch-free on the sign: with noise it is a coin flip per sample.
-          const std::int16_t q = qmag[static_cast<std::size_t>(std::min(av, static_cast<double>(kRawMaxMagnitude)) + 0.5)];
-          const std::int16_t out = v < 0 ? static_cast<std::int16_t>(-q) : q;
-          f.raw[(g * 3 + j) * n_px + i] = av > sat ? kRawSaturated : out;
+          if (!(av <= sat)) {  // (a NaN, impossible from finite parameters, also lands here)
+            f.raw[(g * 3 + j) * n_px + i] = kRawSaturated;
+            continue;
+          }
+          const std::int16_t q = codes.nearest(std::min(av, static_cast<double>(kRawMaxMagnitude)));
+          f.raw[(g * 3 + j) * n_px + i] = v < 0 ? static_cast<std::int16_t>(-q) : q;
         }
       }
     }

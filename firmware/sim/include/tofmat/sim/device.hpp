@@ -16,8 +16,14 @@ struct FrequencyModel {
   double freq_mhz = 0.0;          // nominal (what the decode assumes)
   double scale_error = 0.0;       // true frequency = nominal * (1 + scale_error)
   double phase_offset_rad = 0.0;  // delay of the reference
-  // G_h for h = 0..7 (index 0 unused, G_1 = 1): correlation waveform harmonics.
-  std::array<std::complex<double>, kMaxHarmonic + 1> harmonics{};
+  // G_h = a_h exp(i psi_h) for h = 0..7 (index 0 unused, G_1 = 1): harmonics of
+  // the correlation waveform, kept as amplitude and phase (the profile's form,
+  // so a profile saves and loads exactly).
+  std::array<double, kMaxHarmonic + 1> harmonic_amplitude{0.0, 1.0};
+  std::array<double, kMaxHarmonic + 1> harmonic_phase_rad{};
+  std::complex<double> harmonic(int h) const {
+    return std::polar(harmonic_amplitude[static_cast<std::size_t>(h)], harmonic_phase_rad[static_cast<std::size_t>(h)]);
+  }
   std::array<double, 3> step_gain{1.0, 1.0, 1.0};
   std::array<double, 3> step_offset{0.0, 0.0, 0.0};  // relative to the signal scale A
 

@@ -29,8 +29,10 @@ struct Material {
 ResponseKind response_kind_from_name(const std::string& name);
 const char* response_kind_name(ResponseKind kind);
 
-// Kernels, each 1 at nu = 0 and accurate for omega*tau from 0 to 1e6 (no
-// cancellation, no overflow, never NaN for finite inputs).
+// Kernels, accurate for omega*tau from 0 to 1e6 (no cancellation, no overflow,
+// never NaN for finite inputs). Exponential and gamma are 1 at nu = 0; the
+// slab is 1 - (1 - backing) exp(-T/tau) there: light that leaves through the
+// back and is not returned by the backing is lost.
 std::complex<double> exponential_kernel(double omega, double tau_s);
 std::complex<double> gamma_kernel(double omega, double tau_s, double k);
 // Exponential truncated at round-trip time T, plus the backing's reflection delayed by T.
