@@ -25,8 +25,8 @@ def _renderer(device: str, library: str) -> Renderer:
 
 
 @sim_cli.command("evaluate")
-@click.option("--device", default="kinect2_tanaka2017", show_default=True, help="Device profile name or path.")
-@click.option("--library", default="tanaka2017", show_default=True, help="Material library name or path.")
+@click.option("--device", default="ideal_kinect2", show_default=True, help="Device profile name or path.")
+@click.option("--library", default="examples", show_default=True, help="Material library name or path.")
 @click.option("--out", "out_dir", default=Path("build/sim-eval"), type=click.Path(file_okay=False, path_type=Path),
               show_default=True, help="Folder for figures and results.json.")
 @click.option("--materials", help="Comma-separated subset (default: the whole library).")
@@ -80,8 +80,8 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
 
 
 @sim_cli.command("bench")
-@click.option("--device", default="kinect2_tanaka2017", show_default=True)
-@click.option("--library", default="tanaka2017", show_default=True)
+@click.option("--device", default="ideal_kinect2", show_default=True)
+@click.option("--library", default="examples", show_default=True)
 @click.option("--frames", default=30, show_default=True)
 def bench_cmd(device: str, library: str, frames: int) -> None:
     """Frames per second of full 512x424 renders with noise (one core), and their decode error."""

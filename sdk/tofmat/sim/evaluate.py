@@ -74,9 +74,9 @@ def feature_frequency(c: Capture, position: int) -> npt.NDArray[np.float32]:
 
 def feature_depth(c: Capture, group: int, base: int) -> npt.NDArray[np.float32]:
     """Eq. (11) for one frequency: d(f, base) - d(f, j) + (stage_j - stage_base), (1, n)."""
-    d = c.depth_mm[group]
-    v = d[base] - d + (c.stage_mm - c.stage_mm[base])
-    return v[None, :].astype(np.float32)
+    d: Array = c.depth_mm[group]
+    v: Array = d[base] - d + (c.stage_mm - c.stage_mm[base])
+    return np.asarray(v[None, :], dtype=np.float32)
 
 
 def feature_functions(n_positions: int) -> dict[str, Callable[[Capture], npt.NDArray[np.float32]]]:
