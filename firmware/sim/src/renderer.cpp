@@ -59,8 +59,10 @@ struct CodeGrid {
   }
   std::int16_t nearest(double av) const {
     const auto k = static_cast<std::size_t>(av);
-    const double lo = below[k], hi = above[k];
-    return av - lo <= hi - av ? below[k] : above[k];
+    const int lo = below[k], hi = above[k];
+    // Branch-free select: with noise the choice is a coin flip per sample.
+    const int up = static_cast<int>(2.0 * av > static_cast<double>(lo + hi));
+    return static_cast<std::int16_t>(lo + up * (hi - lo));
   }
 };
 
