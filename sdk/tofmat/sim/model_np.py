@@ -95,14 +95,21 @@ def k_gamma(omega: np.ndarray, tau_ns: float, k: float) -> np.ndarray:
 def slab_round_trip_ns(thickness_mm: float, n: float, path_factor: float, alpha: Any = 0.0) -> Any:
     """T = path_factor * 2 * thickness * n / (C_TRUE cos(theta_t)), sin(theta_t) = sin(alpha)/n."""
     sin_t = np.sin(alpha) / n
-    cos_t = np.sqrt(1.0 - sin_t * sin_t)
-    return path_factor * 2.0 * thickness_mm * n / (C_TRUE * cos_t)
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin_t * sin_t))
+    with np.errstate(divide="ignore"):
+        return path_factor * 2.0 * thickness_mm * n / (C_TRUE * cos_t)
 
 
 def k_slab(omega: np.ndarray, tau_ns: float, t_ns: Any, beta: float) -> np.ndarray:
-    z = t_ns * (1.0 / tau_ns + 1j * omega)
-    e = np.exp(-z)
-    return -np.expm1(-z) / (1.0 + 1j * omega * tau_ns) + beta * e
+    """Truncated exponential plus the delayed backing; T / tau >= 745 (exp underflows, or grazing
+    refraction with n = 1): the exponential."""
+    t_ns = np.asarray(t_ns, float)
+    far = ~np.isfinite(t_ns) | (t_ns / tau_ns >= 745.0)
+    ts = np.where(far, 0.0, t_ns)
+    z = ts * (1.0 / tau_ns + 1j * omega)
+    e = np.where(far, 0.0, np.exp(-z))
+    one_minus = np.where(far, 1.0, -np.expm1(-z))
+    return one_minus / (1.0 + 1j * omega * tau_ns) + beta * e
 
 
 def response(material: Mapping[str, Any], omega: Any, alpha: Any = 0.0) -> np.ndarray:
