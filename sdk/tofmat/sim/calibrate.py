@@ -18,9 +18,9 @@ Staged fit (scipy.optimize.least_squares, finite differences with a block-sparse
 3. joint refinement of the device (harmonics, saturation sharpness, step gains, step offsets,
    scale errors) and all materials, each material weighted by 1/sqrt(its rms) so that the fit
    aims at the median of the per-material rms rather than at the worst curves;
-4. gauge: the median per-capture offsets are moved into the device (``regauge``, an exact
-   reparametrisation of the linear model), then (2) (warm, chosen kind only) and (3) once more,
-   and a report in ``bin`` mode (the database's averaging, 0.25 mm sweep).
+4. gauge: the median per-capture offsets are moved into the device's decode offsets
+   (``regauge``, exact), then (2) (warm, chosen kind only), (3) and (4) once more, and a report
+   in ``bin`` mode (the database's averaging, 0.25 mm sweep).
 
 Re-run: ``python -m tofmat.sim.calibrate --db shared/data/tanaka2017_kinect2_db --out <dir>``
 writes ``<dir>/data/devices/kinect2_tanaka2017.json``, ``<dir>/data/materials/tanaka2017.json``
@@ -101,6 +101,7 @@ def _default_state(names: Sequence[str]) -> dict[tuple, float]:
         for j in range(3):
             st[("gain", g, j)] = 1.0
             st[("off", g, j)] = 0.0
+        st[("eps", g)] = 0.0  # decode offset (rad)
         st[("lw", g)] = 0.0  # log10 full well (gauge: the 16 MHz group's is 1)
     st[("satp",)] = 8.0
     for i, _ in enumerate(names):
@@ -126,6 +127,7 @@ def state_to_device(st: dict[tuple, float], name: str = "kinect2_tanaka2017") ->
             "full_well": float(10.0 ** st[("lw", g)]) if SATURATION else None,
             "scale_error": float(st[("s", g)]),
             "phase_offset_rad": float(st[("delta", g)]),
+            "decode_offset_rad": float(st[("eps", g)]),
             "harmonics": harm,
             "step_gain": [float(st[("gain", g, j)]) for j in range(3)],
             "step_offset": [float(st[("off", g, j)]) for j in range(3)],
@@ -142,6 +144,7 @@ def device_to_state(dev: dict[str, Any], st: dict[tuple, float]) -> None:
             st[("hx", g, h)] = float(G[h].real)
             st[("hy", g, h)] = float(G[h].imag)
         st[("delta", g)] = float(grp.get("phase_offset_rad", 0.0))
+        st[("eps", g)] = float(grp.get("decode_offset_rad", 0.0))
         st[("s", g)] = float(grp.get("scale_error", 0.0))
         for j in range(3):
             st[("gain", g, j)] = float(grp.get("step_gain", [1, 1, 1])[j])
@@ -161,6 +164,7 @@ def _device_arrays(st: dict[tuple, float]) -> dict[str, np.ndarray]:
         "f": np.array(GROUPS, float),
         "s": np.array([st[("s", g)] for g in range(3)]),
         "delta": np.array([st[("delta", g)] for g in range(3)]),
+        "eps": np.array([st[("eps", g)] for g in range(3)]),
         "G": G,
         "gain": np.array([[st[("gain", g, j)] for j in range(3)] for g in range(3)]),
         "offset": np.array([[st[("off", g, j)] for j in range(3)] for g in range(3)]),
@@ -198,63 +202,21 @@ def state_to_material(st: dict[tuple, float], i: int, name: str, kind: str) -> d
 
 
 # ---------------------------------------------------------------------------------------------
-# Gauge: move common row offsets into the device (exact for ideal step gains)
+# Gauge: move the common row levels into the device (spec section 4.2)
 # ---------------------------------------------------------------------------------------------
-def shift_levels(st: dict[tuple, float], c_mm: Sequence[float]) -> None:
-    """Shift the wrapped depth of each group (80, 16, 120) by c_mm without changing anything else.
-
-    z -> c z e^{i gamma} (c > 0 real: the phase does not see it), gamma = 2 pi c_mm / U_f:
-    delta -> delta - gamma; G_h -> G_h e^{-i (h - 1) gamma} for h = 1 (mod 3) and
-    G_h e^{-i (h + 1) gamma} for h = 2 (mod 3) (h = 0 (mod 3) must be 0); the step gains so that
-    a1 / a0 -> (a1 / a0) e^{2 i gamma} with a0 = sum_j g_j / 2, a1 = sum_j g_j e^{i phi_j} / 2
-    (g_0 = 1 kept); the step offsets so that sum_j o_j e^{-i phi_j} -> c e^{i gamma} (same).
-    Exact for the linear model; approximate where taps saturate or the noise wrap acts.
-    """
-    e_m = np.exp(-1j * M.STEP_PHASES)
-    e_p = np.exp(1j * M.STEP_PHASES)
-    for g, f in enumerate(GROUPS):
-        gam = 2.0 * math.pi * float(c_mm[g]) / M.unambiguous_range_mm(float(f))
-        st[("delta", g)] -= gam
-        for h in range(2, HMAX + 1):
-            if h % 3 == 0:
-                continue
-            k = (h - 1) if h % 3 == 1 else (h + 1)
-            z = (st[("hx", g, h)] + 1j * st[("hy", g, h)]) * np.exp(-1j * k * gam)
-            st[("hx", g, h)], st[("hy", g, h)] = float(z.real), float(z.imag)
-        gains = np.array([st[("gain", g, j)] for j in range(3)])
-        a0, a1 = 0.5 * gains.sum(), 0.5 * np.sum(gains * e_p)
-        c = 1.0
-        if abs(a1) > 1e-12:
-            r = a1 / a0 * np.exp(2j * gam)
-            # g0 (1 + ...) fixed: g1 (e1 - r) + g2 (e2 - r) = (r - 1) g0
-            A = np.array([[(e_p[1] - r).real, (e_p[2] - r).real], [(e_p[1] - r).imag, (e_p[2] - r).imag]])
-            rhs = (r - 1.0) * gains[0]
-            g12 = np.linalg.solve(A, np.array([rhs.real, rhs.imag]))
-            st[("gain", g, 1)], st[("gain", g, 2)] = float(g12[0]), float(g12[1])
-            c = (gains[0] + g12[0] + g12[1]) / (2.0 * a0)
-        o = np.array([st[("off", g, j)] for j in range(3)])
-        O = np.sum(o * e_m) * c * np.exp(1j * gam)
-        rhs2 = O - o[0] * e_m[0]
-        A2 = np.array([[e_m[1].real, e_m[2].real], [e_m[1].imag, e_m[2].imag]])
-        o12 = np.linalg.solve(A2, np.array([rhs2.real, rhs2.imag]))
-        st[("off", g, 1)], st[("off", g, 2)] = float(o12[0]), float(o12[1])
-
-
 def regauge(st: dict[tuple, float], idx: Sequence[int]) -> tuple[float, float]:
-    """Move the median per-capture offsets (row0, row1) into the device, keeping delta_120 = 0
-    and the combined depth unchanged (levels c with c16 - c120 = o0, c80 - c120 = o1,
-    80 c80 + 16 c16 + 120 c120 = 0, then a common range shift, an exact symmetry)."""
+    """Move the median per-capture offsets (row0, row1) into the device's decode offsets eps_f.
+
+    Levels c_f with c16 - c120 = o0, c80 - c120 = o1 and 80 c80 + 16 c16 + 120 c120 = 0 (the
+    combined depth is unchanged): eps_f += 2 pi c_f / U_f. The decode offset acts after the
+    samples are formed, so this is exact (also with saturation); only the noise-wrap expectation
+    of section 4.1 moves with d_120 (by |c120|, a few mm)."""
     o0 = float(np.median([st[("o0", i)] for i in idx]))
     o1 = float(np.median([st[("o1", i)] for i in idx]))
     c120 = -(80.0 * o1 + 16.0 * o0) / 216.0
     c = [o1 + c120, o0 + c120, c120]  # groups 80, 16, 120
-    shift_levels(st, c)
-    # common range shift: delta_f -> delta_f - w_f/w_120 * delta_120 (curves unchanged)
-    d120 = st[("delta", 2)]
-    w = [f * (1.0 + st[("s", g)]) for g, f in enumerate(GROUPS)]
-    for g in range(3):
-        st[("delta", g)] -= w[g] / w[2] * d120
-        st[("delta", g)] = float((st[("delta", g)] + math.pi) % (2 * math.pi) - math.pi)
+    for g, f in enumerate(GROUPS):
+        st[("eps", g)] += 2.0 * math.pi * c[g] / M.unambiguous_range_mm(float(f))
     for i in idx:
         st[("o0", i)] -= o0
         st[("o1", i)] -= o1
@@ -297,12 +259,12 @@ class Problem:
                 dev["f"], dev["s"], dev["delta"], dev["G"], dev["gain"], dev["offset"], Rh,
                 self.D, self.A, 0.0, dev["scale"], dev["full_well"], float(dev["sat_p"]),
             )  # fmt: skip
-            d = M.decode(m)
+            d = M.decode(m, 0.0, dev["eps"])
         else:
             z = M.phasor_direct(
                 dev["f"], dev["s"], dev["delta"], dev["G"], dev["gain"], dev["offset"], Rh, self.D
             )
-            d = M.depths_from_phasor(z)
+            d = M.depths_from_phasor(z, dev["eps"])
         _, dcomb = M.unwrap_combined(d)
         noise = np.array([st[("noise", i)] for i in idx])
         de = M.expected_wrapped(d, noise)
@@ -617,7 +579,7 @@ def _wants_noise(y: np.ndarray, bins: tuple[float, float, int]) -> bool:
 
 def calibrate(
     table: Any,
-    restarts: int = 4,
+    restarts: int = 3,
     seed: int = 0,
     rounds: int = 2,
     progress: Callable[[str], None] | None = None,
@@ -691,9 +653,15 @@ def calibrate(
         rms = prob.rms(st, kinds, allidx)
         log(f"  joint: cost {res.cost:.1f}, median rms {np.median(rms):.3f} mm, "
             f"max {rms.max():.3f} mm ({res.nfev} evaluations)")  # fmt: skip
-        if rnd + 1 < rounds:  # (not after the last joint: inexact with saturation / noise wrap)
-            o0, o1 = regauge(st, allidx)
-            log(f"  gauge: moved median offsets ({o0:.2f}, {o1:.2f}) mm into the device")
+        o0, o1 = regauge(st, allidx)
+        log(f"  gauge: moved median offsets ({o0:.2f}, {o1:.2f}) mm into the decode offsets")
+
+    # the decode-offset gauge moves d_120 by a few mm: refit the noise-wrap materials' own terms
+    for i in sorted(noisy):
+        _, st_i, rms_i, _ = fit_material(prob, st, kinds, i, [kinds[i]], True, starts=())
+        for p in MAT_BOUNDS:
+            st[(p, i)] = st_i[(p, i)]
+        log(f"  {names[i]}: refit after the gauge, rms {rms_i:.3f} mm")
 
     # ---- report -------------------------------------------------------------------------------
     device = state_to_device(st)
@@ -723,7 +691,8 @@ def calibrate(
 # Outputs
 # ---------------------------------------------------------------------------------------------
 def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], table: Any = None,
-                  db_path: str | None = None) -> dict[str, str]:  # fmt: skip
+                  db_path: str | None = None,
+                  template_device: str | None = None) -> dict[str, str]:  # fmt: skip
     """Device JSON, material library JSON (with a "fit" block per material) and the plot grid."""
     out_dir = os.fspath(out_dir)
     dev_path = os.path.join(out_dir, "data", "devices", "kinect2_tanaka2017.json")
@@ -732,11 +701,31 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
     os.makedirs(os.path.dirname(dev_path), exist_ok=True)
     os.makedirs(os.path.dirname(mat_path), exist_ok=True)
     device = dict(result.device)
+    device["version"] = 2
+    # blocks of the simulator's profile that this fit does not determine (camera intrinsics, noise,
+    # per-pixel phase, signal level): taken from the ideal profile when it is available
+    tpl_path = template_device or os.path.join(
+        os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "firmware", "sim", "data",
+        "devices", "ideal_kinect2.json")  # fmt: skip
+    if os.path.isfile(tpl_path):
+        with open(tpl_path) as fh:
+            tpl = json.load(fh)
+        for k in ("camera", "noise", "pixel_phase", "signal"):
+            if k in tpl and k not in device:
+                device[k] = tpl[k]
+    device["notes"] = (
+        "Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the 29 "
+        "real curves (docs/simulator-model.md with its extensions: harmonics to h = 13, tap "
+        "full-well saturation with full_well in units of the 16 MHz tap signal of an albedo-1 "
+        "target at range_ref_mm, signal_scale per group, decode offsets carrying the common row "
+        "levels). camera/noise/pixel_phase/signal are not fitted (copied from the ideal profile)."
+    )
     device["fit"] = {
         "source": "tofmat.sim.calibrate against shared/data/tanaka2017_kinect2_db (29 materials)",
         "median_rms_mm": result.median_rms_mm,
         "runtime_s": result.runtime_s,
-        "gauges": "delta_120 = 0, s_120 = 0, step_gain[0] = 1, step_offset[0] = 0",
+        "gauges": "delta_120 = 0, s_120 = 0, step_gain[0] = 1, step_offset[0] = 0, full_well = 1; "
+        "the median per-capture offsets are carried by decode_offset_rad",
         **result.config,
     }
     with open(dev_path, "w") as fh:
@@ -764,6 +753,10 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
         json.dump(lib, fh, indent=2)
         fh.write("\n")
     paths = {"device": dev_path, "materials": mat_path}
+    log_path = os.path.join(out_dir, "data", "materials", "tanaka2017_fit_log.txt")
+    with open(log_path, "w") as fh:
+        fh.write("\n".join(result.log) + "\n")
+    paths["log"] = log_path
     if table is None and db_path is not None:
         import tofmat
 
@@ -808,9 +801,9 @@ def plot_fit(result: CalibrationResult, table: Any, path: str) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--db", default="shared/data/tanaka2017_kinect2_db")
+    ap.add_argument("--db", default="/work/shared/data/tanaka2017_kinect2_db")
     ap.add_argument("--out", default=".")
-    ap.add_argument("--restarts", type=int, default=4)
+    ap.add_argument("--restarts", type=int, default=3)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--rounds", type=int, default=2)
     a = ap.parse_args(argv)

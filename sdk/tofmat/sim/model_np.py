@@ -184,6 +184,7 @@ def device_arrays(device: Mapping[str, Any]) -> dict[str, np.ndarray]:
         "f": np.array(GROUP_FREQS_MHZ),
         "s": np.array([float(g.get("scale_error", 0.0)) for g in groups]),
         "delta": np.array([float(g.get("phase_offset_rad", 0.0)) for g in groups]),
+        "eps": np.array([float(g.get("decode_offset_rad", 0.0)) for g in groups]),
         "G": np.array([harmonic_vector(g, nh) for g in groups]),
         "gain": np.array([[float(x) for x in g.get("step_gain", [1, 1, 1])] for g in groups]),
         "offset": np.array([[float(x) for x in g.get("step_offset", [0, 0, 0])] for g in groups]),
@@ -203,6 +204,7 @@ def ideal_device(name: str = "ideal", version: str = "0") -> dict[str, Any]:
                 "full_well": None,
                 "scale_error": 0.0,
                 "phase_offset_rad": 0.0,
+                "decode_offset_rad": 0.0,
                 "harmonics": [
                     {"h": h, "amplitude": 0.0, "phase_rad": 0.0} for h in range(2, N_HARM + 1)
                 ],
@@ -284,11 +286,16 @@ def saturate(T: np.ndarray, W: Any, p: float) -> np.ndarray:
     return T / (1.0 + u**p) ** (1.0 / p)
 
 
-def decode(m: np.ndarray, delta_p: Any = 0.0) -> np.ndarray:
-    """Wrapped per-group depths d_f (mm) from raw samples m (..., 3 groups, 3 steps, N)."""
+def decode(m: np.ndarray, delta_p: Any = 0.0, eps: Any = None) -> np.ndarray:
+    """Wrapped per-group depths d_f (mm) from raw samples m (..., 3 groups, 3 steps, N).
+
+    theta_j = p0 - eps_f + phi_j with p0 = -delta_p (the P0 tables) and eps_f the per-group
+    decode offset (spec 2.1: the P0 calibration's residual; it adds eps_f to the phase)."""
     dp = np.asarray(delta_p, float)  # scalar or (N,)
-    e = np.exp(-1j * (STEP_PHASES[:, None] - dp))  # exp(-i theta_j), theta_j = p0 + phi_j: (3, N|1)
+    e = np.exp(-1j * (STEP_PHASES[:, None] - dp))  # exp(-i (p0 + phi_j)): (3, N|1)
     z = np.sum(m * e, axis=-2)
+    if eps is not None:
+        z = z * np.exp(1j * np.asarray(eps, float))[:, None]
     phase = np.mod(np.angle(z), 2.0 * math.pi)
     f = np.array(GROUP_FREQS_MHZ)[:, None] * 1e-3
     return C_DEV * phase / (4.0 * math.pi * f)
@@ -336,8 +343,10 @@ def phasor_direct(
     return z + (np.real(Rh[..., 0]) * O)[..., None]
 
 
-def depths_from_phasor(z: np.ndarray) -> np.ndarray:
-    """d_f = C_DEV * wrap(arg z) / (4 pi f) for the groups (..., 3, N)."""
+def depths_from_phasor(z: np.ndarray, eps: Any = None) -> np.ndarray:
+    """d_f = C_DEV * wrap(arg z + eps_f) / (4 pi f) for the groups (..., 3, N)."""
+    if eps is not None:
+        z = z * np.exp(1j * np.asarray(eps, float))[:, None]
     phase = np.mod(np.angle(z), 2.0 * math.pi)
     f = np.array(GROUP_FREQS_MHZ)[:, None] * 1e-3
     return C_DEV * phase / (4.0 * math.pi * f)
@@ -401,7 +410,7 @@ def simulate(
         dev["f"], dev["s"], dev["delta"], dev["G"], dev["gain"], dev["offset"], Rh, D_mm, A,
         delta_p, dev["scale"], dev["full_well"], float(dev["sat_p"]),
     )  # fmt: skip
-    d = decode(m, delta_p)
+    d = decode(m, delta_p, dev["eps"])
     D, dcomb = unwrap_combined(d)
     rows = np.stack([d[1] - d[2], d[0] - d[2]])
     return {"m": m, "d": d, "D": D, "dcomb": dcomb, "rows": rows}
