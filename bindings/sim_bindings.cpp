@@ -148,7 +148,8 @@ void register_sim(pyb::module_& parent) {
       .def_property_readonly("incidence_deg", [](const Frame& f) { return image(f.incidence_deg, {f.height, f.width}); });
 
   pyb::class_<Renderer>(m, "Renderer")
-      .def(pyb::init<DeviceProfile, MaterialLibrary>(), pyb::arg("device"), pyb::arg("library"))
+      .def(pyb::init<DeviceProfile, MaterialLibrary, int>(), pyb::arg("device"), pyb::arg("library"),
+           pyb::arg("threads") = 0, "threads: workers per frame (0: one per hardware thread); frames do not depend on it.")
       .def(
           "render",
           [](const Renderer& r, const Scene& s, std::uint64_t seed, bool noise) {
@@ -174,7 +175,20 @@ void register_sim(pyb::module_& parent) {
             }
             return out;
           },
-          "Per-pixel phase (3, H, W) the P0 tables correct; decode with p0 = -pixel_phase.")
+          "Per-pixel phase (3, H, W) of the raw samples (the pattern the P0 tables correct).")
+      .def(
+          "p0_tables",
+          [](const Renderer& r) {
+            const auto& c = r.device().camera;
+            pyb::array_t<float> out(std::vector<pyb::ssize_t>{3, c.height, c.width});
+            for (int g = 0; g < 3; ++g) {
+              const auto p = r.p0_table(g);
+              std::memcpy(out.mutable_data() + static_cast<std::size_t>(g) * p.size(), p.data(), p.size() * sizeof(float));
+            }
+            return out;
+          },
+          "The P0 corrections (3, H, W) the simulated device reports: -(pixel_phase + decode_offset_rad). "
+          "Decode with these.")
       .def_property_readonly("device", &Renderer::device)
       .def_property_readonly("library", &Renderer::library);
 

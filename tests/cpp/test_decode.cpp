@@ -385,15 +385,17 @@ TEST(IdealDecode, SweepDecodesToScaledRange) {
 }
 
 TEST(IdealDecode, RawSamplesAreTheCosinesOfTheSpec) {
-  // m_j = A Re{conj(R) exp(i (2 pi f t - delta_p + phi_j))} with R = albedo for an opaque material.
+  // m_j = A r_f Re{conj(R) exp(i (2 pi f t - delta_p + phi_j))} with R = albedo for an opaque material
+  // and r_f the group's signal scale.
   const IdealSetup s;
   for (double range : {0.0, 500.0, 1234.5, 8000.0}) {
     for (double dp : {0.0, 0.4}) {
       for (std::size_t g = 0; g < 3; ++g) {
-        const auto m = tofmat::sim::raw_samples(s.device.groups[g], s.w[g], range, dp, 1000.0);
+        const auto m = tofmat::sim::raw_samples(s.device.groups[g], s.w[g], range, dp, 1000.0, 1.0, s.device.saturation_sharpness);
         const double x = kTwoPi * kFreqs[g] * 1e-3 * 2.0 * range / kCTrue - dp;
         for (int j = 0; j < 3; ++j) {
-          EXPECT_NEAR(m[static_cast<std::size_t>(j)], 1000.0 * 0.7 * std::cos(x + kTwoPi * j / 3.0), 1e-9)
+          EXPECT_NEAR(m[static_cast<std::size_t>(j)],
+                      1000.0 * s.device.groups[g].signal_scale * 0.7 * std::cos(x + kTwoPi * j / 3.0), 1e-9)
               << range << " " << g << " " << j;
         }
       }

@@ -234,14 +234,14 @@ void check_noise_free_decode(double depth_mm, double yaw_deg, const std::string&
         double e_sum = 0.0;
         const double x_phase = kTwoPi * kFreqs[g] * 1e-3 * 2.0 * range / kCTrue;
         for (std::size_t j = 0; j < 3; ++j) {
-          const double m = amp * std::cos(x_phase + kTwoPi * static_cast<double>(j) / 3.0);
+          const double m = amp * d.groups[g].signal_scale * std::cos(x_phase + kTwoPi * static_cast<double>(j) / 3.0);
           const double got = raw_at(f, g * 3 + j, i);
           const double e = std::fabs(got - m);
           ASSERT_LE(e, 0.5 * lut_spacing(m) + 0.55) << "pixel " << x << "," << y << " group " << g << " step " << j
                                                      << ": raw " << got << " model " << m;
           e_sum += e;
         }
-        const double bound = kWrapDev[g] / kTwoPi * std::asin(std::min(1.0, e_sum / (1.5 * amp))) + 2e-3;
+        const double bound = kWrapDev[g] / kTwoPi * std::asin(std::min(1.0, e_sum / (1.5 * amp * d.groups[g].signal_scale))) + 2e-3;
         ASSERT_LE(circ(dec.depth_mm[g][i], range * kScale, kWrapDev[g]), bound)
             << "pixel " << x << "," << y << " group " << g;
       }
@@ -291,7 +291,7 @@ TEST(RendererDecode, QuantisationIsUnbiased) {
       for (std::size_t g = 0; g < 3; ++g) {
         const double xp = kTwoPi * kFreqs[g] * 1e-3 * 2.0 * range / kCTrue;
         for (std::size_t j = 0; j < 3; ++j) {
-          const double m = amp * std::cos(xp + kTwoPi * static_cast<double>(j) / 3.0);
+          const double m = amp * d.groups[g].signal_scale * std::cos(xp + kTwoPi * static_cast<double>(j) / 3.0);
           if (std::fabs(m) < 300.0 || std::fabs(m) > 16000.0) continue;
           const double got = raw_at(f, g * 3 + j, i);
           sum_signed += std::fabs(got) - std::fabs(m);
@@ -448,8 +448,8 @@ TEST(RendererNoise, MeanOverFramesConvergesAsOneOverSqrtN) {
 }
 
 TEST(RendererNoise, ShotNoiseGrowsWithSignal) {
-  // sd^2 = read^2 + shot_gain * (A |R| + ambient): measured on the
-  // difference of two frames of the same noise-free scene.
+  // sd^2 = read^2 + shot_gain * (A r_f albedo + ambient), the light the taps
+  // collected: measured on the difference of two frames of the same scene.
   DeviceProfile d = small_device(64, 48);
   d.noise.read_noise = 0.0;
   d.noise.shot_gain = 1.0;
@@ -466,7 +466,7 @@ TEST(RendererNoise, ShotNoiseGrowsWithSignal) {
     for (std::size_t sub = 0; sub < 9; ++sub) {
       const double diff = raw_at(a, sub, i) - raw_at(b, sub, i);
       s2 += diff * diff;
-      expect += 2.0 * (amp * 0.9 + 1.0 / 12.0);  // two frames, plus rounding
+      expect += 2.0 * (amp * d.groups[sub / 3].signal_scale * 0.9 + 1.0 / 12.0);  // two frames, plus rounding
     }
   }
   EXPECT_NEAR(s2 / expect, 1.0, 0.05);  // 27648 differences: se ~0.9 %
@@ -709,7 +709,7 @@ TEST(RendererArgs, RejectsInvalidDeviceOrLibrary) {
   d.groups[0].step_gain[1] = 3.0;
   EXPECT_THROW(Renderer(d, library()), std::invalid_argument);
   MaterialLibrary lib = library();
-  lib.materials[0].albedo = 2.0;
+  lib.materials[0].albedo = 20.0;
   EXPECT_THROW(Renderer(DeviceProfile::ideal_kinect2(), lib), std::invalid_argument);
 }
 

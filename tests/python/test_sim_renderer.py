@@ -1,5 +1,5 @@
 """The raw frame renderer through Python (tofmat.sim.Renderer) and the float decode
-(tofmat._tofmat.decode_frame with p0 = -Renderer.pixel_phase()).
+(tofmat._tofmat.decode_frame with p0 = Renderer.p0_tables()).
 
 The C++ suite tests/cpp/test_sim_renderer.cpp checks the raw samples against the model sample by
 sample; here the same behaviour is checked through the Python API the SDK and tools use.
@@ -36,7 +36,7 @@ def device(**changes: Any) -> sim.DeviceProfile:
 
 
 def decode(r: sim.Renderer, f: sim.Frame) -> Any:
-    p0 = -r.pixel_phase().reshape(3, -1)
+    p0 = r.p0_tables().reshape(3, -1)
     return _tofmat.decode_frame(f.raw, p0)
 
 

@@ -9,6 +9,20 @@
 #include "tofmat/sim/measurement.hpp"
 
 namespace tofmat::sim {
+namespace {
+
+// Spec 4.1: the database averaged wrapped depths, so with per-sample noise of
+// sigma_f = noise_mm * 120 / f the mean near a wrap is pulled inwards:
+// E[d_f] = d_f + U_f [Q(d_f / sigma_f) - Q((U_f - d_f) / sigma_f)].
+double expected_wrapped(double d_mm, double freq_mhz, double noise_mm) {
+  if (!(noise_mm > 0.0)) return d_mm;
+  const double u = 150000.0 / freq_mhz;  // C_DEV / (2 f), mm
+  const double sigma = noise_mm * 120.0 / freq_mhz;
+  const auto q = [](double x) { return 0.5 * std::erfc(x / std::sqrt(2.0)); };
+  return d_mm + u * (q(d_mm / sigma) - q((u - d_mm) / sigma));
+}
+
+}  // namespace
 
 std::vector<float> distortion_curve(const DeviceProfile& device, const Material& material, const BinSpec& bins,
                                     const std::vector<RowSpec>& rows, double incidence_rad, CurveMethod method,
@@ -32,7 +46,9 @@ std::vector<float> distortion_curve(const DeviceProfile& device, const Material&
     const double range = sweep.start_mm + sweep.step_mm * static_cast<double>(i);
     const auto d = ideal_depths(device, w, range);
     comb[i] = unwrap_depths(d).combined_mm;
-    frequency_features(rows, freqs.data(), d.data(), 3, &vals[i * n_rows]);
+    std::array<double, 3> mean{};
+    for (std::size_t g = 0; g < 3; ++g) mean[g] = expected_wrapped(d[g], freqs[g], material.noise_mm);
+    frequency_features(rows, freqs.data(), mean.data(), 3, &vals[i * n_rows]);
   }
 
   if (method == CurveMethod::kBinMean) {

@@ -5,6 +5,12 @@
 
 namespace tofmat::sim {
 
+double saturate_tap(double t, double full_well, double sharpness) {
+  if (!(full_well < std::numeric_limits<double>::infinity())) return t;
+  const double u = std::fabs(t) / full_well;
+  return t / std::pow(1.0 + std::pow(u, sharpness), 1.0 / sharpness);
+}
+
 DeviceProfile DeviceProfile::ideal_kinect2() {
   DeviceProfile d;
   d.name = "ideal_kinect2";
@@ -14,6 +20,7 @@ DeviceProfile DeviceProfile::ideal_kinect2() {
     d.groups[g].harmonic_amplitude.fill(0.0);
     d.groups[g].harmonic_phase_rad.fill(0.0);
     d.groups[g].harmonic_amplitude[1] = 1.0;
+    d.groups[g].signal_scale = kDefaultSignalScale[g];
   }
   return d;
 }
@@ -26,6 +33,9 @@ void DeviceProfile::validate() const {
     if (!(f.freq_mhz > 0.0 && f.freq_mhz < 1e4)) bad(tag + "freq_mhz must be in (0, 10000)");
     if (!(std::fabs(f.scale_error) < 0.5)) bad(tag + "scale_error must be in (-0.5, 0.5)");
     if (!std::isfinite(f.phase_offset_rad)) bad(tag + "phase_offset_rad must be finite");
+    if (!std::isfinite(f.decode_offset_rad)) bad(tag + "decode_offset_rad must be finite");
+    if (!(f.signal_scale > 0.0 && f.signal_scale <= 10.0)) bad(tag + "signal_scale must be in (0, 10]");
+    if (!(f.full_well > 0.0)) bad(tag + "full_well must be > 0 (or null: no saturation)");
     if (f.harmonic_amplitude[1] != 1.0 || f.harmonic_phase_rad[1] != 0.0) {
       bad(tag + "the fundamental's coefficient must be 1");
     }
@@ -39,6 +49,8 @@ void DeviceProfile::validate() const {
       if (!(std::fabs(f.step_offset[static_cast<std::size_t>(j)]) < 1.0)) bad(tag + "step offsets must be in (-1, 1)");
     }
   }
+  if (!(range_ref_mm > 0.0 && range_ref_mm <= 1e5)) bad("range_ref_mm must be in (0, 100000]");
+  if (!(saturation_sharpness >= 1.0 && saturation_sharpness <= 100.0)) bad("saturation.sharpness must be in [1, 100]");
   if (!(noise.read_noise >= 0.0 && noise.shot_gain >= 0.0 && noise.ambient >= 0.0)) bad("noise terms must be >= 0");
   if (!(signal.counts_at_1m > 0.0) || !(signal.saturation > 0.0 && signal.saturation <= 16320.0)) {
     bad("signal needs counts_at_1m > 0 and 0 < saturation <= 16320");

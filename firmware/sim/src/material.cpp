@@ -38,7 +38,8 @@ ResponseKind response_kind_from_name(const std::string& name) {
   if (name == "exponential") return ResponseKind::kExponential;
   if (name == "gamma") return ResponseKind::kGamma;
   if (name == "slab") return ResponseKind::kSlab;
-  throw std::invalid_argument("unknown material kind '" + name + "' (opaque, exponential, gamma, slab)");
+  if (name == "double") return ResponseKind::kDouble;
+  throw std::invalid_argument("unknown material kind '" + name + "' (opaque, exponential, gamma, slab, double)");
 }
 
 const char* response_kind_name(ResponseKind kind) {
@@ -47,17 +48,23 @@ const char* response_kind_name(ResponseKind kind) {
     case ResponseKind::kExponential: return "exponential";
     case ResponseKind::kGamma: return "gamma";
     case ResponseKind::kSlab: return "slab";
+    case ResponseKind::kDouble: return "double";
   }
   return "?";
 }
 
 void Material::validate() const {
   auto bad = [&](const char* what) { throw std::invalid_argument("material '" + name + "': " + what); };
-  if (!(albedo >= 0.0 && albedo <= 1.0)) bad("albedo must be in [0, 1]");
+  if (!(albedo >= 0.0 && albedo <= 10.0)) bad("albedo must be in [0, 10]");
   if (!(subsurface >= 0.0 && subsurface <= 1.0)) bad("subsurface must be in [0, 1]");
   if (kind != ResponseKind::kOpaque && !(tau_ps > 0.0 && tau_ps <= 1e6)) bad("tau_ps must be in (0, 1e6]");
   if (kind == ResponseKind::kGamma && !(gamma_k >= 1e-2 && gamma_k <= 1e3)) bad("gamma_k must be in [0.01, 1000]");
   if (!(refractive_index >= 1.0 && refractive_index <= 4.0)) bad("refractive_index must be in [1, 4]");
+  if (kind == ResponseKind::kDouble) {
+    if (!(subsurface2 >= 0.0 && subsurface + subsurface2 <= 1.0)) bad("subsurface2 must be >= 0 with subsurface + subsurface2 <= 1");
+    if (!(tau2_ps > 0.0 && tau2_ps <= 1e6)) bad("tau2_ps must be in (0, 1e6]");
+  }
+  if (!(noise_mm >= 0.0 && noise_mm <= 1e3)) bad("noise_mm must be in [0, 1000]");
   if (kind == ResponseKind::kSlab) {
     if (!(thickness_mm > 0.0 && thickness_mm <= 1e3)) bad("thickness_mm must be in (0, 1000]");
     if (!(path_factor >= 1.0 && path_factor <= 1e4)) bad("path_factor must be in [1, 1e4]");
@@ -94,10 +101,13 @@ double schlick_reflectance(double n, double incidence_rad) {
 }
 
 std::complex<double> material_response(const Material& m, double freq_hz, double incidence_rad) {
-  if (m.kind == ResponseKind::kOpaque || m.subsurface == 0.0) return {m.albedo, 0.0};
+  const bool second = m.kind == ResponseKind::kDouble && m.subsurface2 != 0.0;
+  if (m.kind == ResponseKind::kOpaque || (m.subsurface == 0.0 && !second)) return {m.albedo, 0.0};
   const double n = m.refractive_index;
   const double f0 = schlick_reflectance(n, 0.0);
-  const double b = std::min(1.0, m.subsurface * (1.0 - schlick_reflectance(n, incidence_rad)) / (1.0 - f0));
+  // Fresnel transmission scales every subsurface share alike.
+  const double transmitted = (1.0 - schlick_reflectance(n, incidence_rad)) / (1.0 - f0);
+  const double b = std::min(1.0, m.subsurface * transmitted);
   const double omega = kTwoPi * freq_hz;
   const double tau = m.tau_ps * 1e-12;
   std::complex<double> k;
@@ -110,6 +120,10 @@ std::complex<double> material_response(const Material& m, double freq_hz, double
       const double transit = m.path_factor * 2.0 * m.thickness_mm * n / (kCTrueMmPerS * cos_t);
       k = slab_kernel(omega, tau, transit, m.backing);
       break;
+    }
+    case ResponseKind::kDouble: {
+      const double b2 = std::min(1.0, m.subsurface2 * transmitted);
+      return m.albedo * ((1.0 - b - b2) + b * exponential_kernel(omega, tau) + b2 * exponential_kernel(omega, m.tau2_ps * 1e-12));
     }
     case ResponseKind::kOpaque: k = 1.0; break;
   }

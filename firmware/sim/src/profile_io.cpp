@@ -76,14 +76,17 @@ json parse(const std::string& text, const std::string& what) {
 }
 
 void check_version(const json& j, const std::string& where) {
+  if (!j.contains("version")) fail(where, "missing version (this build reads versions 1 and 2)");
   const double v = num(j, where, "version", -1);
-  if (v != kProfileFormatVersion) fail(where, "unsupported version (this build reads version 1)");
+  if (!j.at("version").is_number_integer() || v < kProfileOldestVersion || v > kProfileFormatVersion) {
+    fail(where, "unsupported version (this build reads versions 1 and 2)");
+  }
 }
 
 Material material_from(const json& j, const std::string& where) {
   only_keys(j, where,
             {"name", "kind", "albedo", "subsurface", "tau_ps", "gamma_k", "refractive_index", "thickness_mm",
-             "path_factor", "backing", "fit", "notes"});
+             "path_factor", "backing", "subsurface2", "tau2_ps", "noise_mm", "fit", "notes"});
   Material m;
   m.name = str(j, where, "name");
   try {
@@ -99,6 +102,9 @@ Material material_from(const json& j, const std::string& where) {
   m.thickness_mm = num(j, where, "thickness_mm", m.thickness_mm);
   m.path_factor = num(j, where, "path_factor", m.path_factor);
   m.backing = num(j, where, "backing", m.backing);
+  m.subsurface2 = num(j, where, "subsurface2", m.subsurface2);
+  m.tau2_ps = num(j, where, "tau2_ps", m.tau2_ps);
+  m.noise_mm = num(j, where, "noise_mm", m.noise_mm);
   try {
     m.validate();
   } catch (const std::invalid_argument& e) {
@@ -117,7 +123,10 @@ json material_to(const Material& m) {
               {"refractive_index", m.refractive_index},
               {"thickness_mm", m.thickness_mm},
               {"path_factor", m.path_factor},
-              {"backing", m.backing}};
+              {"backing", m.backing},
+              {"subsurface2", m.subsurface2},
+              {"tau2_ps", m.tau2_ps},
+              {"noise_mm", m.noise_mm}};
 }
 
 std::string read_text(const std::filesystem::path& p) {
@@ -138,19 +147,32 @@ MaterialLibrary library_from(const std::string& text);
 DeviceProfile device_from(const std::string& text) {
   const json j = parse(text, "device profile");
   const std::string w = "device";
-  only_keys(j, w, {"name", "version", "frequencies", "pixel_phase", "noise", "signal", "camera", "fit", "notes"});
+  only_keys(j, w,
+            {"name", "version", "range_ref_mm", "saturation", "frequencies", "pixel_phase", "noise", "signal", "camera",
+             "fit", "notes"});
   check_version(j, w);
   DeviceProfile d = DeviceProfile::ideal_kinect2();
   d.name = str(j, w, "name");
+  d.range_ref_mm = num(j, w, "range_ref_mm", d.range_ref_mm);
+  if (j.contains("saturation")) {
+    only_keys(j.at("saturation"), w + ".saturation", {"sharpness"});
+    d.saturation_sharpness = num(j.at("saturation"), w + ".saturation", "sharpness", d.saturation_sharpness);
+  }
   if (!j.contains("frequencies") || !j.at("frequencies").is_array() || j.at("frequencies").size() != 3) {
     fail(w + ".frequencies", "expected 3 entries (groups 80, 16, 120 MHz)");
   }
   for (std::size_t g = 0; g < 3; ++g) {
     const json& f = j.at("frequencies")[g];
     const std::string fw = w + ".frequencies[" + std::to_string(g) + "]";
-    only_keys(f, fw, {"freq_mhz", "scale_error", "phase_offset_rad", "harmonics", "step_gain", "step_offset"});
+    only_keys(f, fw,
+              {"freq_mhz", "signal_scale", "full_well", "scale_error", "phase_offset_rad", "decode_offset_rad",
+               "harmonics", "step_gain", "step_offset"});
     auto& m = d.groups[g];
     m.freq_mhz = num(f, fw, "freq_mhz", 0.0);
+    m.signal_scale = num(f, fw, "signal_scale", m.signal_scale);
+    m.decode_offset_rad = num(f, fw, "decode_offset_rad", 0.0);
+    // null (or absent): the taps never saturate
+    if (f.contains("full_well") && !f.at("full_well").is_null()) m.full_well = num(f, fw, "full_well", 0.0);
     m.scale_error = num(f, fw, "scale_error", 0.0);
     m.phase_offset_rad = num(f, fw, "phase_offset_rad", 0.0);
     m.step_gain = triple(f, fw, "step_gain", m.step_gain);
@@ -161,7 +183,9 @@ DeviceProfile device_from(const std::string& text) {
         const std::string hw = fw + ".harmonics";
         only_keys(h, hw, {"h", "amplitude", "phase_rad"});
         const double order = num(h, hw, "h", 0);
-        if (order != std::floor(order) || order < 2 || order > kMaxHarmonic) fail(hw, "h must be an integer 2..7");
+        if (order != std::floor(order) || order < 2 || order > kMaxHarmonic) {
+          fail(hw, "h must be an integer 2.." + std::to_string(kMaxHarmonic));
+        }
         m.harmonic_amplitude[static_cast<std::size_t>(order)] = num(h, hw, "amplitude", 0.0);
         m.harmonic_phase_rad[static_cast<std::size_t>(order)] = num(h, hw, "phase_rad", 0.0);
       }
@@ -211,19 +235,29 @@ std::string device_to_json(const DeviceProfile& d) {
   json freqs = json::array();
   for (const auto& f : d.groups) {
     json hs = json::array();
-    for (int h = 2; h <= kMaxHarmonic; ++h) {
+    // h = 2..7 always, higher orders up to the last non-zero one.
+    int top = 7;
+    for (int h = 8; h <= kMaxHarmonic; ++h) {
+      if (f.harmonic_amplitude[static_cast<std::size_t>(h)] != 0.0) top = h;
+    }
+    for (int h = 2; h <= top; ++h) {
       const auto k = static_cast<std::size_t>(h);
       hs.push_back({{"h", h}, {"amplitude", f.harmonic_amplitude[k]}, {"phase_rad", f.harmonic_phase_rad[k]}});
     }
     freqs.push_back({{"freq_mhz", f.freq_mhz},
+                     {"signal_scale", f.signal_scale},
+                     {"full_well", std::isfinite(f.full_well) ? json(f.full_well) : json(nullptr)},
                      {"scale_error", f.scale_error},
                      {"phase_offset_rad", f.phase_offset_rad},
+                     {"decode_offset_rad", f.decode_offset_rad},
                      {"harmonics", hs},
                      {"step_gain", f.step_gain},
                      {"step_offset", f.step_offset}});
   }
   const json j{{"name", d.name},
-               {"version", d.version},
+               {"version", kProfileFormatVersion},
+               {"range_ref_mm", d.range_ref_mm},
+               {"saturation", {{"sharpness", d.saturation_sharpness}}},
                {"frequencies", freqs},
                {"pixel_phase",
                 {{"mean_rad", d.pixel_phase.mean_rad},
@@ -286,7 +320,7 @@ MaterialLibrary library_from(const std::string& text) {
 std::string library_to_json(const MaterialLibrary& lib) {
   json mats = json::array();
   for (const auto& m : lib.materials) mats.push_back(material_to(m));
-  return json{{"name", lib.name}, {"version", lib.version}, {"materials", mats}}.dump(2);
+  return json{{"name", lib.name}, {"version", kProfileFormatVersion}, {"materials", mats}}.dump(2);
 }
 
 const Material& MaterialLibrary::find(const std::string& material) const {

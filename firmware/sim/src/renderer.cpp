@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <random>
 #include <stdexcept>
+#include <thread>
 
 #include "tofmat/core/decode.hpp"
 #include "tofmat/core/raw_lut.hpp"
@@ -36,10 +38,46 @@ struct Plane {
   Vec3 point;
   Vec3 n;
   const Material* material;
-  // This frame's waveforms by incidence step, so the locked cache is visited
-  // once per step and plane, not once per pixel.
-  mutable std::array<const Waveform*, 91> by_step{};
+  int id;  // index into a worker's per-plane waveform slots
 };
+
+// A worker's waveforms by plane and incidence step, so the locked cache is
+// visited once per step and plane, not once per pixel.
+using WaveformSlots = std::vector<std::array<const Waveform*, 91>>;
+
+// The taps' soft full well as a table of S(u) = N(T) / T = (1 + u^p)^(-1/p)
+// against u = |T| / W on [0, kSatMaxU]; beyond it S = 1/u (error < u^-p / p,
+// 1e-12 for p >= 8). Linear interpolation errs by < 2e-6 (u spacing 1e-3).
+constexpr double kSatMaxU = 4.0;
+constexpr int kSatPoints = 4096;
+
+std::vector<float> saturation_table(double p) {
+  std::vector<float> t(kSatPoints + 2);
+  for (int k = 0; k <= kSatPoints + 1; ++k) {
+    const double u = kSatMaxU * k / kSatPoints;
+    t[static_cast<std::size_t>(k)] = static_cast<float>(std::pow(1.0 + std::pow(u, p), -1.0 / p));
+  }
+  return t;
+}
+
+double saturate_lookup(const std::vector<float>& table, double t, double inv_well) {
+  const double u = std::fabs(t) * inv_well;
+  if (u >= kSatMaxU) return t / u;
+  const double x = u * (kSatPoints / kSatMaxU);
+  const auto k = static_cast<std::size_t>(x);
+  const double fr = x - static_cast<double>(k);
+  return t * (table[k] + fr * (table[k + 1] - table[k]));
+}
+
+// Independent noise streams per block of rows (splitmix64 of seed and block),
+// so a frame does not depend on how many threads render it.
+std::uint64_t block_seed(std::uint64_t seed, std::uint64_t block) {
+  std::uint64_t z = seed + 0x9E3779B97F4A7C15ull * (block + 1);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+constexpr int kRowsPerBlock = 8;
 
 // The magnitudes the 11-bit code can carry, bracketing each integer: for
 // floor(|v|) = k, below[k] is the largest code magnitude <= k and above[k] the
@@ -73,8 +111,14 @@ const CodeGrid& code_grid() {
 
 }  // namespace
 
-Renderer::Renderer(DeviceProfile device, MaterialLibrary library) : device_(std::move(device)), library_(std::move(library)) {
+Renderer::Renderer(DeviceProfile device, MaterialLibrary library, int threads)
+    : device_(std::move(device)), library_(std::move(library)) {
   device_.validate();
+  if (threads < 0 || threads > 256) throw std::invalid_argument("renderer threads must be 0..256");
+  threads_ = threads > 0 ? threads : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  bool wells = false;
+  for (const auto& g : device_.groups) wells = wells || std::isfinite(g.full_well);
+  if (wells) saturation_ = saturation_table(device_.saturation_sharpness);
   for (const auto& m : library_.materials) m.validate();
   const auto& c = device_.camera;
   rays_.resize(static_cast<std::size_t>(c.width) * static_cast<std::size_t>(c.height));
@@ -104,21 +148,27 @@ const Waveform& Renderer::waveform(const Material& m, int incidence_step) const 
   if (slot) return *slot;
   auto w = std::make_unique<Waveform>();
   const double incidence = incidence_step * kIncidenceStepDeg * kDegToRad;
-  w->reflectance = std::abs(material_response(m, device_.groups[1].true_freq_hz(), incidence));
   for (std::size_t g = 0; g < 3; ++g) {
-    const auto& fm = device_.groups[g];
-    const HarmonicWeights hw = harmonic_weights(fm, m, incidence);
-    auto& tab = w->samples[g];
+    const HarmonicWeights hw = harmonic_weights(device_.groups[g], m, incidence);
+    w->dc = hw.dc;
+    auto& tab = w->ac[g];
     tab.resize(3 * kWaveformPoints);
     for (int k = 0; k < kWaveformPoints; ++k) {
-      // raw_samples at a range whose phase is 2 pi k / N: pass the phase as a
-      // negative pixel phase at range 0.
-      const auto s = raw_samples(fm, hw, 0.0, -kTwoPi * k / kWaveformPoints, 1.0);
+      const auto s = ac_per_unit(hw, kTwoPi * k / kWaveformPoints);
       for (std::size_t j = 0; j < 3; ++j) tab[static_cast<std::size_t>(k) * 3 + j] = static_cast<float>(s[j]);
     }
   }
   slot = std::move(w);
   return *slot;
+}
+
+std::vector<float> Renderer::p0_table(int group) const {
+  if (group < 0 || group > 2) throw std::invalid_argument("group must be 0, 1 or 2");
+  const auto& pat = pixel_phase_[static_cast<std::size_t>(group)];
+  const auto eps = static_cast<float>(device_.groups[static_cast<std::size_t>(group)].decode_offset_rad);
+  std::vector<float> out(pat.size());
+  for (std::size_t i = 0; i < pat.size(); ++i) out[i] = -(pat[i] + eps);
+  return out;
 }
 
 Frame Renderer::render(const Scene& scene, std::uint64_t seed, bool noise) const {
@@ -141,6 +191,7 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
     double split_x;
   };
   std::vector<TargetPlanes> planes;
+  int n_planes = 0;
   for (const auto& t : scene.targets) {
     if (t.x0 < 0 || t.y0 < 0 || t.x1 > w || t.y1 > h || t.x0 >= t.x1 || t.y0 >= t.y1) {
       throw std::invalid_argument("target '" + t.material + "' rectangle is empty or outside the image");
@@ -153,14 +204,16 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
     const double cxp = 0.5 * (t.x0 + t.x1 - 1), cyp = 0.5 * (t.y0 + t.y1 - 1);
     const Vec3 r = ray(cam, cxp, cyp);
     const Vec3 p{r.x * t.depth_mm / r.z, r.y * t.depth_mm / r.z, t.depth_mm};
-    planes.push_back({Plane{p, normal(t.yaw_deg + 0.5 * t.fold_deg, t.pitch_deg), m},
-                      Plane{p, normal(t.yaw_deg - 0.5 * t.fold_deg, t.pitch_deg), m}, cxp});
+    planes.push_back({Plane{p, normal(t.yaw_deg + 0.5 * t.fold_deg, t.pitch_deg), m, n_planes},
+                      Plane{p, normal(t.yaw_deg - 0.5 * t.fold_deg, t.pitch_deg), m, n_planes + 1}, cxp});
+    n_planes += 2;
   }
   const bool has_wall = !scene.background_material.empty();
   Plane wall{};
   if (has_wall) {
     if (!(scene.background_depth_mm > 0.0)) throw std::invalid_argument("background depth must be > 0");
-    wall = Plane{{0.0, 0.0, scene.background_depth_mm}, {0.0, 0.0, -1.0}, &library_.find(scene.background_material)};
+    wall = Plane{{0.0, 0.0, scene.background_depth_mm}, {0.0, 0.0, -1.0}, &library_.find(scene.background_material),
+                 n_planes++};
   }
 
   Frame f;
@@ -174,87 +227,137 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
   f.target.assign(n_px, -2);
   f.incidence_deg.assign(n_px, NAN);
 
-  FastNormal gauss(seed);
   const auto& codes = code_grid();
   const double sat = device_.signal.saturation;
   const auto& nm = device_.noise;
   const double points_per_rad = kWaveformPoints / kTwoPi;
-  std::array<double, 3> omega_per_mm{};  // phase per mm of range
+  // Full well in counts: full_well = 1 is the 16 MHz tap signal of an albedo-1
+  // target at range_ref_mm (spec 2.1), i.e. counts_at_1m * (1000 / range_ref)^2.
+  const double well_unit = device_.signal.counts_at_1m * (1000.0 / device_.range_ref_mm) * (1000.0 / device_.range_ref_mm);
+  std::array<double, 3> omega_per_mm{}, inv_well{};  // phase per mm of range; 1 / full well (0: none)
+  std::array<bool, 3> linear{};
   for (std::size_t g = 0; g < 3; ++g) {
-    omega_per_mm[g] = kTwoPi * device_.groups[g].true_freq_hz() * 1e-9 * 2.0 / kCTrueMmPerNs;
+    const auto& fm = device_.groups[g];
+    omega_per_mm[g] = kTwoPi * fm.true_freq_hz() * 1e-9 * 2.0 / kCTrueMmPerNs;
+    linear[g] = !std::isfinite(fm.full_well);
+    inv_well[g] = linear[g] ? 0.0 : 1.0 / (fm.full_well * well_unit);
   }
 
-  for (int y = region.y0; y < region.y1; ++y) {
-    for (int x = region.x0; x < region.x1; ++x) {
-      // i: index in the output region; gi: index in the camera's full grid.
-      const std::size_t i = static_cast<std::size_t>(y - region.y0) * static_cast<std::size_t>(rw) +
-                            static_cast<std::size_t>(x - region.x0);
-      const std::size_t gi = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
-      const Vec3& d = rays_[gi];
-      const Plane* s = nullptr;
-      int target = -2;
-      for (int k = static_cast<int>(scene.targets.size()) - 1; k >= 0; --k) {
-        const auto& t = scene.targets[static_cast<std::size_t>(k)];
-        if (x >= t.x0 && x < t.x1 && y >= t.y0 && y < t.y1) {
-          const auto& tp = planes[static_cast<std::size_t>(k)];
-          s = x < tp.split_x ? &tp.left : &tp.right;
-          target = k;
-          break;
-        }
-      }
-      if (!s && has_wall) {
-        s = &wall;
-        target = -1;
-      }
-      double range = 0.0, cos_inc = 0.0;
-      if (s) {
-        const double nd = dot(s->n, d);
-        range = nd < 0.0 ? dot(s->n, s->point) / nd : -1.0;
-        cos_inc = -nd;
-        if (!(range > 0.0)) s = nullptr;  // facing away: no return
-      }
-      const Waveform* wf = nullptr;
-      double amp = 0.0;
-      if (s) {
-        const double inc_deg = static_cast<double>(std::acos(static_cast<float>(std::min(1.0, cos_inc)))) / kDegToRad;
-        f.range_mm[i] = static_cast<float>(range);
-        f.depth_mm[i] = static_cast<float>(range * d.z);
-        f.target[i] = static_cast<std::int16_t>(target);
-        f.incidence_deg[i] = static_cast<float>(inc_deg);
-        const auto step = static_cast<std::size_t>(inc_deg / kIncidenceStepDeg + 0.5);
-        if (!s->by_step[step]) s->by_step[step] = &waveform(*s->material, static_cast<int>(step));
-        wf = s->by_step[step];
-        amp = device_.signal.counts_at_1m * cos_inc * (1000.0 / range) * (1000.0 / range);
-      }
-      const double sigma =
-          noise ? std::sqrt(nm.read_noise * nm.read_noise + nm.shot_gain * (amp * (wf ? wf->reflectance : 0.0) + nm.ambient))
-                : 0.0;
-      for (std::size_t g = 0; g < 3; ++g) {
-        double m[3] = {0.0, 0.0, 0.0};
-        if (wf) {
-          double t = (omega_per_mm[g] * range - pixel_phase_[g][gi]) * points_per_rad;
-          t -= std::floor(t / kWaveformPoints) * kWaveformPoints;
-          auto k0 = static_cast<std::size_t>(t);
-          if (k0 >= static_cast<std::size_t>(kWaveformPoints)) k0 = 0;
-          const double fr = t - static_cast<double>(k0);
-          const std::size_t k1 = (k0 + 1) % kWaveformPoints;
-          const float* a = &wf->samples[g][k0 * 3];
-          const float* b = &wf->samples[g][k1 * 3];
-          for (std::size_t j = 0; j < 3; ++j) m[j] = amp * (a[j] + fr * (b[j] - a[j]));
-        }
-        for (std::size_t j = 0; j < 3; ++j) {
-          const double v = m[j] + (noise ? sigma * gauss() : 0.0);
-          const double av = std::fabs(v);
-          // Branch-free on the sign: with noise it is a coin flip per sample.
-          if (!(av <= sat)) {  // (a NaN, impossible from finite parameters, also lands here)
-            f.raw[(g * 3 + j) * n_px + i] = kRawSaturated;
-            continue;
+  // One block of rows: geometry, noise-free samples, taps, noise, the 11-bit code.
+  const auto render_rows = [&](int by0, int by1, std::uint64_t block, WaveformSlots& slots) {
+    FastNormal gauss(block_seed(seed, block));
+    for (int y = by0; y < by1; ++y) {
+      for (int x = region.x0; x < region.x1; ++x) {
+        // i: index in the output region; gi: index in the camera's full grid.
+        const std::size_t i = static_cast<std::size_t>(y - region.y0) * static_cast<std::size_t>(rw) +
+                              static_cast<std::size_t>(x - region.x0);
+        const std::size_t gi = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(x);
+        const Vec3& d = rays_[gi];
+        const Plane* s = nullptr;
+        int target = -2;
+        for (int k = static_cast<int>(scene.targets.size()) - 1; k >= 0; --k) {
+          const auto& t = scene.targets[static_cast<std::size_t>(k)];
+          if (x >= t.x0 && x < t.x1 && y >= t.y0 && y < t.y1) {
+            const auto& tp = planes[static_cast<std::size_t>(k)];
+            s = x < tp.split_x ? &tp.left : &tp.right;
+            target = k;
+            break;
           }
-          const std::int16_t q = codes.nearest(std::min(av, static_cast<double>(kRawMaxMagnitude)));
-          f.raw[(g * 3 + j) * n_px + i] = v < 0 ? static_cast<std::int16_t>(-q) : q;
+        }
+        if (!s && has_wall) {
+          s = &wall;
+          target = -1;
+        }
+        double range = 0.0, cos_inc = 0.0;
+        if (s) {
+          const double nd = dot(s->n, d);
+          range = nd < 0.0 ? dot(s->n, s->point) / nd : -1.0;
+          cos_inc = -nd;
+          if (!(range > 0.0)) s = nullptr;  // facing away: no return
+        }
+        const Waveform* wf = nullptr;
+        double amp = 0.0;
+        if (s) {
+          const double inc_deg = static_cast<double>(std::acos(static_cast<float>(std::min(1.0, cos_inc)))) / kDegToRad;
+          f.range_mm[i] = static_cast<float>(range);
+          f.depth_mm[i] = static_cast<float>(range * d.z);
+          f.target[i] = static_cast<std::int16_t>(target);
+          f.incidence_deg[i] = static_cast<float>(inc_deg);
+          const auto step = static_cast<std::size_t>(inc_deg / kIncidenceStepDeg + 0.5);
+          auto& slot = slots[static_cast<std::size_t>(s->id)][step];
+          if (!slot) slot = &waveform(*s->material, static_cast<int>(step));
+          wf = slot;
+          amp = device_.signal.counts_at_1m * cos_inc * (1000.0 / range) * (1000.0 / range);
+        }
+        for (std::size_t g = 0; g < 3; ++g) {
+          const auto& fm = device_.groups[g];
+          double m[3] = {0.0, 0.0, 0.0};
+          double dc = 0.0;
+          if (wf) {
+            const double a = amp * fm.signal_scale;
+            dc = a * wf->dc;
+            double t = (omega_per_mm[g] * range - pixel_phase_[g][gi]) * points_per_rad;
+            t -= std::floor(t / kWaveformPoints) * kWaveformPoints;
+            auto k0 = static_cast<std::size_t>(t);
+            if (k0 >= static_cast<std::size_t>(kWaveformPoints)) k0 = 0;
+            const double fr = t - static_cast<double>(k0);
+            const std::size_t k1 = (k0 + 1) % kWaveformPoints;
+            const float* p = &wf->ac[g][k0 * 3];
+            const float* q = &wf->ac[g][k1 * 3];
+            for (std::size_t j = 0; j < 3; ++j) {
+              const double ac = a * (p[j] + fr * (q[j] - p[j]));
+              // Taps in anti-phase; the sample is their difference (spec 3.1).
+              const double diff = linear[g] ? ac
+                                            : saturate_lookup(saturation_, 0.5 * (dc + ac), inv_well[g]) -
+                                                  saturate_lookup(saturation_, 0.5 * (dc - ac), inv_well[g]);
+              m[j] = fm.step_gain[j] * diff + fm.step_offset[j] * dc;
+            }
+          }
+          // Shot noise follows the light the taps collected (DC) plus ambient.
+          const double sigma = noise ? std::sqrt(nm.read_noise * nm.read_noise + nm.shot_gain * (dc + nm.ambient)) : 0.0;
+          for (std::size_t j = 0; j < 3; ++j) {
+            const double v = m[j] + (noise ? sigma * gauss() : 0.0);
+            const double av = std::fabs(v);
+            if (!(av <= sat)) {  // (a NaN, impossible from finite parameters, also lands here)
+              f.raw[(g * 3 + j) * n_px + i] = kRawSaturated;
+              continue;
+            }
+            const std::int16_t code = codes.nearest(std::min(av, static_cast<double>(kRawMaxMagnitude)));
+            // Branch-free on the sign: with noise it is a coin flip per sample.
+            f.raw[(g * 3 + j) * n_px + i] = static_cast<std::int16_t>(code * (1 - 2 * static_cast<int>(v < 0)));
+          }
         }
       }
     }
+  };
+
+  // Blocks of rows counted from the region's top row: the same region and seed
+  // give the same frame whatever the number of threads.
+  const int n_blocks = (rh + kRowsPerBlock - 1) / kRowsPerBlock;
+  const int n_workers = std::min(threads_, n_blocks);
+  std::vector<std::exception_ptr> errors(static_cast<std::size_t>(std::max(1, n_workers)));
+  const auto work = [&](int first) {
+    try {
+      WaveformSlots slots(static_cast<std::size_t>(n_planes));
+      for (int b = first; b < n_blocks; b += n_workers) {
+        const int y0 = region.y0 + b * kRowsPerBlock;
+        render_rows(y0, std::min(region.y1, y0 + kRowsPerBlock), static_cast<std::uint64_t>(b), slots);
+      }
+    } catch (...) {
+      errors[static_cast<std::size_t>(first)] = std::current_exception();
+    }
+  };
+  if (n_workers <= 1) {
+    work(0);
+  } else {
+    std::vector<std::thread> pool;
+    pool.reserve(static_cast<std::size_t>(n_workers - 1));
+    for (int t = 1; t < n_workers; ++t) pool.emplace_back(work, t);
+    work(0);
+    for (auto& t : pool) t.join();
+  }
+  for (const auto& e : errors) {
+    if (e) std::rethrow_exception(e);
   }
   return f;
 }

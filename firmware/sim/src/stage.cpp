@@ -14,14 +14,14 @@ StageCapture stage_sweep(const Renderer& renderer, const Target& target, const P
     throw std::invalid_argument("frames_per_position must be 1..10000");
   }
   const int width = renderer.device().camera.width;
-  // The P0 correction of the region's pixels: p0 = -pixel phase.
+  // The P0 correction of the region's pixels, as the device reports it.
   const std::size_t n = static_cast<std::size_t>(roi.x1 - roi.x0) * static_cast<std::size_t>(roi.y1 - roi.y0);
   std::vector<float> p0(3 * n);
   for (std::size_t g = 0; g < 3; ++g) {
-    const auto& pat = renderer.pixel_phase(static_cast<int>(g));
+    const auto pat = renderer.p0_table(static_cast<int>(g));
     std::size_t k = 0;
     for (int y = roi.y0; y < roi.y1; ++y) {
-      for (int x = roi.x0; x < roi.x1; ++x) p0[g * n + k++] = -pat[static_cast<std::size_t>(y * width + x)];
+      for (int x = roi.x0; x < roi.x1; ++x) p0[g * n + k++] = pat[static_cast<std::size_t>(y * width + x)];
     }
   }
 

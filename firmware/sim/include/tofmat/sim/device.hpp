@@ -5,18 +5,34 @@
 #include <array>
 #include <complex>
 #include <cstdint>
+#include <limits>
 #include <string>
 
 namespace tofmat::sim {
 
-inline constexpr int kMaxHarmonic = 7;
+// Highest harmonic a profile may list. The 3-step decode folds h = 3k +- 1
+// into its error terms; a correlation waveform with sharp features (the
+// calibrated 16 MHz group's) needs up to h = 13.
+inline constexpr int kMaxHarmonic = 16;
+
+// The raw signal of the groups (80, 16, 120 MHz) relative to each other when a
+// profile does not say: the reciprocals of libfreenect2's ab_multiplier_per_frq
+// (1.322581, 1.0, 1.612903), the factors that equalise the groups' amplitudes.
+inline constexpr std::array<double, 3> kDefaultSignalScale{1.0 / 1.322581, 1.0, 1.0 / 1.612903};
 
 // One modulation frequency's illumination/demodulation and phase-step errors.
 struct FrequencyModel {
   double freq_mhz = 0.0;          // nominal (what the decode assumes)
   double scale_error = 0.0;       // true frequency = nominal * (1 + scale_error)
   double phase_offset_rad = 0.0;  // delay of the reference
-  // G_h = a_h exp(i psi_h) for h = 0..7 (index 0 unused, G_1 = 1): harmonics of
+  double signal_scale = 1.0;       // r_f: this group's raw signal relative to the others
+  // W_f: a tap's soft full well in units of counts_at_1m * (1000 / range_ref_mm)^2
+  // (the 16 MHz tap signal of an albedo-1 target at range_ref_mm); +inf: none.
+  double full_well = std::numeric_limits<double>::infinity();
+  // eps_f: residual of the camera's P0 calibration; the decode adds it to the
+  // phase (the simulated device reports P0 tables of -(delta_p + eps_f)).
+  double decode_offset_rad = 0.0;
+  // G_h = a_h exp(i psi_h) for h = 0..kMaxHarmonic (index 0 unused, G_1 = 1): harmonics of
   // the correlation waveform, kept as amplitude and phase (the profile's form,
   // so a profile saves and loads exactly).
   std::array<double, kMaxHarmonic + 1> harmonic_amplitude{0.0, 1.0};
@@ -25,7 +41,7 @@ struct FrequencyModel {
     return std::polar(harmonic_amplitude[static_cast<std::size_t>(h)], harmonic_phase_rad[static_cast<std::size_t>(h)]);
   }
   std::array<double, 3> step_gain{1.0, 1.0, 1.0};
-  std::array<double, 3> step_offset{0.0, 0.0, 0.0};  // relative to the signal scale A
+  std::array<double, 3> step_offset{0.0, 0.0, 0.0};  // relative to the received DC, A r_f R(0)
 
   double true_freq_hz() const { return freq_mhz * 1e6 * (1.0 + scale_error); }
 };
@@ -57,9 +73,15 @@ struct Camera {
   double fx = 365.0, fy = 365.0, cx = 256.0, cy = 212.0;
 };
 
+// Soft full-well saturation of a tap (docs/simulator-model.md 3.1):
+// N(T) = T / (1 + (|T| / W)^p)^(1/p); W = +inf: N(T) = T.
+double saturate_tap(double t, double full_well, double sharpness);
+
 struct DeviceProfile {
   std::string name;
-  int version = 1;
+  int version = 2;
+  double range_ref_mm = 1000.0;         // the range at which curves' fall-off A is 1
+  double saturation_sharpness = 8.0;    // p of the taps' soft full well
   std::array<FrequencyModel, 3> groups;  // raw sub-image groups: 80, 16, 120 MHz
   PixelPhasePattern pixel_phase;
   NoiseModel noise;

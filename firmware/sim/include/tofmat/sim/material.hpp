@@ -8,12 +8,14 @@
 
 namespace tofmat::sim {
 
-enum class ResponseKind { kOpaque, kExponential, kGamma, kSlab };
+enum class ResponseKind { kOpaque, kExponential, kGamma, kSlab, kDouble };
 
 struct Material {
   std::string name;
   ResponseKind kind = ResponseKind::kOpaque;
-  double albedo = 0.5;            // amplitude only, never phase
+  // Amplitude only, never phase. In a calibrated library its unit is the one
+  // of the device's full_well (values above 1 are allowed: specular metals).
+  double albedo = 0.5;
   double subsurface = 0.0;        // b: share of light returned after subsurface transport
   double tau_ps = 0.0;            // time constant of the subsurface kernel
   double gamma_k = 1.0;           // shape of the gamma kernel (1 = exponential)
@@ -21,6 +23,12 @@ struct Material {
   double thickness_mm = 0.0;      // slab only
   double path_factor = 1.0;       // slab only: effective path / geometric round trip
   double backing = 0.0;           // slab only: backing reflection, relative
+  double subsurface2 = 0.0;       // double only: share of the second exponential
+  double tau2_ps = 1000.0;        // double only: its time constant
+  // The per-sample 120 MHz depth noise of the capture the material was fitted
+  // to (docs/simulator-model.md 4.1). Only distortion curves use it; rendered
+  // frames get their noise from the device's noise model.
+  double noise_mm = 0.0;
 
   // Throws std::invalid_argument for a parameter outside its physical range.
   void validate() const;
@@ -41,7 +49,8 @@ std::complex<double> slab_kernel(double omega, double tau_s, double transit_s, d
 // Fresnel (Schlick) reflectance at incidence alpha for refractive index n.
 double schlick_reflectance(double n, double incidence_rad);
 
-// R(nu, alpha) = albedo * ((1 - b_eff) + b_eff * K(nu)); see the spec.
+// R(nu, alpha) = albedo * ((1 - b_eff) + b_eff * K(nu)); the double kind adds
+// a second exponential, b2_eff / (1 + i omega tau2) (spec 1.1).
 std::complex<double> material_response(const Material& m, double freq_hz, double incidence_rad);
 
 }  // namespace tofmat::sim

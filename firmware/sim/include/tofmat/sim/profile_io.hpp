@@ -12,7 +12,11 @@
 
 namespace tofmat::sim {
 
-inline constexpr int kProfileFormatVersion = 1;
+// Version 2 added signal_scale, full_well, decode_offset_rad, harmonics above
+// h = 7, range_ref_mm, saturation, and the double kind; version 1 files read
+// with their defaults.
+inline constexpr int kProfileFormatVersion = 2;
+inline constexpr int kProfileOldestVersion = 1;
 inline constexpr std::size_t kProfileMaxBytes = 4 * 1024 * 1024;
 
 struct MaterialLibrary {

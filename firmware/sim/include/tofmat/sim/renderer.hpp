@@ -32,15 +32,17 @@ struct Frame {
   std::vector<float> incidence_deg;  // truth: angle between ray and surface normal
 };
 
-// Noise-free raw samples of one material at one incidence, tabulated over a
-// period of the pixel phase for each group: samples[g][k * 3 + j] is sample j
-// at phase 2 pi k / kWaveformPoints, step gains and offsets included. Linear
-// interpolation between points errs by at most (2 pi / N)^2 / 8 * sum h^2
-// |G_h R_h| of the signal: < 0.02 counts at the saturation level for N = 4096.
+// The AC part of one material's raw samples at one incidence per unit signal,
+// tabulated over a period of the pixel phase for each group: ac[g][k * 3 + j]
+// is step j at phase 2 pi k / kWaveformPoints (ac_per_unit). The taps, step
+// gains and offsets are applied per pixel, because saturation is not linear in
+// the signal. Linear interpolation between points errs by at most
+// (2 pi / N)^2 / 8 * sum h^2 |G_h R_h| of the signal: < 0.02 counts at the
+// saturation level for N = 4096 and harmonics to h = 7 with amplitudes <= 0.1.
 inline constexpr int kWaveformPoints = 4096;
 struct Waveform {
-  std::array<std::vector<float>, 3> samples;
-  double reflectance = 0.0;  // |R| at the lowest frequency: drives shot noise
+  std::array<std::vector<float>, 3> ac;
+  double dc = 0.0;  // R(0, alpha): the received DC per unit signal
 };
 
 class Renderer {
@@ -49,7 +51,9 @@ class Renderer {
     double x, y, z;
   };
 
-  Renderer(DeviceProfile device, MaterialLibrary library);
+  // threads: workers for a frame (0: one per hardware thread). The result does
+  // not depend on it: noise is seeded per block of rows.
+  Renderer(DeviceProfile device, MaterialLibrary library, int threads = 0);
 
   // Noise is seeded: the same seed gives the same frame. Safe to call from
   // several threads (the waveform cache is locked).
@@ -64,6 +68,10 @@ class Renderer {
   // The phase the P0 tables correct at each pixel (radians, group g), as the
   // simulated device reports it.
   const std::vector<float>& pixel_phase(int group) const { return pixel_phase_[static_cast<std::size_t>(group)]; }
+  // The P0 correction the simulated device reports for each pixel:
+  // -(pixel phase + the group's decode_offset_rad). Decoding with it gives the
+  // phase plus eps_f, as the real camera's imperfect P0 tables do.
+  std::vector<float> p0_table(int group) const;
   const DeviceProfile& device() const { return device_; }
   const MaterialLibrary& library() const { return library_; }
 
@@ -72,6 +80,8 @@ class Renderer {
   MaterialLibrary library_;
   std::array<std::vector<float>, 3> pixel_phase_;
   std::vector<Vec3> rays_;  // unit ray per pixel
+  int threads_ = 1;
+  std::vector<float> saturation_;  // N(T) / T against |T| / W, for groups with a full well
   const Waveform& waveform(const Material& m, int incidence_step) const;
   mutable std::mutex cache_mutex_;
   mutable std::map<std::pair<const Material*, int>, std::unique_ptr<Waveform>> cache_;
