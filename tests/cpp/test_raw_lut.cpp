@@ -138,3 +138,14 @@ TEST(RawLut, NearestClampsBeyondTheRangeAndNeverGivesTheMarker) {
 }
 
 }  // namespace
+
+TEST(RawLut, MagnitudeNearestMatchesTheCodeSearch) {
+  // Every quarter count from 0 to the top (ties included: halves of odd steps
+  // and midpoints of wide steps land on quarters), plus values just either side.
+  for (int q = 0; q <= 4 * tofmat::kRawMaxMagnitude; ++q) {
+    for (double v : {q / 4.0, std::nextafter(q / 4.0, 0.0), std::nextafter(q / 4.0, 1e9)}) {
+      if (v < 0.0 || v > tofmat::kRawMaxMagnitude) continue;
+      ASSERT_EQ(tofmat::raw_magnitude_nearest(v), tofmat::raw_code_value(tofmat::raw_code_nearest(v))) << v;
+    }
+  }
+}

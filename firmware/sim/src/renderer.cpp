@@ -79,36 +79,6 @@ std::uint64_t block_seed(std::uint64_t seed, std::uint64_t block) {
 }
 constexpr int kRowsPerBlock = 8;
 
-// The magnitudes the 11-bit code can carry, bracketing each integer: for
-// floor(|v|) = k, below[k] is the largest code magnitude <= k and above[k] the
-// smallest > k, so the nearest code of |v| is one of the two (ties go down,
-// as raw_code_nearest does). Two lookups instead of a search per sample.
-struct CodeGrid {
-  std::vector<std::int16_t> below, above;
-  CodeGrid() : below(kRawMaxMagnitude + 1), above(kRawMaxMagnitude + 1) {
-    std::int16_t lo = 0;
-    std::uint16_t c = 0;
-    for (int k = 0; k <= kRawMaxMagnitude; ++k) {
-      while (c < 1023 && raw_code_value(static_cast<std::uint16_t>(c + 1)) <= k) ++c;
-      lo = raw_code_value(c);
-      below[static_cast<std::size_t>(k)] = lo;
-      above[static_cast<std::size_t>(k)] = c < 1023 ? raw_code_value(static_cast<std::uint16_t>(c + 1)) : lo;
-    }
-  }
-  std::int16_t nearest(double av) const {
-    const auto k = static_cast<std::size_t>(av);
-    const int lo = below[k], hi = above[k];
-    // Branch-free select: with noise the choice is a coin flip per sample.
-    const int up = static_cast<int>(2.0 * av > static_cast<double>(lo + hi));
-    return static_cast<std::int16_t>(lo + up * (hi - lo));
-  }
-};
-
-const CodeGrid& code_grid() {
-  static const CodeGrid grid;
-  return grid;
-}
-
 }  // namespace
 
 Renderer::Renderer(DeviceProfile device, MaterialLibrary library, int threads)
@@ -227,7 +197,6 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
   f.target.assign(n_px, -2);
   f.incidence_deg.assign(n_px, NAN);
 
-  const auto& codes = code_grid();
   const double sat = device_.signal.saturation;
   const auto& nm = device_.noise;
   const double points_per_rad = kWaveformPoints / kTwoPi;
@@ -296,12 +265,13 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
           if (wf) {
             const double a = amp * fm.signal_scale;
             dc = a * wf->dc;
-            double t = (omega_per_mm[g] * range - pixel_phase_[g][gi]) * points_per_rad;
-            t -= std::floor(t / kWaveformPoints) * kWaveformPoints;
-            auto k0 = static_cast<std::size_t>(t);
-            if (k0 >= static_cast<std::size_t>(kWaveformPoints)) k0 = 0;
-            const double fr = t - static_cast<double>(k0);
-            const std::size_t k1 = (k0 + 1) % kWaveformPoints;
+            // Table position: the integer part wraps by masking (N is a power of two).
+            const double t = (omega_per_mm[g] * range - pixel_phase_[g][gi]) * points_per_rad;
+            const double whole = std::floor(t);
+            const double fr = t - whole;
+            constexpr std::int64_t kMask = kWaveformPoints - 1;
+            const auto k0 = static_cast<std::size_t>(static_cast<std::int64_t>(whole) & kMask);
+            const auto k1 = static_cast<std::size_t>((static_cast<std::int64_t>(whole) + 1) & kMask);
             const float* p = &wf->ac[g][k0 * 3];
             const float* q = &wf->ac[g][k1 * 3];
             for (std::size_t j = 0; j < 3; ++j) {
@@ -322,7 +292,7 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
               f.raw[(g * 3 + j) * n_px + i] = kRawSaturated;
               continue;
             }
-            const std::int16_t code = codes.nearest(std::min(av, static_cast<double>(kRawMaxMagnitude)));
+            const int code = raw_magnitude_nearest(std::min(av, static_cast<double>(kRawMaxMagnitude)));
             // Branch-free on the sign: with noise it is a coin flip per sample.
             f.raw[(g * 3 + j) * n_px + i] = static_cast<std::int16_t>(code * (1 - 2 * static_cast<int>(v < 0)));
           }

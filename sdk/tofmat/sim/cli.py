@@ -80,6 +80,34 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     click.echo(f"wrote {out_dir}/results.json and figures")
 
 
+@sim_cli.command("calibrate")
+@click.option("--db", "db_dir", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path),
+              help="Folder of the real database (.npy per material).")
+@click.option("--out", "out_dir", default=Path("build/calib"), type=click.Path(file_okay=False, path_type=Path),
+              show_default=True, help="Writes data/devices/kinect2_tanaka2017.json, data/materials/tanaka2017.json, "
+              "the fit log and the real-vs-simulated plot under this folder.")  # fmt: skip
+@click.option("--restarts", default=3, show_default=True, help="Restarts of the harmonic phases (multimodal fit).")
+@click.option("--rounds", default=2, show_default=True, help="Rounds of per-material and joint refinement.")
+@click.option("--seed", default=0, show_default=True)
+def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed: int) -> None:
+    """Fit the device profile and material library to the real database's curves (~10 min, one core)."""
+    import tofmat
+
+    from . import calibrate as cal
+
+    if restarts < 1 or rounds < 1:
+        raise click.BadParameter("--restarts and --rounds must be >= 1")
+    try:
+        table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))
+    except (ValueError, OSError) as e:
+        raise click.ClickException(f"cannot read the database: {e}") from e
+    result = cal.calibrate(table, restarts=restarts, seed=seed, rounds=rounds, progress=lambda m: click.echo(m, err=True))
+    for kind, path in cal.write_outputs(result, out_dir, table).items():
+        click.echo(f"wrote {kind}: {path}")
+    click.echo(f"median rms {result.median_rms_mm:.3f} mm over {len(result.rms_mm)} materials "
+               f"(max {max(result.rms_mm.values()):.3f} mm), {result.runtime_s:.0f} s")
+
+
 @sim_cli.command("bench")
 @click.option("--device", default="ideal_kinect2", show_default=True)
 @click.option("--library", default="examples", show_default=True)

@@ -40,6 +40,7 @@ struct Frame {
 // (2 pi / N)^2 / 8 * sum h^2 |G_h R_h| of the signal: < 0.02 counts at the
 // saturation level for N = 4096 and harmonics to h = 7 with amplitudes <= 0.1.
 inline constexpr int kWaveformPoints = 4096;
+static_assert((kWaveformPoints & (kWaveformPoints - 1)) == 0, "the renderer wraps table positions by masking");
 struct Waveform {
   std::array<std::vector<float>, 3> ac;
   double dc = 0.0;  // R(0, alpha): the received DC per unit signal
