@@ -1,0 +1,303 @@
+// End to end: the simulated Kinect v2 (firmware/sim/kinect_device) -> USB
+// transport -> driver (firmware/kinect/device) -> stream parser -> 11-bit
+// unpack -> float decode, with and without every kind of fault.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <vector>
+
+#include "tofmat/core/decode.hpp"
+#include "tofmat/core/frame_decode.hpp"
+#include "tofmat/kinect/device.hpp"
+#include "tofmat/kinect/raw_unpack.hpp"
+#include "tofmat/sim/kinect_device.hpp"
+
+namespace {
+
+using namespace tofmat;
+using namespace tofmat::sim;
+using kinect::Kinect2Device;
+using kinect::UsbError;
+using kinect::UsbErrorKind;
+
+constexpr double kCDevOverTrue = 300.0 / 299.792458;
+
+MaterialLibrary library() {
+  MaterialLibrary lib;
+  lib.name = "lib";
+  Material white;
+  white.name = "white";
+  white.albedo = 0.9;
+  Material wax;
+  wax.name = "wax";
+  wax.kind = ResponseKind::kExponential;
+  wax.albedo = 0.6;
+  wax.subsurface = 0.6;
+  wax.tau_ps = 300.0;
+  lib.materials = {white, wax};
+  return lib;
+}
+
+std::shared_ptr<const Renderer> renderer() {
+  DeviceProfile d = DeviceProfile::ideal_kinect2();
+  d.noise.read_noise = 3.0;
+  d.noise.shot_gain = 0.03;
+  d.noise.ambient = 100.0;
+  d.pixel_phase.mean_rad = {0.4, -0.3, 1.1};
+  d.pixel_phase.radial_rad = {0.05, 0.02, 0.08};
+  d.pixel_phase.scatter_rad = 0.01;
+  d.groups[0].decode_offset_rad = 0.02;
+  return std::make_shared<const Renderer>(d, library());
+}
+
+// Two targets at different depths on a wall, moving 10 mm per frame.
+Scene scene_at(std::uint64_t k) {
+  Scene s;
+  Target a;
+  a.material = "white";
+  a.depth_mm = 700.0 + 10.0 * static_cast<double>(k);
+  a.x0 = 100;
+  a.y0 = 100;
+  a.x1 = 240;
+  a.y1 = 300;
+  Target b = a;
+  b.material = "wax";
+  b.depth_mm = 1100.0 - 10.0 * static_cast<double>(k);
+  b.yaw_deg = 20.0;
+  b.x0 = 280;
+  b.x1 = 420;
+  s.targets = {a, b};
+  s.background_material = "white";
+  s.background_depth_mm = 2500.0;
+  return s;
+}
+
+struct Received {
+  std::uint32_t sequence;
+  std::vector<std::int16_t> raw;  // 9 x pixels
+};
+
+struct Rig {
+  std::shared_ptr<SimulatedKinect> sim = std::make_shared<SimulatedKinect>(renderer(), scene_at);
+  std::unique_ptr<Kinect2Device> dev;
+  std::vector<Received> frames;
+
+  void start(kinect::DriverOptions o = {}) {
+    o.status_poll_ms = 1;
+    dev = std::make_unique<Kinect2Device>(sim->connect(), o);
+    dev->open();
+    dev->start([this](const kinect::DepthPacket& p) {
+      Received r{p.sequence, std::vector<std::int16_t>(9 * kinect::kPixels)};
+      kinect::unpack_depth_packet(p.data, r.raw.data());
+      frames.push_back(std::move(r));
+    });
+  }
+  void pump(int n) {
+    for (int k = 0; k < n; ++k) dev->pump(10);
+  }
+};
+
+// The device path delivers the renderer's raw values exactly (columns 0 and
+// 511 read 0 on the real device too).
+void expect_exact(const Received& r, const Frame& truth) {
+  for (std::size_t s = 0; s < 9; ++s) {
+    for (std::size_t i = 0; i < kinect::kPixels; ++i) {
+      const std::size_t x = i % kinect::kWidth;
+      const std::int16_t want = (x == 0 || x == kinect::kWidth - 1) ? 0 : truth.raw[s * kinect::kPixels + i];
+      ASSERT_EQ(r.raw[s * kinect::kPixels + i], want) << "frame " << r.sequence << " sub-image " << s << " pixel " << i;
+    }
+  }
+}
+
+TEST(KinectSim, StartUpReadsTheDevicesIdentityAndTables) {
+  Rig rig;
+  rig.start();
+  const auto& id = rig.dev->identity();
+  EXPECT_EQ(id.serial, "SIM000000001");
+  EXPECT_EQ(id.firmware, "2.3.103.2003");
+  EXPECT_FLOAT_EQ(id.depth.fx, 365.0f);
+  EXPECT_FLOAT_EQ(id.depth.cy, 212.0f);
+  // The P0 tables carry -(pixel phase + decode offset) within half a table step.
+  const auto p0 = id.p0.p0_rad();
+  for (int g = 0; g < 3; ++g) {
+    const auto want = rig.sim->renderer().p0_table(g);
+    for (std::size_t i = 0; i < want.size(); i += 1013) {
+      const double diff = std::remainder(static_cast<double>(p0[static_cast<std::size_t>(g) * want.size() + i]) - want[i],
+                                         2.0 * M_PI);
+      ASSERT_LT(std::fabs(diff), 0.5 * kinect::kP0RadPerUnit + 1e-6) << g << " " << i;
+    }
+  }
+  EXPECT_TRUE(rig.dev->streaming());
+  EXPECT_EQ(rig.dev->counters().retries, 0u);
+}
+
+TEST(KinectSim, EndToEndDepthsMatchTheSimulationWithinTheNoiseBudget) {
+  Rig rig;
+  rig.start();
+  rig.pump(4);
+  ASSERT_EQ(rig.frames.size(), 4u);
+  const auto p0 = rig.dev->identity().p0.p0_rad();
+  for (const auto& r : rig.frames) {
+    const auto truth = rig.sim->truth(r.sequence);
+    ASSERT_TRUE(truth);
+    expect_exact(r, *truth);
+    const auto d = decode_frame(r.raw.data(), kinect::kPixels, p0);
+    // Per target: mean combined depth against the true range, and the
+    // per-frequency spread (noise) within the budget of this noise model.
+    std::map<int, std::pair<double, int>> err;
+    for (std::size_t i = 0; i < kinect::kPixels; ++i) {
+      const int t = truth->target[i];
+      if (t < 0 || d.flags[i]) continue;
+      const double want = truth->range_mm[i] * kCDevOverTrue;
+      auto& e = err[t];
+      e.first += d.combined_mm[i] - want;
+      ++e.second;
+      if (t == 0) {
+        ASSERT_LT(std::fabs(d.combined_mm[i] - want), 10.0) << i;  // opaque: noise only (~1 mm sd)
+      }
+    }
+    ASSERT_EQ(err.size(), 2u);
+    // The profile's 80 MHz decode offset (a P0 calibration residual of 0.02
+    // rad) moves d80 by 0.02 / 2 pi * 1875 mm, the combined depth by 80/216 of it.
+    const double offset = 80.0 / 216.0 * 0.02 / (2.0 * M_PI) * 1875.0;
+    EXPECT_NEAR(err[0].first / err[0].second, offset, 0.2) << "opaque target, frame " << r.sequence;
+    // The subsurface target is pushed back by its response (the paper's effect): 10..60 mm.
+    const double wax_shift = err[1].first / err[1].second;
+    EXPECT_GT(wax_shift, 10.0);
+    EXPECT_LT(wax_shift, 60.0);
+  }
+  const auto c = rig.dev->stream_counters();
+  EXPECT_EQ(c.frames, 4u);
+  EXPECT_EQ(c.broken_sub_images + c.bad_footers + c.incomplete_frames, 0u);
+}
+
+// Each fault kind: the stream goes on, every frame passed on is exact, the
+// counters say what happened.
+void run_with(const KinectFaults& f, const char* what) {
+  Rig rig;
+  rig.sim->set_faults(f);
+  rig.start();
+  rig.pump(12);
+  const auto sc = rig.sim->counters();
+  const auto dc = rig.dev->stream_counters();
+  EXPECT_GE(rig.frames.size(), 3u) << what << ": frames resume";
+  EXPECT_LT(rig.frames.size(), 12u) << what << ": some frames must have been hit";
+  for (const auto& r : rig.frames) {
+    const auto truth = rig.sim->truth(r.sequence);
+    ASSERT_TRUE(truth) << what;
+    expect_exact(r, *truth);
+  }
+  EXPECT_EQ(dc.frames, rig.frames.size()) << what;
+  EXPECT_GT(dc.broken_sub_images + dc.incomplete_frames, 0u) << what;
+  EXPECT_EQ(sc.frames, 12u) << what;
+}
+
+TEST(KinectSimFaults, DroppedPackets) {
+  KinectFaults f;
+  f.drop = 0.003;
+  run_with(f, "drop");
+}
+
+TEST(KinectSimFaults, DuplicatedPackets) {
+  KinectFaults f;
+  f.duplicate = 0.003;
+  run_with(f, "duplicate");
+}
+
+TEST(KinectSimFaults, TruncatedPackets) {
+  KinectFaults f;
+  f.truncate = 0.003;
+  run_with(f, "truncate");
+}
+
+TEST(KinectSimFaults, GarbagePackets) {
+  KinectFaults f;
+  f.garbage = 0.003;
+  run_with(f, "garbage");
+}
+
+TEST(KinectSimFaults, StalledEndpointLosesFramesThenResumes) {
+  Rig rig;
+  KinectFaults f;
+  f.stall_at_frame = 2;
+  f.stall_frames = 3;
+  rig.sim->set_faults(f);
+  rig.start();
+  rig.pump(8);
+  std::vector<std::uint32_t> seqs;
+  for (const auto& r : rig.frames) seqs.push_back(r.sequence);
+  EXPECT_EQ(seqs, (std::vector<std::uint32_t>{0, 1, 5, 6, 7}));
+  EXPECT_EQ(rig.sim->counters().stalled_frames, 3u);
+}
+
+TEST(KinectSimFaults, UnplugMidStreamIsReportedAndReplugResumes) {
+  Rig rig;
+  KinectFaults f;
+  f.unplug_at_frame = 3;
+  rig.sim->set_faults(f);
+  rig.start();
+  try {
+    rig.pump(10);
+    FAIL() << "unplug not reported";
+  } catch (const UsbError& e) {
+    EXPECT_EQ(e.kind(), UsbErrorKind::kDisconnected);
+  }
+  EXPECT_EQ(rig.frames.size(), 3u);  // the half-sent frame 3 is never passed on
+  EXPECT_FALSE(rig.sim->plugged());
+  rig.dev.reset();  // closing a gone device must not throw
+  try {
+    rig.sim->connect();
+    FAIL() << "connected to an unplugged device";
+  } catch (const UsbError& e) {
+    EXPECT_EQ(e.kind(), UsbErrorKind::kNoDevice);
+  }
+  rig.sim->set_faults({});
+  rig.sim->replug();
+  rig.frames.clear();
+  rig.start();
+  rig.pump(3);
+  ASSERT_EQ(rig.frames.size(), 3u);
+  for (const auto& r : rig.frames) expect_exact(r, *rig.sim->truth(r.sequence));
+}
+
+TEST(KinectSimCommands, LostResponseIsRetriedWithANewSequence) {
+  Rig rig;
+  KinectFaults f;
+  f.lost_responses = 2;
+  rig.sim->set_faults(f);
+  rig.start();
+  EXPECT_EQ(rig.dev->counters().retries, 2u);
+  rig.pump(1);
+  EXPECT_EQ(rig.frames.size(), 1u);
+}
+
+TEST(KinectSimCommands, DeviceThatNeverAnswersTimesOut) {
+  Rig rig;
+  KinectFaults f;
+  f.lost_responses = 100;
+  rig.sim->set_faults(f);
+  try {
+    rig.start();
+    FAIL() << "start succeeded without answers";
+  } catch (const UsbError& e) {
+    EXPECT_EQ(e.kind(), UsbErrorKind::kTimeout);
+  }
+}
+
+TEST(KinectSimCommands, SecondDriverFindsTheDeviceBusy) {
+  Rig rig;
+  rig.start();
+  try {
+    rig.sim->connect();
+    FAIL() << "two drivers on one device";
+  } catch (const UsbError& e) {
+    EXPECT_EQ(e.kind(), UsbErrorKind::kBusy);
+  }
+  rig.dev.reset();
+  EXPECT_NO_THROW(rig.sim->connect());
+}
+
+}  // namespace
