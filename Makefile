@@ -12,8 +12,8 @@ TOFMAT   = $(PYTHON) -m tofmat
 SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 # Debian 12 packages: compilers and build tools, GoogleTest, zlib (CRC-32),
-# clang and its runtime for libFuzzer.
-APT_PACKAGES := build-essential cmake ninja-build libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev
+# clang and its runtime for libFuzzer, libusb-1.0 (the Kinect driver).
+APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev
 
 .PHONY: all setup build build-cpp build-python typecheck test test-cpp test-sanitize test-python fuzz demo bench clean check-db
 

@@ -19,6 +19,7 @@ void register_classifier(pyb::module_& m);
 void register_features(pyb::module_& m);
 void register_decode(pyb::module_& m);
 void register_sim(pyb::module_& m);
+void register_kinect(pyb::module_& m);
 
 // A C-contiguous float32 copy/view of `a` after checking that it is a
 // floating-point array of exactly `shape` (-1 = any size on that axis).

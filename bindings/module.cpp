@@ -8,4 +8,5 @@ PYBIND11_MODULE(_tofmat, m) {
   tofmat::py::register_features(m);
   tofmat::py::register_decode(m);
   tofmat::py::register_sim(m);
+  tofmat::py::register_kinect(m);
 }

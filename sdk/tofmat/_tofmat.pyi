@@ -9,6 +9,15 @@ SPEED_OF_LIGHT_MM_PER_NS: float
 
 class FormatError(ValueError): ...
 
+class UsbError(OSError):
+    kind: str  # "no device", "permission denied", "device busy", "disconnected", "timeout", ...
+
+class kinect:
+    @staticmethod
+    def list_devices() -> list[dict[str, Any]]: ...
+    @staticmethod
+    def open_device(serial: str = "") -> str: ...
+
 class BinSpec:
     start_mm: float
     width_mm: float

@@ -228,3 +228,26 @@ def test_demo_runs(cli_table: Path) -> None:
     p = run("demo", "--table", cli_table, "--sweeps", "3", "--sweep-bins", "30")
     assert "final labels:" in p.stdout
     assert p.stdout.count("sweep ") >= 3
+
+
+def test_devices_without_a_kinect_exits_1_with_one_line_reason() -> None:
+    from click.testing import CliRunner
+
+    from tofmat.cli import main
+
+    r = CliRunner().invoke(main, ["devices"])
+    assert r.exit_code == 1
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert lines == [lines[-1]] and "no Kinect v2" in lines[-1]
+
+
+def test_usb_error_is_an_oserror_with_a_kind() -> None:
+    import pytest
+
+    import tofmat
+    from tofmat import _tofmat
+
+    with pytest.raises(tofmat.UsbError) as e:
+        _tofmat.kinect.open_device()
+    assert isinstance(e.value, OSError)
+    assert e.value.kind == "no device"
