@@ -1,3 +1,5 @@
+#include <pybind11/stl.h>
+
 #include <cstring>
 
 #include "bindings.hpp"
@@ -25,11 +27,28 @@ void register_decode(pyb::module_& m) {
                                std::memcpy(out.mutable_data(), d.combined_mm.data(), d.pixels * sizeof(float));
                                return out;
                              })
+      .def_property_readonly("features",
+                             [](const DecodedFrame& d) {
+                               pyb::array_t<float> out(std::vector<pyb::ssize_t>{2, static_cast<pyb::ssize_t>(d.pixels)});
+                               for (std::size_t r = 0; r < 2; ++r) {
+                                 std::memcpy(out.mutable_data() + r * d.pixels, d.features[r].data(), d.pixels * sizeof(float));
+                               }
+                               return out;
+                             })
       .def_property_readonly("flags", [](const DecodedFrame& d) {
         pyb::array_t<std::uint8_t> out(static_cast<pyb::ssize_t>(d.pixels));
         std::memcpy(out.mutable_data(), d.flags.data(), d.pixels);
         return out;
       });
+  pyb::class_<DecodeTables>(m, "DecodeTables",
+                            "e^{-i p0} per pixel and group, built once from the P0 corrections (3, pixels).")
+      .def(pyb::init([](const pyb::handle& p0_obj) {
+             auto a = as_float32(p0_obj, {3, -1}, "p0_rad");
+             std::vector<float> p0(a.data(), a.data() + a.size());
+             return DecodeTables(p0, static_cast<std::size_t>(a.shape(1)));
+           }),
+           pyb::arg("p0_rad"))
+      .def_readonly("pixels", &DecodeTables::pixels);
   m.attr("DECODE_SATURATED") = kDecodeSaturated;
   m.attr("DECODE_DARK") = kDecodeDark;
 
@@ -41,19 +60,57 @@ void register_decode(pyb::module_& m) {
           throw pyb::value_error("raw must be an int16 array of shape (9, ...) (the nine phase-step images)");
         }
         const auto pixels = static_cast<std::size_t>(raw.size() / 9);
+        DecodeOptions opt;
+        opt.min_amplitude = min_amplitude;
+        if (pyb::isinstance<DecodeTables>(p0_obj)) {  // prepared once: no per-call P0 work
+          const auto& t = p0_obj.cast<const DecodeTables&>();
+          if (t.pixels != pixels) throw pyb::value_error("the decode tables are for another pixel count");
+          pyb::gil_scoped_release nogil;
+          return decode_frame(raw.data(), t, opt);
+        }
         std::vector<float> p0;
         if (!p0_obj.is_none()) {
           auto a = as_float32(p0_obj, {3, -1}, "p0_rad");
           if (static_cast<std::size_t>(a.shape(1)) != pixels) throw pyb::value_error("p0_rad must be (3, pixels)");
           p0.assign(a.data(), a.data() + a.size());
         }
-        DecodeOptions opt;
-        opt.min_amplitude = min_amplitude;
         pyb::gil_scoped_release nogil;
         return decode_frame(raw.data(), pixels, p0, opt);
       },
       pyb::arg("raw"), pyb::arg("p0_rad") = pyb::none(), pyb::arg("min_amplitude") = 3.0,
-      "Decode raw (9, ...) int16 samples; p0_rad (3, pixels) per-pixel corrections. Outputs are flat per pixel.");
+      "Decode raw (9, ...) int16 samples; p0_rad: (3, pixels) per-pixel corrections, or DecodeTables built from "
+      "them once. Outputs are flat per pixel.");
+
+  m.def(
+      "decode_region",
+      [](const pyb::handle& raw_obj, const pyb::object& p0_obj, std::array<int, 4> rect, double min_amplitude) {
+        auto raw = pyb::array_t<std::int16_t, pyb::array::c_style>::ensure(raw_obj);
+        if (!raw || raw.ndim() != 3 || raw.shape(0) != 9) {
+          throw pyb::value_error("raw must be an int16 array of shape (9, height, width)");
+        }
+        const int h = static_cast<int>(raw.shape(1)), w = static_cast<int>(raw.shape(2));
+        const auto pixels = static_cast<std::size_t>(h) * static_cast<std::size_t>(w);
+        const PixelRegion region{rect[0], rect[1], rect[2], rect[3]};
+        if (pyb::isinstance<DecodeTables>(p0_obj)) {
+          const auto& t = p0_obj.cast<const DecodeTables&>();
+          DecodeOptions opt;
+          opt.min_amplitude = min_amplitude;
+          pyb::gil_scoped_release nogil;
+          return decode_region(raw.data(), w, h, t, region, opt);
+        }
+        std::vector<float> p0;
+        if (!p0_obj.is_none()) {
+          auto a = as_float32(p0_obj, {3, -1}, "p0_rad");
+          if (static_cast<std::size_t>(a.shape(1)) != pixels) throw pyb::value_error("p0_rad must be (3, height * width)");
+          p0.assign(a.data(), a.data() + a.size());
+        }
+        DecodeOptions opt;
+        opt.min_amplitude = min_amplitude;
+        pyb::gil_scoped_release nogil;
+        return decode_region(raw.data(), w, h, p0, region, opt);
+      },
+      pyb::arg("raw"), pyb::arg("p0_rad"), pyb::arg("rect"), pyb::arg("min_amplitude") = 3.0,
+      "Decode only the pixels of rect = (x0, y0, x1, y1) of a (9, height, width) frame; outputs flat, row by row.");
 }
 
 }  // namespace tofmat::py

@@ -1,6 +1,6 @@
 # Type stubs for the C++ extension (bindings/). Keep in step with bindings/*.cpp.
 from os import PathLike
-from typing import Any, Sequence
+from typing import Any, Sequence, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -127,13 +127,33 @@ class DecodedFrame:
     @property
     def combined_mm(self) -> npt.NDArray[np.float32]: ...
     @property
+    def features(self) -> npt.NDArray[np.float32]: ...
+    @property
     def flags(self) -> npt.NDArray[np.uint8]: ...
+
+class DecodeTables:
+    pixels: int
+    def __init__(self, p0_rad: npt.ArrayLike) -> None: ...
 
 DECODE_SATURATED: int
 DECODE_DARK: int
 
+@overload
 def decode_frame(
     raw: npt.NDArray[np.int16], p0_rad: npt.ArrayLike | None = None, min_amplitude: float = 3.0
+) -> DecodedFrame: ...
+@overload
+def decode_frame(raw: npt.NDArray[np.int16], tables: DecodeTables, min_amplitude: float = 3.0) -> DecodedFrame: ...
+@overload
+def decode_region(
+    raw: npt.NDArray[np.int16],
+    p0_rad: npt.ArrayLike | None,
+    rect: tuple[int, int, int, int],
+    min_amplitude: float = 3.0,
+) -> DecodedFrame: ...
+@overload
+def decode_region(
+    raw: npt.NDArray[np.int16], tables: DecodeTables, rect: tuple[int, int, int, int], min_amplitude: float = 3.0
 ) -> DecodedFrame: ...
 
 # The `sim` submodule of the extension (bindings/sim_bindings.cpp), written as a

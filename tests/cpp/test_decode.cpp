@@ -404,3 +404,44 @@ TEST(IdealDecode, RawSamplesAreTheCosinesOfTheSpec) {
 }
 
 }  // namespace
+
+// ---------------------------------------------------------------------------
+// Region decode and per-pixel features
+// ---------------------------------------------------------------------------
+
+TEST(DecodeRegion, EqualsTheFullFrameDecodeOfThosePixelsAndCarriesTheFeatures) {
+  const int w = 40, h = 30;
+  const std::size_t n = static_cast<std::size_t>(w * h);
+  std::vector<std::int16_t> raw(9 * n);
+  std::vector<float> p0(3 * n);
+  std::uint32_t state = 12345;
+  const auto next = [&] { return state = state * 1664525u + 1013904223u; };
+  for (auto& v : raw) v = static_cast<std::int16_t>(static_cast<int>(next() % 4001) - 2000);
+  for (auto& v : p0) v = static_cast<float>(next() % 1000) * 1e-3f;
+  raw[5 * n + 3 * w + 7] = tofmat::kRawSaturated;
+  const auto full = tofmat::decode_frame(raw.data(), n, p0);
+  const tofmat::PixelRegion r{5, 2, 17, 11};
+  const auto part = tofmat::decode_region(raw.data(), w, h, p0, r);
+  ASSERT_EQ(part.pixels, 12u * 9u);
+  std::size_t k = 0;
+  for (int y = r.y0; y < r.y1; ++y) {
+    for (int x = r.x0; x < r.x1; ++x, ++k) {
+      const std::size_t i = static_cast<std::size_t>(y * w + x);
+      ASSERT_EQ(part.flags[k], full.flags[i]);
+      for (std::size_t g = 0; g < 3; ++g) ASSERT_EQ(part.phase_rad[g][k], full.phase_rad[g][i]);
+      if (full.flags[i]) {
+        EXPECT_TRUE(std::isnan(part.features[0][k]));
+        continue;
+      }
+      ASSERT_EQ(part.combined_mm[k], full.combined_mm[i]);
+      // Eq. (10) in the database's sign, from the wrapped depths.
+      // (from the double depths: within the float rounding of depths up to 9375 mm)
+      EXPECT_NEAR(part.features[0][k], full.depth_mm[1][i] - full.depth_mm[2][i], 2e-3);
+      EXPECT_NEAR(part.features[1][k], full.depth_mm[0][i] - full.depth_mm[2][i], 2e-3);
+    }
+  }
+  EXPECT_EQ(part.flags[1 * 12 + 2], tofmat::kDecodeSaturated);  // (7, 3) is saturated
+  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, p0, {0, 0, 41, 1}), std::invalid_argument);
+  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, p0, {3, 3, 3, 9}), std::invalid_argument);
+  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, std::vector<float>(5), r), std::invalid_argument);
+}

@@ -1,6 +1,7 @@
 #include "tofmat/core/frame_decode.hpp"
 
 #include <cmath>
+#include <complex>
 #include <stdexcept>
 
 #include "tofmat/core/decode.hpp"
@@ -9,11 +10,9 @@
 
 namespace tofmat {
 
-DecodedFrame decode_frame(const std::int16_t* raw, std::size_t pixels, const std::vector<float>& p0_rad,
-                          const DecodeOptions& options) {
-  if (!p0_rad.empty() && p0_rad.size() != 3 * pixels) {
-    throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
-  }
+namespace {
+
+DecodedFrame allocate(std::size_t pixels) {
   DecodedFrame out;
   out.pixels = pixels;
   for (std::size_t g = 0; g < 3; ++g) {
@@ -22,30 +21,93 @@ DecodedFrame decode_frame(const std::int16_t* raw, std::size_t pixels, const std
     out.depth_mm[g].assign(pixels, NAN);
   }
   out.combined_mm.assign(pixels, NAN);
+  for (auto& f : out.features) f.assign(pixels, NAN);
   out.flags.assign(pixels, 0);
-  for (std::size_t i = 0; i < pixels; ++i) {
-    std::array<double, 3> wrapped{};
-    std::uint8_t flags = 0;
-    for (std::size_t g = 0; g < 3; ++g) {
-      double m[3];
-      for (std::size_t j = 0; j < 3; ++j) {
-        const std::int16_t v = raw[(g * 3 + j) * pixels + i];
-        if (v == kRawSaturated) flags |= kDecodeSaturated;
-        m[j] = v;
-      }
-      const double p0 = p0_rad.empty() ? 0.0 : p0_rad[g * pixels + i];
-      const auto z = phasor_from_samples(m, p0);
-      const double amp = std::abs(z) / 1.5;
-      const double phase = phase_of(z);
-      out.phase_rad[g][i] = static_cast<float>(phase);
-      out.amplitude[g][i] = static_cast<float>(amp);
-      if (!(amp >= options.min_amplitude)) flags |= kDecodeDark;
-      wrapped[g] = depth_from_phase_mm(phase, kGroupFrequenciesMhz[g]);
+  return out;
+}
+
+// e^{-i phi_j} of the three phase steps.
+const std::array<std::complex<double>, 3> kStepRotations = {
+    std::polar(1.0, -kPhaseStepsRad[0]), std::polar(1.0, -kPhaseStepsRad[1]), std::polar(1.0, -kPhaseStepsRad[2])};
+
+// Pixel `src` of a frame of `stride` pixels into slot `dst` of `out`:
+// a + i b = e^{-i p0} sum_j m_j e^{-i phi_j} (phasor_from_samples, factored).
+void decode_pixel(const std::int16_t* raw, std::size_t stride, std::size_t src, const DecodeTables& t,
+                  const DecodeOptions& options, DecodedFrame& out, std::size_t dst) {
+  std::array<double, 3> wrapped{};
+  std::uint8_t flags = 0;
+  for (std::size_t g = 0; g < 3; ++g) {
+    std::complex<double> sum{0.0, 0.0};
+    for (std::size_t j = 0; j < 3; ++j) {
+      const std::int16_t v = raw[(g * 3 + j) * stride + src];
+      if (v == kRawSaturated) flags |= kDecodeSaturated;
+      sum += static_cast<double>(v) * kStepRotations[j];
     }
-    out.flags[i] = flags;
-    if (flags) continue;
-    for (std::size_t g = 0; g < 3; ++g) out.depth_mm[g][i] = static_cast<float>(wrapped[g]);
-    out.combined_mm[i] = static_cast<float>(unwrap_depths(wrapped).combined_mm);
+    const std::complex<double> rot{t.cos_p0[g][src], -static_cast<double>(t.sin_p0[g][src])};
+    const auto z = sum * rot;
+    const double amp = std::sqrt(std::norm(z)) / 1.5;  // (no overflow from int16 sums: no hypot needed)
+    const double phase = phase_of(z);
+    out.phase_rad[g][dst] = static_cast<float>(phase);
+    out.amplitude[g][dst] = static_cast<float>(amp);
+    if (!(amp >= options.min_amplitude)) flags |= kDecodeDark;
+    wrapped[g] = depth_from_phase_mm(phase, kGroupFrequenciesMhz[g]);
+  }
+  out.flags[dst] = flags;
+  if (flags) return;
+  for (std::size_t g = 0; g < 3; ++g) out.depth_mm[g][dst] = static_cast<float>(wrapped[g]);
+  out.combined_mm[dst] = static_cast<float>(unwrap_depths(wrapped).combined_mm);
+  out.features[0][dst] = static_cast<float>(wrapped[kGroup16] - wrapped[kGroup120]);
+  out.features[1][dst] = static_cast<float>(wrapped[kGroup80] - wrapped[kGroup120]);
+}
+
+}  // namespace
+
+DecodeTables::DecodeTables(const std::vector<float>& p0_rad, std::size_t n) : pixels(n) {
+  if (!p0_rad.empty() && p0_rad.size() != 3 * n) throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
+  for (std::size_t g = 0; g < 3; ++g) {
+    cos_p0[g].assign(n, 1.0f);
+    sin_p0[g].assign(n, 0.0f);
+    if (p0_rad.empty()) continue;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double p = p0_rad[g * n + i];
+      cos_p0[g][i] = static_cast<float>(std::cos(p));
+      sin_p0[g][i] = static_cast<float>(std::sin(p));
+    }
+  }
+}
+
+DecodedFrame decode_frame(const std::int16_t* raw, std::size_t pixels, const std::vector<float>& p0_rad,
+                          const DecodeOptions& options) {
+  return decode_frame(raw, DecodeTables(p0_rad, pixels), options);
+}
+
+DecodedFrame decode_frame(const std::int16_t* raw, const DecodeTables& t, const DecodeOptions& options) {
+  DecodedFrame out = allocate(t.pixels);
+  for (std::size_t i = 0; i < t.pixels; ++i) decode_pixel(raw, t.pixels, i, t, options, out, i);
+  return out;
+}
+
+DecodedFrame decode_region(const std::int16_t* raw, int width, int height, const std::vector<float>& p0_rad,
+                           const PixelRegion& r, const DecodeOptions& options) {
+  if (width < 1 || height < 1) throw std::invalid_argument("frame size must be positive");
+  const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  return decode_region(raw, width, height, DecodeTables(p0_rad, pixels), r, options);
+}
+
+DecodedFrame decode_region(const std::int16_t* raw, int width, int height, const DecodeTables& t,
+                           const PixelRegion& r, const DecodeOptions& options) {
+  if (width < 1 || height < 1) throw std::invalid_argument("frame size must be positive");
+  const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  if (t.pixels != pixels) throw std::invalid_argument("decode tables are for a frame of another size");
+  if (r.x0 < 0 || r.y0 < 0 || r.x1 > width || r.y1 > height || r.x0 >= r.x1 || r.y0 >= r.y1) {
+    throw std::invalid_argument("decode region is empty or outside the frame");
+  }
+  const std::size_t rw = static_cast<std::size_t>(r.x1 - r.x0);
+  DecodedFrame out = allocate(rw * static_cast<std::size_t>(r.y1 - r.y0));
+  std::size_t k = 0;
+  for (int y = r.y0; y < r.y1; ++y) {
+    const std::size_t row = static_cast<std::size_t>(y) * static_cast<std::size_t>(width);
+    for (int x = r.x0; x < r.x1; ++x) decode_pixel(raw, pixels, row + static_cast<std::size_t>(x), t, options, out, k++);
   }
   return out;
 }
