@@ -12,8 +12,8 @@ namespace tofmat::sim {
 
 // Highest harmonic a profile may list. The 3-step decode folds h = 3k +- 1
 // into its error terms; a correlation waveform with sharp features (the
-// calibrated 16 MHz group's) needs up to h = 13.
-inline constexpr int kMaxHarmonic = 16;
+// calibrated 16 MHz group's) needs up to h = 25.
+inline constexpr int kMaxHarmonic = 32;
 
 // The raw signal of the groups (80, 16, 120 MHz) relative to each other when a
 // profile does not say: the reciprocals of libfreenect2's ab_multiplier_per_frq
