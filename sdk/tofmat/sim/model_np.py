@@ -397,14 +397,15 @@ def simulate(
 ) -> dict[str, np.ndarray]:
     """Noise-free forward model along a range sweep (scalar alpha and delta_p).
 
-    ``A`` defaults to the curves' fall-off ``(RANGE_REF_MM / D)^2`` (section 4).
+    ``A`` defaults to the curves' fall-off ``(range_ref_mm / D)^2`` (section 4; the device's
+    ``range_ref_mm``, 1000 when absent).
     Returns m (3 groups, 3 steps, N), d (wrapped, (3, N), groups 80/16/120), D (unwrapped),
     dcomb (N,), rows (2, N) = (d16 - d120, d80 - d120).
     """
     dev = device_arrays(device)
     D_mm = np.atleast_1d(np.asarray(D_mm, float))
     if A is None:
-        A = (RANGE_REF_MM / D_mm) ** 2
+        A = (float(device.get("range_ref_mm", RANGE_REF_MM)) / D_mm) ** 2
     Rh = material_harmonic_responses(material, dev, alpha)
     m = raw_samples_core(
         dev["f"], dev["s"], dev["delta"], dev["G"], dev["gain"], dev["offset"], Rh, D_mm, A,
