@@ -49,7 +49,10 @@ from . import model_np as M
 # ---------------------------------------------------------------------------------------------
 THIN_ACRYLICS = {"acryl1mm": 1.0, "acryl2mm": 2.0, "acryl3mm": 3.0}
 ACRYLIC_N = 1.49
-HMAX = 13  # highest harmonic of the device model (spec section 2.1)
+HMAX = 25  # highest harmonic of the device model (spec section 2.1)
+# highest fitted harmonic per group (80, 16, 120 MHz): the 16 MHz correlation waveform has the
+# sharpest features; above these the harmonics stay 0 (listed in the profile with amplitude 0)
+GROUP_HMAX = (19, 25, 19)
 HARMONICS_LOW = (2, 4, 5, 7)
 HARMONICS_FIT = tuple(h for h in range(2, HMAX + 1) if h % 3)  # h = 3k cancel (ideal gains)
 GROUPS = (80, 16, 120)
@@ -387,7 +390,8 @@ def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: b
     keys: list[tuple] = []
     for g in range(3):
         for h in harm:
-            keys += [("hx", g, h), ("hy", g, h)]
+            if h <= GROUP_HMAX[g]:
+                keys += [("hx", g, h), ("hy", g, h)]
         if delta and GROUPS[g] != 120:
             keys.append(("delta", g))
         if scale and GROUPS[g] != 120:
@@ -647,7 +651,7 @@ def calibrate(
         rms_now = prob.rms(st, kinds, allidx)
         prob.weights = 1.0 / np.sqrt(np.maximum(rms_now, WEIGHT_FLOOR_MM))
         prob.setup(st, kinds, allidx, _dev_keys(HARMONICS_FIT, **JOINT_DEVICE_EXTRAS), mat_free)
-        res = prob.solve(max_nfev=40 if rnd + 1 < rounds else 80)
+        res = prob.solve(max_nfev=40 if rnd + 1 < rounds else 100)
         st = prob.st
         prob.weights = np.ones(nm)
         rms = prob.rms(st, kinds, allidx)
@@ -683,7 +687,7 @@ def calibrate(
         kind_scores=kind_scores,
         log=logs,
         config={"restarts": restarts, "seed": seed, "rounds": rounds, "bins": list(bins),
-                "h_max": HMAX, "ridge": RIDGE, "offset_prior_mm": OFFSET_PRIOR_MM},  # fmt: skip
+                "h_max": HMAX, "group_h_max": list(GROUP_HMAX), "ridge": RIDGE, "offset_prior_mm": OFFSET_PRIOR_MM},  # fmt: skip
     )
 
 
@@ -715,7 +719,7 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
                 device[k] = tpl[k]
     device["notes"] = (
         "Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the 29 "
-        "real curves (docs/simulator-model.md with its extensions: harmonics to h = 13, tap "
+        "real curves (docs/simulator-model.md with its extensions: harmonics to h = 19/25/19, tap "
         "full-well saturation with full_well in units of the 16 MHz tap signal of an albedo-1 "
         "target at range_ref_mm, signal_scale per group, decode offsets carrying the common row "
         "levels). camera/noise/pixel_phase/signal are not fitted (copied from the ideal profile)."
@@ -739,13 +743,15 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
             "rms_interp_mm": result.rms_interp_mm[m["name"]],
             "offsets_mm": result.offsets_mm[m["name"]],
             "kind_scores_rms_mm": result.kind_scores.get(m["name"], {}),
-            "albedo_note": "not identifiable from relative curves; 1.0 placeholder",
+            "albedo_note": "seen by the curves only through tap saturation: the relative signal in "
+            "units of the 16 MHz taps' full well at range_ref_mm, not an optical albedo",
         }
         mats.append(mm)
     lib = {
         "name": "tanaka2017",
+        "version": 2,
         "device": device["name"],
-        "note": "fitted with the device in data/devices/kinect2_tanaka2017.json; offsets_mm are "
+        "notes": "fitted with the device in data/devices/kinect2_tanaka2017.json; offsets_mm are "
         "per-capture nuisance offsets (row0, row1) of the real database, not material properties",
         "materials": mats,
     }
@@ -753,6 +759,11 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
         json.dump(lib, fh, indent=2)
         fh.write("\n")
     paths = {"device": dev_path, "materials": mat_path}
+    # The simulator must read what the fit wrote (strict keys, ranges): fail here, not later.
+    from . import DeviceProfile, MaterialLibrary
+
+    DeviceProfile.load(dev_path, out_dir)
+    MaterialLibrary.load(mat_path, out_dir)
     log_path = os.path.join(out_dir, "data", "materials", "tanaka2017_fit_log.txt")
     with open(log_path, "w") as fh:
         fh.write("\n".join(result.log) + "\n")
