@@ -131,6 +131,7 @@ TEST(KinectSim, StartUpReadsTheDevicesIdentityAndTables) {
     }
   }
   EXPECT_TRUE(rig.dev->streaming());
+  EXPECT_TRUE(rig.dev->connected());
   EXPECT_EQ(rig.dev->counters().retries, 0u);
 }
 
@@ -247,6 +248,7 @@ TEST(KinectSimFaults, UnplugMidStreamIsReportedAndReplugResumes) {
   }
   EXPECT_EQ(rig.frames.size(), 3u);  // the half-sent frame 3 is never passed on
   EXPECT_FALSE(rig.sim->plugged());
+  EXPECT_FALSE(rig.dev->connected());
   rig.dev.reset();  // closing a gone device must not throw
   try {
     rig.sim->connect();

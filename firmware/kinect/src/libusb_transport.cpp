@@ -112,6 +112,7 @@ class LibusbTransport : public UsbTransport {
   }
 
   std::string describe() const override { return description_; }
+  bool connected() const override { return !disconnected_; }
 
   void control(std::uint8_t request_type, std::uint8_t request, std::uint16_t value, std::uint16_t index,
                unsigned timeout_ms) override {

@@ -34,6 +34,7 @@ class SimulatedKinectTransport : public kinect::UsbTransport {
   }
 
   std::string describe() const override { return "simulated Kinect v2 (serial SIM000000001)"; }
+  bool connected() const override { return dev_->plugged(); }
 
   void control(std::uint8_t, std::uint8_t, std::uint16_t, std::uint16_t, unsigned) override { check(); }
 

@@ -67,6 +67,7 @@ class Kinect2Device {
   const DriverCounters& counters() const { return counters_; }
   DepthStreamCounters stream_counters() const;
   std::string describe() const { return transport_->describe(); }
+  bool connected() const { return transport_->connected(); }
 
   // One command transaction (1.5): write, optional response, completion.
   // Retries a timed-out command with a new sequence number; skips stale

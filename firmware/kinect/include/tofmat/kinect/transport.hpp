@@ -39,9 +39,16 @@ class UsbError : public std::runtime_error {
 // A completed iso packet: its bytes as received (length 0 allowed).
 using IsoPacketHandler = std::function<void(const std::uint8_t* data, std::size_t length)>;
 
+// Opening is a factory's job (open_libusb_kinect, SimulatedKinect::connect):
+// it finds, resets, configures and claims the device. Closing is destruction,
+// which releases the interfaces and never throws.
 class UsbTransport {
  public:
   virtual ~UsbTransport() = default;
+
+  // False once the device has gone (unplug): every call then throws
+  // UsbError(kDisconnected). The driver's pump() is where it is noticed first.
+  virtual bool connected() const = 0;
 
   // A human-readable identity ("libusb 2-1 045e:02d8 serial ..." / "sim").
   virtual std::string describe() const = 0;
