@@ -57,6 +57,8 @@ class DepthStreamParser {
   void reset();
 
   const DepthStreamCounters& counters() const { return counters_; }
+  // Bytes of the sub-packet being collected (diagnostics and tests).
+  std::size_t pending_bytes() const { return collected_; }
 
  private:
   void on_sub_packet();
