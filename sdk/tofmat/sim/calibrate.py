@@ -36,13 +36,18 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence, TypeAlias, TypedDict, cast
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.optimize import least_squares  # type: ignore[import-untyped]  # scipy ships no type stubs
+from scipy.sparse import lil_matrix  # type: ignore[import-untyped]  # scipy ships no type stubs
 
 from . import model_np as M
+from .model_np import ComplexArray, FloatArray
+
+# A state key: the parameter's name, then its indices (group, harmonic / step, or material).
+StateKey: TypeAlias = tuple[str, *tuple[int, ...]]
+State: TypeAlias = dict[StateKey, float]
 
 # ---------------------------------------------------------------------------------------------
 # Configuration
@@ -93,8 +98,8 @@ def _log(msg: str) -> None:
 # ---------------------------------------------------------------------------------------------
 # State (a flat dict of named parameters) <-> JSON dicts
 # ---------------------------------------------------------------------------------------------
-def _default_state(names: Sequence[str]) -> dict[tuple, float]:
-    st: dict[tuple, float] = {}
+def _default_state(names: Sequence[str]) -> State:
+    st: State = {}
     for g in range(3):
         for h in range(2, HMAX + 1):
             st[("hx", g, h)] = 0.0
@@ -116,7 +121,7 @@ def _default_state(names: Sequence[str]) -> dict[tuple, float]:
     return st
 
 
-def state_to_device(st: dict[tuple, float], name: str = "kinect2_tanaka2017") -> dict[str, Any]:
+def state_to_device(st: State, name: str = "kinect2_tanaka2017") -> dict[str, Any]:
     freqs = []
     for g, f in enumerate(GROUPS):
         harm = []
@@ -135,11 +140,11 @@ def state_to_device(st: dict[tuple, float], name: str = "kinect2_tanaka2017") ->
             "step_gain": [float(st[("gain", g, j)]) for j in range(3)],
             "step_offset": [float(st[("off", g, j)]) for j in range(3)],
         })  # fmt: skip
-    return {"name": name, "version": "2", "range_ref_mm": M.RANGE_REF_MM,
+    return {"name": name, "version": 2, "range_ref_mm": M.RANGE_REF_MM,
             "saturation": {"sharpness": float(st[("satp",)])}, "frequencies": freqs}  # fmt: skip
 
 
-def device_to_state(dev: dict[str, Any], st: dict[tuple, float]) -> None:
+def device_to_state(dev: dict[str, Any], st: State) -> None:
     for g, f in enumerate(GROUPS):
         grp = M._group(dev, float(f))
         G = M.harmonic_vector(grp, HMAX)
@@ -153,11 +158,27 @@ def device_to_state(dev: dict[str, Any], st: dict[tuple, float]) -> None:
             st[("gain", g, j)] = float(grp.get("step_gain", [1, 1, 1])[j])
             st[("off", g, j)] = float(grp.get("step_offset", [0, 0, 0])[j])
         fw = grp.get("full_well")
-        st[("lw", g)] = math.log10(float(fw)) if fw else 0.0
+        # null (no saturation): the fit always saturates, so a well far above any signal (1e6)
+        st[("lw", g)] = math.log10(float(fw)) if fw else 6.0
     st[("satp",)] = float((dev.get("saturation") or {}).get("sharpness", 8.0))
 
 
-def _device_arrays(st: dict[tuple, float]) -> dict[str, np.ndarray]:
+class _DeviceArrays(TypedDict):
+    """The device as arrays over the groups (as model_np.device_arrays; sat_p a float)."""
+
+    f: FloatArray
+    s: FloatArray
+    delta: FloatArray
+    eps: FloatArray
+    G: ComplexArray
+    gain: FloatArray
+    offset: FloatArray
+    scale: FloatArray
+    full_well: FloatArray
+    sat_p: float
+
+
+def _device_arrays(st: State) -> _DeviceArrays:
     G = np.zeros((3, HMAX + 1), complex)
     G[:, 1] = 1.0
     for g in range(3):
@@ -177,7 +198,7 @@ def _device_arrays(st: dict[tuple, float]) -> dict[str, np.ndarray]:
     }
 
 
-def state_to_material(st: dict[tuple, float], i: int, name: str, kind: str) -> dict[str, Any]:
+def state_to_material(st: State, i: int, name: str, kind: str) -> dict[str, Any]:
     thick = THIN_ACRYLICS.get(name, 0.0)
     n = ACRYLIC_N if name.startswith("acryl") else 1.5
     mat: dict[str, Any] = {
@@ -207,7 +228,7 @@ def state_to_material(st: dict[tuple, float], i: int, name: str, kind: str) -> d
 # ---------------------------------------------------------------------------------------------
 # Gauge: move the common row levels into the device (spec section 4.2)
 # ---------------------------------------------------------------------------------------------
-def regauge(st: dict[tuple, float], idx: Sequence[int]) -> tuple[float, float]:
+def regauge(st: State, idx: Sequence[int]) -> tuple[float, float]:
     """Move the median per-capture offsets (row0, row1) into the device's decode offsets eps_f.
 
     Levels c_f with c16 - c120 = o0, c80 - c120 = o1 and 80 c80 + 16 c16 + 120 c120 = 0 (the
@@ -234,7 +255,7 @@ class Problem:
 
     def __init__(
         self,
-        Y: np.ndarray,
+        Y: FloatArray,
         names: Sequence[str],
         bins: tuple[float, float, int],
         grid: tuple[float, float, float] = FIT_GRID,
@@ -251,7 +272,7 @@ class Problem:
         self.weights = np.ones(len(self.Y))
 
     # -- forward ---------------------------------------------------------------------------
-    def curves(self, st: dict[tuple, float], kinds: Sequence[str], idx: Sequence[int]) -> np.ndarray:
+    def curves(self, st: State, kinds: Sequence[str], idx: Sequence[int]) -> FloatArray:
         dev = _device_arrays(st)
         Rh = np.stack([
             M.material_harmonic_responses(state_to_material(st, i, self.names[i], kinds[i]), dev)
@@ -287,16 +308,16 @@ class Problem:
     # -- parameter vector --------------------------------------------------------------------
     def setup(
         self,
-        st: dict[tuple, float],
+        st: State,
         kinds: Sequence[str],
         idx: Sequence[int],
-        dev_free: Sequence[tuple],
-        mat_free: dict[int, Sequence[str]],
+        dev_free: Sequence[StateKey],
+        mat_free: Mapping[int, Sequence[str]],
     ) -> None:
         self.st = dict(st)
         self.kinds = list(kinds)
         self.idx = list(idx)
-        keys: list[tuple] = list(dev_free)
+        keys: list[StateKey] = list(dev_free)
         for i in self.idx:
             keys += [(p, i) for p in mat_free.get(i, ())]
         self.keys = keys
@@ -314,7 +335,7 @@ class Problem:
         dev_cols = [c for c, k in enumerate(keys) if k[0] in DEV_BOUNDS]
         for a, i in enumerate(self.idx):
             r0, r1 = self.row_start[a], self.row_start[a + 1]
-            cols = dev_cols + [c for c, k in enumerate(keys) if k[0] in MAT_BOUNDS and k[1] == i]
+            cols = dev_cols + [c for c, k in enumerate(keys) if k[0] in MAT_BOUNDS and k[1] == i]  # type: ignore[misc]  # material keys are (name, i)
             for c in cols:
                 sp[r0:r1, c] = 1
             for j, p in enumerate(("o0", "o1")):
@@ -331,20 +352,20 @@ class Problem:
         self.ridge_w = self.ridge * math.sqrt(len(self.idx))
 
     @staticmethod
-    def _bounds(k: tuple) -> tuple[float, float]:
+    def _bounds(k: StateKey) -> tuple[float, float]:
         return DEV_BOUNDS[k[0]] if k[0] in DEV_BOUNDS else MAT_BOUNDS[k[0]]
 
-    def x0(self) -> np.ndarray:
+    def x0(self) -> FloatArray:
         x = np.array([self.st[k] for k in self.keys], float)
         span = self.hi - self.lo
-        return np.clip(x, self.lo + 1e-9 * span, self.hi - 1e-9 * span)
+        return cast(FloatArray, np.clip(x, self.lo + 1e-9 * span, self.hi - 1e-9 * span))
 
-    def apply(self, x: np.ndarray) -> dict[tuple, float]:
+    def apply(self, x: FloatArray) -> State:
         st = dict(self.st)
         st.update(zip(self.keys, map(float, x)))
         return st
 
-    def residuals(self, x: np.ndarray) -> np.ndarray:
+    def residuals(self, x: FloatArray) -> FloatArray:
         st = self.apply(x)
         sim = self.curves(st, self.kinds, self.idx)
         res = []
@@ -370,7 +391,7 @@ class Problem:
         self.st = self.apply(r.x)
         return r
 
-    def rms(self, st: dict[tuple, float], kinds: Sequence[str], idx: Sequence[int]) -> np.ndarray:
+    def rms(self, st: State, kinds: Sequence[str], idx: Sequence[int]) -> FloatArray:
         sim = self.curves(st, kinds, idx)
         out = []
         for a, i in enumerate(idx):
@@ -383,11 +404,11 @@ class Problem:
 
 def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: bool = False,
               gain: bool = False, off: bool = False, sat: bool = SATURATION,
-              full_well: bool = False) -> list[tuple]:  # fmt: skip
+              full_well: bool = False) -> list[StateKey]:  # fmt: skip
     """Free device parameters. Gauges: delta_120 = 0 (a common range shift is unobservable),
     s_120 = 0, g_0 = 1, o_0 = 0 (the common mode of o_j cancels in the decode). With free
     per-capture offsets and free harmonic phases, the deltas are pure gauge too (see regauge)."""
-    keys: list[tuple] = []
+    keys: list[StateKey] = []
     for g in range(3):
         for h in harm:
             if h <= GROUP_HMAX[g]:
@@ -407,7 +428,7 @@ def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: b
     return keys
 
 
-def _init_offsets(prob: Problem, st: dict[tuple, float], kinds: Sequence[str], idx: Sequence[int]) -> None:
+def _init_offsets(prob: Problem, st: State, kinds: Sequence[str], idx: Sequence[int]) -> None:
     sim = prob.curves(st, kinds, idx)
     for a, i in enumerate(idx):
         for row in range(2):
@@ -416,7 +437,7 @@ def _init_offsets(prob: Problem, st: dict[tuple, float], kinds: Sequence[str], i
             st[("o%d" % row, i)] = float(np.clip(np.median(d), -390, 390)) if d.size else 0.0
 
 
-def typical_median(Y: np.ndarray, frac: float = 0.5) -> tuple[np.ndarray, list[int]]:
+def typical_median(Y: FloatArray, frac: float = 0.5) -> tuple[FloatArray, list[int]]:
     """Median curve of the materials closest to the overall median (offsets removed)."""
     med = np.nanmedian(Y, axis=0)
     dev = []
@@ -431,7 +452,7 @@ def typical_median(Y: np.ndarray, frac: float = 0.5) -> tuple[np.ndarray, list[i
 # ---------------------------------------------------------------------------------------------
 # Stages
 # ---------------------------------------------------------------------------------------------
-def translucent_group(Y: np.ndarray, typical: np.ndarray) -> list[int]:
+def translucent_group(Y: FloatArray, typical: FloatArray) -> list[int]:
     """Materials whose rows sit well above the typical curve (subsurface delays of ~ns)."""
     out = []
     for i, y in enumerate(Y):
@@ -442,9 +463,9 @@ def translucent_group(Y: np.ndarray, typical: np.ndarray) -> list[int]:
 
 
 def stage_device(
-    Y: np.ndarray, bins: tuple, restarts: int, rng: np.random.Generator,
+    Y: FloatArray, bins: tuple[float, float, int], restarts: int, rng: np.random.Generator,
     log: Callable[[str], None], keep: int = 1,
-) -> list[dict[tuple, float]]:  # fmt: skip
+) -> list[State]:  # fmt: skip
     """Device harmonics from two pseudo-materials: the median curve of the typical (near-opaque)
     materials and the median curve of the translucent group (started with a ~1.5 ns
     subsurface response). The second curve separates the harmonics h = 3k - 1 and 3k + 1,
@@ -472,7 +493,7 @@ def stage_device(
         for i in idx:
             st[("lr", i)] = -1.5  # start unsaturated
         _init_offsets(prob, st, kinds, idx)
-        free = {i: ("b", "lt", "o0", "o1") for i in idx}
+        free: dict[int, tuple[str, ...]] = {i: ("b", "lt", "o0", "o1") for i in idx}
         prob.setup(st, kinds, idx, _dev_keys(HARMONICS_LOW, sat=False), free)
         prob.solve(max_nfev=80)
         if SATURATION:
@@ -488,16 +509,16 @@ def stage_device(
 
 
 def fit_material(
-    prob: Problem, st: dict[tuple, float], kinds: list[str], i: int, candidates: Sequence[str],
+    prob: Problem, st: State, kinds: list[str], i: int, candidates: Sequence[str],
     with_noise: bool, nfev: int = 40,
     starts: Sequence[tuple[float, float, float]] = (
         (1.0, 0.3, -1.0), (2.0, 0.6, -0.4), (3.2, 0.4, -0.2)),
-) -> tuple[str, dict[tuple, float], float, dict[str, float]]:  # fmt: skip
+) -> tuple[str, State, float, dict[str, float]]:  # fmt: skip
     """Device fixed: the best kind and parameters of material i (several starting points)."""
     scores: dict[str, float] = {}
-    fits: dict[str, dict[tuple, float]] = {}
+    fits: dict[str, State] = {}
     for kind in candidates:
-        kb: tuple[float, dict[tuple, float]] | None = None
+        kb: tuple[float, State] | None = None
         trial = [(st[("lt", i)], st[("b", i)], st[("lr", i)])] + list(starts)
         for lt, b0, lr in trial:
             s = dict(st)
@@ -540,7 +561,7 @@ class CalibrationResult:
     config: dict[str, Any] = field(default_factory=dict)
 
 
-def _table_arrays(table: Any) -> tuple[np.ndarray, list[str], tuple[float, float, int]]:
+def _table_arrays(table: Any) -> tuple[FloatArray, list[str], tuple[float, float, int]]:
     Y = np.asarray(table.features, float)
     names = list(table.materials)
     b = table.bins
@@ -550,13 +571,13 @@ def _table_arrays(table: Any) -> tuple[np.ndarray, list[str], tuple[float, float
 def simulated_curves(
     device: dict[str, Any], materials: Sequence[dict[str, Any]], offsets: dict[str, list[float]],
     bins: tuple[float, float, int], mode: str = "bin", grid: tuple[float, float, float] = REPORT_GRID,
-) -> np.ndarray:  # fmt: skip
+) -> FloatArray:  # fmt: skip
     return np.stack([
         M.curve(device, m, bins, mode, grid, offsets.get(m["name"], (0.0, 0.0))) for m in materials
     ])  # fmt: skip
 
 
-def rms_per_material(sim: np.ndarray, Y: np.ndarray) -> np.ndarray:
+def rms_per_material(sim: FloatArray, Y: FloatArray) -> FloatArray:
     out = []
     for s, y in zip(sim, Y):
         v = np.isfinite(y)
@@ -566,7 +587,7 @@ def rms_per_material(sim: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def _wants_noise(y: np.ndarray, bins: tuple[float, float, int]) -> bool:
+def _wants_noise(y: FloatArray, bins: tuple[float, float, int]) -> bool:
     """The 120 MHz wrap inside the averaging: both rows rise together by tens of mm within the
     last ~60 mm of the range (row0 - row1, which does not involve d120, stays smooth)."""
     v = np.isfinite(y[0]) & np.isfinite(y[1])

@@ -30,10 +30,14 @@ Units: distances in mm, times in ns (``tau_ps`` in ps), angular frequencies in r
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence, TypeAlias, cast
 
 import numpy as np
-from scipy.special import erfc
+import numpy.typing as npt
+from scipy.special import erfc  # type: ignore[import-untyped]  # scipy ships no type stubs
+
+FloatArray: TypeAlias = npt.NDArray[np.float64]
+ComplexArray: TypeAlias = npt.NDArray[np.complex128]
 
 C_TRUE = 299.792458  # mm/ns, physics (time of flight)
 C_DEV = 300.0  # mm/ns, the device's decode (Eq. (1) as the real data was computed)
@@ -76,18 +80,18 @@ def material_defaults(material: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def fresnel_b_eff(b: float, n: float, alpha: float | np.ndarray) -> np.ndarray:
+def fresnel_b_eff(b: float, n: float, alpha: float | FloatArray) -> FloatArray | np.float64:
     """Schlick: b_eff = min(1, b (1 - F(alpha)) / (1 - F0))."""
     f0 = ((n - 1.0) / (n + 1.0)) ** 2
     f = f0 + (1.0 - f0) * (1.0 - np.cos(alpha)) ** 5
     return np.minimum(1.0, b * (1.0 - f) / (1.0 - f0))
 
 
-def k_exponential(omega: np.ndarray, tau_ns: float) -> np.ndarray:
-    return 1.0 / (1.0 + 1j * omega * tau_ns)
+def k_exponential(omega: FloatArray, tau_ns: float) -> ComplexArray:
+    return cast(ComplexArray, 1.0 / (1.0 + 1j * omega * tau_ns))
 
 
-def k_gamma(omega: np.ndarray, tau_ns: float, k: float) -> np.ndarray:
+def k_gamma(omega: FloatArray, tau_ns: float, k: float) -> ComplexArray:
     y = omega * tau_ns / k
     return np.exp(-k * (0.5 * np.log1p(y * y) + 1j * np.arctan(y)))
 
@@ -100,7 +104,7 @@ def slab_round_trip_ns(thickness_mm: float, n: float, path_factor: float, alpha:
         return path_factor * 2.0 * thickness_mm * n / (C_TRUE * cos_t)
 
 
-def k_slab(omega: np.ndarray, tau_ns: float, t_ns: Any, beta: float) -> np.ndarray:
+def k_slab(omega: FloatArray, tau_ns: float, t_ns: Any, beta: float) -> ComplexArray:
     """Truncated exponential plus the delayed backing; T / tau >= 745 (exp underflows, or grazing
     refraction with n = 1): the exponential."""
     t_ns = np.asarray(t_ns, float)
@@ -109,10 +113,10 @@ def k_slab(omega: np.ndarray, tau_ns: float, t_ns: Any, beta: float) -> np.ndarr
     z = ts * (1.0 / tau_ns + 1j * omega)
     e = np.where(far, 0.0, np.exp(-z))
     one_minus = np.where(far, 1.0, -np.expm1(-z))
-    return one_minus / (1.0 + 1j * omega * tau_ns) + beta * e
+    return cast(ComplexArray, one_minus / (1.0 + 1j * omega * tau_ns) + beta * e)
 
 
-def response(material: Mapping[str, Any], omega: Any, alpha: Any = 0.0) -> np.ndarray:
+def response(material: Mapping[str, Any], omega: Any, alpha: Any = 0.0) -> ComplexArray:
     """R(nu, alpha) for angular frequencies ``omega`` (rad/ns); broadcasts omega and alpha."""
     m = material_defaults(material)
     omega = np.asarray(omega, dtype=float)
@@ -120,7 +124,7 @@ def response(material: Mapping[str, Any], omega: Any, alpha: Any = 0.0) -> np.nd
     rho = float(m["albedo"])
     n = float(m["refractive_index"])
     if kind == "opaque":
-        return rho * np.ones(np.broadcast(omega, np.asarray(alpha)).shape, complex)
+        return cast(ComplexArray, rho * np.ones(np.broadcast(omega, np.asarray(alpha)).shape, complex))
     tau = float(m["tau_ps"]) * 1e-3
     b_eff = fresnel_b_eff(float(m["subsurface"]), n, alpha)
     if kind == "exponential":
@@ -150,7 +154,7 @@ def response(material: Mapping[str, Any], omega: Any, alpha: Any = 0.0) -> np.nd
 def _group(device: Mapping[str, Any], freq_mhz: float) -> Mapping[str, Any]:
     for g in device["frequencies"]:
         if abs(float(g["freq_mhz"]) - freq_mhz) < 1e-9:
-            return g
+            return cast(Mapping[str, Any], g)
     raise KeyError(f"device has no {freq_mhz} MHz group")
 
 
@@ -160,7 +164,7 @@ def n_harmonics(device: Mapping[str, Any]) -> int:
     return max([N_HARM] + hs)
 
 
-def harmonic_vector(group: Mapping[str, Any], n_harm: int = N_HARM) -> np.ndarray:
+def harmonic_vector(group: Mapping[str, Any], n_harm: int = N_HARM) -> ComplexArray:
     """G_h for h = 0..n_harm (index h), G_0 = 0 (unused), G_1 = 1."""
     g = np.zeros(n_harm + 1, complex)
     g[1] = 1.0
@@ -171,7 +175,7 @@ def harmonic_vector(group: Mapping[str, Any], n_harm: int = N_HARM) -> np.ndarra
     return g
 
 
-def device_arrays(device: Mapping[str, Any]) -> dict[str, np.ndarray]:
+def device_arrays(device: Mapping[str, Any]) -> dict[str, npt.NDArray[Any]]:
     """The device as arrays over the groups (80, 16, 120 MHz order)."""
     groups = [_group(device, f) for f in GROUP_FREQS_MHZ]
     nh = n_harmonics(device)
@@ -217,8 +221,8 @@ def ideal_device(name: str = "ideal", version: str = "0") -> dict[str, Any]:
 
 
 def material_harmonic_responses(
-    material: Mapping[str, Any], dev: Mapping[str, np.ndarray], alpha: Any = 0.0
-) -> np.ndarray:
+    material: Mapping[str, Any], dev: Mapping[str, Any], alpha: Any = 0.0
+) -> ComplexArray:
     """R(h f (1 + s), alpha) for the groups and h = 0..H: shape (3, H + 1) (+ alpha's shape)."""
     h = np.arange(dev["G"].shape[-1])
     omega = 2.0 * math.pi * (dev["f"] * 1e-3 * (1.0 + dev["s"]))[:, None] * h[None, :]
@@ -230,20 +234,20 @@ def material_harmonic_responses(
 # Section 3: raw samples, decode, unwrap
 # ---------------------------------------------------------------------------------------------
 def raw_samples_core(
-    f_mhz: np.ndarray,
-    s: np.ndarray,
-    delta: np.ndarray,
-    G: np.ndarray,
-    gain: np.ndarray,
-    offset: np.ndarray,
-    Rh: np.ndarray,
-    D_mm: np.ndarray,
+    f_mhz: FloatArray,
+    s: FloatArray,
+    delta: FloatArray,
+    G: ComplexArray,
+    gain: FloatArray,
+    offset: FloatArray,
+    Rh: ComplexArray,
+    D_mm: FloatArray,
     A: Any = 1.0,
     delta_p: Any = 0.0,
     scale: Any = None,
     full_well: Any = None,
     sat_p: float = 8.0,
-) -> np.ndarray:
+) -> FloatArray:
     """m_j for all groups: returns (..., 3 groups, 3 steps, N) (spec sections 3 and 3.1).
 
     f_mhz, s, delta: (3,); G: (3, H + 1); gain, offset: (3, 3); Rh: (..., 3, H + 1) =
@@ -272,13 +276,13 @@ def raw_samples_core(
     dc = amp * np.real(Rh[..., 0])[..., None, None]  # R(0) = albedo
     W = np.full(3, np.inf) if full_well is None else np.asarray(full_well, float)
     if np.all(np.isinf(W)):
-        return gain[:, :, None] * ac + offset[:, :, None] * dc
+        return cast(FloatArray, gain[:, :, None] * ac + offset[:, :, None] * dc)
     Wb = W[:, None, None]
     diff = saturate(0.5 * (dc + ac), Wb, sat_p) - saturate(0.5 * (dc - ac), Wb, sat_p)
-    return gain[:, :, None] * diff + offset[:, :, None] * dc
+    return cast(FloatArray, gain[:, :, None] * diff + offset[:, :, None] * dc)
 
 
-def saturate(T: np.ndarray, W: Any, p: float) -> np.ndarray:
+def saturate(T: FloatArray, W: Any, p: float) -> FloatArray:
     """Soft full-well saturation of a tap, N(T) = T / (1 + (|T| / W)^p)^(1/p); W = inf: T."""
     W = np.asarray(W, float)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -286,7 +290,7 @@ def saturate(T: np.ndarray, W: Any, p: float) -> np.ndarray:
     return T / (1.0 + u**p) ** (1.0 / p)
 
 
-def decode(m: np.ndarray, delta_p: Any = 0.0, eps: Any = None) -> np.ndarray:
+def decode(m: FloatArray, delta_p: Any = 0.0, eps: Any = None) -> FloatArray:
     """Wrapped per-group depths d_f (mm) from raw samples m (..., 3 groups, 3 steps, N).
 
     theta_j = p0 - eps_f + phi_j with p0 = -delta_p (the P0 tables) and eps_f the per-group
@@ -298,19 +302,19 @@ def decode(m: np.ndarray, delta_p: Any = 0.0, eps: Any = None) -> np.ndarray:
         z = z * np.exp(1j * np.asarray(eps, float))[:, None]
     phase = np.mod(np.angle(z), 2.0 * math.pi)
     f = np.array(GROUP_FREQS_MHZ)[:, None] * 1e-3
-    return C_DEV * phase / (4.0 * math.pi * f)
+    return cast(FloatArray, C_DEV * phase / (4.0 * math.pi * f))
 
 
 def phasor_direct(
-    f_mhz: np.ndarray,
-    s: np.ndarray,
-    delta: np.ndarray,
-    G: np.ndarray,
-    gain: np.ndarray,
-    offset: np.ndarray,
-    Rh: np.ndarray,
-    D_mm: np.ndarray,
-) -> np.ndarray:
+    f_mhz: FloatArray,
+    s: FloatArray,
+    delta: FloatArray,
+    G: ComplexArray,
+    gain: FloatArray,
+    offset: FloatArray,
+    Rh: ComplexArray,
+    D_mm: FloatArray,
+) -> ComplexArray:
     """The decode's a + i b (up to a positive factor) for delta_p = 0 when no tap saturates,
     without forming the samples (for fitting; the phase does not depend on A or the scale).
 
@@ -340,10 +344,10 @@ def phasor_direct(
         if np.any(xb != 0):
             z = z + xb[..., None] * np.conj(Pk)
     O = offset @ np.exp(-1j * ph)  # (3,)
-    return z + (np.real(Rh[..., 0]) * O)[..., None]
+    return cast(ComplexArray, z + (np.real(Rh[..., 0]) * O)[..., None])
 
 
-def depths_from_phasor(z: np.ndarray, eps: Any = None) -> np.ndarray:
+def depths_from_phasor(z: ComplexArray, eps: Any = None) -> FloatArray:
     """d_f = C_DEV * wrap(arg z + eps_f) / (4 pi f) for the groups (..., 3, N)."""
     if eps is not None:
         z = z * np.exp(1j * np.asarray(eps, float))[:, None]
@@ -352,11 +356,11 @@ def depths_from_phasor(z: np.ndarray, eps: Any = None) -> np.ndarray:
     return C_DEV * phase / (4.0 * math.pi * f)
 
 
-def _round_half_up(x: np.ndarray) -> np.ndarray:
+def _round_half_up(x: FloatArray) -> FloatArray:
     return np.floor(x + 0.5)
 
 
-def unwrap_combined(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def unwrap_combined(d: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Hierarchical unwrap of wrapped (d80, d16, d120) (..., 3, N) -> (D (..., 3, N), d_comb)."""
     d80, d16, d120 = d[..., 0, :], d[..., 1, :], d[..., 2, :]
     u80, u120 = unambiguous_range_mm(80.0), unambiguous_range_mm(120.0)
@@ -367,7 +371,7 @@ def unwrap_combined(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([D80, D16, D120], axis=-2), dcomb
 
 
-def expected_wrapped(d: np.ndarray, noise_mm: Any) -> np.ndarray:
+def expected_wrapped(d: FloatArray, noise_mm: Any) -> FloatArray:
     """Section 4.1: E[wrap(d_f + n_f)], n_f ~ N(0, sigma_f^2), sigma_f = noise_mm * 120 / f.
 
     The database averaged wrapped phases arithmetically; near a wrap (d120 near 1250 mm) the mean
@@ -382,7 +386,11 @@ def expected_wrapped(d: np.ndarray, noise_mm: Any) -> np.ndarray:
     U = (C_DEV / (2e-3 * f))[:, None]  # (3, 1)
     sig = noise[..., None, None] * (120.0 / f)[:, None]  # (..., 3, 1)
     safe = np.where(sig > 0.0, sig, 1.0)
-    q = lambda x: 0.5 * erfc(x / math.sqrt(2.0))  # noqa: E731
+
+    def q(x: FloatArray) -> FloatArray:
+        out: FloatArray = 0.5 * erfc(x / math.sqrt(2.0))
+        return out
+
     corr = U * (q(d / safe) - q((U - d) / safe))
     return d + np.where(sig > 0.0, corr, 0.0)
 
@@ -394,7 +402,7 @@ def simulate(
     alpha: float = 0.0,
     A: Any = None,
     delta_p: float = 0.0,
-) -> dict[str, np.ndarray]:
+) -> dict[str, FloatArray]:
     """Noise-free forward model along a range sweep (scalar alpha and delta_p).
 
     ``A`` defaults to the curves' fall-off ``(range_ref_mm / D)^2`` (section 4; the device's
@@ -420,16 +428,16 @@ def simulate(
 # ---------------------------------------------------------------------------------------------
 # Section 4: curves against the real database
 # ---------------------------------------------------------------------------------------------
-def bin_edges(start_mm: float, width_mm: float, count: int) -> np.ndarray:
-    return start_mm + width_mm * np.arange(count + 1)
+def bin_edges(start_mm: float, width_mm: float, count: int) -> FloatArray:
+    return cast(FloatArray, start_mm + width_mm * np.arange(count + 1))
 
 
-def sweep_grid(start_mm: float = 450.0, stop_mm: float = 1400.0, step_mm: float = 0.25) -> np.ndarray:
+def sweep_grid(start_mm: float = 450.0, stop_mm: float = 1400.0, step_mm: float = 0.25) -> FloatArray:
     n = int(round((stop_mm - start_mm) / step_mm))
-    return start_mm + step_mm * np.arange(n + 1)
+    return cast(FloatArray, start_mm + step_mm * np.arange(n + 1))
 
 
-def rows_from_depths(d: np.ndarray, noise_mm: float = 0.0) -> np.ndarray:
+def rows_from_depths(d: FloatArray, noise_mm: float = 0.0) -> FloatArray:
     """Rows (2, N) from wrapped depths (3, N); with noise_mm > 0 the wrapped depths are replaced by
     their expectation under per-sample noise (section 4.1)."""
     de = expected_wrapped(d, noise_mm)
@@ -437,12 +445,12 @@ def rows_from_depths(d: np.ndarray, noise_mm: float = 0.0) -> np.ndarray:
 
 
 def curve_from_sweep(
-    dcomb: np.ndarray,
-    rows: np.ndarray,
+    dcomb: FloatArray,
+    rows: FloatArray,
     bins: tuple[float, float, int],
     mode: str = "interp",
     accumulator: str = "numpy",
-) -> np.ndarray:
+) -> FloatArray:
     """(2, count) curve from a sweep. mode 'interp' (smooth, for fitting) or 'bin' (average of
     samples per bin, as the real database; NaN where a bin has no sample)."""
     start, width, count = bins
@@ -479,10 +487,10 @@ def curve(
     grid: tuple[float, float, float] = (450.0, 1400.0, 0.25),
     offsets_mm: Sequence[float] = (0.0, 0.0),
     accumulator: str = "numpy",
-) -> np.ndarray:
+) -> FloatArray:
     """Simulated database curve (2, count) of a material at incidence 0 (section 4)."""
     D = sweep_grid(*grid)
     sim = simulate(device, material, D)
     rows = rows_from_depths(sim["d"], float(material_defaults(material)["noise_mm"]))
     out = curve_from_sweep(sim["dcomb"], rows, bins, mode, accumulator)
-    return out + np.asarray(offsets_mm, float)[:, None]
+    return cast(FloatArray, out + np.asarray(offsets_mm, float)[:, None])
