@@ -89,6 +89,8 @@ Renderer::Renderer(DeviceProfile device, MaterialLibrary library, int threads)
   bool wells = false;
   for (const auto& g : device_.groups) wells = wells || std::isfinite(g.full_well);
   if (wells) saturation_ = saturation_table(device_.saturation_sharpness);
+  // 1 - S(u) ~ u^p / p: below u = (1e-7 p)^(1/p) a tap is linear to 1e-7.
+  linear_below_ = std::pow(1e-7 * device_.saturation_sharpness, 1.0 / device_.saturation_sharpness);
   for (const auto& m : library_.materials) m.validate();
   const auto& c = device_.camera;
   rays_.resize(static_cast<std::size_t>(c.width) * static_cast<std::size_t>(c.height));
@@ -274,12 +276,20 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
             const auto k1 = static_cast<std::size_t>((static_cast<std::int64_t>(whole) + 1) & kMask);
             const float* p = &wf->ac[g][k0 * 3];
             const float* q = &wf->ac[g][k1 * 3];
+            double ac[3];
+            double peak = 0.0;
             for (std::size_t j = 0; j < 3; ++j) {
-              const double ac = a * (p[j] + fr * (q[j] - p[j]));
-              // Taps in anti-phase; the sample is their difference (spec 3.1).
-              const double diff = linear[g] ? ac
-                                            : saturate_lookup(saturation_, 0.5 * (dc + ac), inv_well[g]) -
-                                                  saturate_lookup(saturation_, 0.5 * (dc - ac), inv_well[g]);
+              ac[j] = a * (p[j] + fr * (q[j] - p[j]));
+              peak = std::max(peak, std::fabs(ac[j]));
+            }
+            // Taps in anti-phase; the sample is their difference (spec 3.1). A
+            // pixel whose brighter tap stays below linear_below_ of the well is
+            // linear to 1e-7: most pixels skip the two table lookups per sample.
+            const bool taps_linear = linear[g] || 0.5 * (dc + peak) * inv_well[g] < linear_below_;
+            for (std::size_t j = 0; j < 3; ++j) {
+              const double diff = taps_linear ? ac[j]
+                                              : saturate_lookup(saturation_, 0.5 * (dc + ac[j]), inv_well[g]) -
+                                                    saturate_lookup(saturation_, 0.5 * (dc - ac[j]), inv_well[g]);
               m[j] = fm.step_gain[j] * diff + fm.step_offset[j] * dc;
             }
           }

@@ -37,8 +37,9 @@ struct Frame {
 // is step j at phase 2 pi k / kWaveformPoints (ac_per_unit). The taps, step
 // gains and offsets are applied per pixel, because saturation is not linear in
 // the signal. Linear interpolation between points errs by at most
-// (2 pi / N)^2 / 8 * sum h^2 |G_h R_h| of the signal: < 0.02 counts at the
-// saturation level for N = 4096 and harmonics to h = 7 with amplitudes <= 0.1.
+// (2 pi / N)^2 / 8 * sum h^2 |G_h R_h| of the signal: for N = 4096 and the
+// calibrated profile (16 MHz harmonics to h = 25) 6.2e-5 of it, one count at
+// the top of the range where the 11-bit code's steps are 64 counts.
 inline constexpr int kWaveformPoints = 4096;
 static_assert((kWaveformPoints & (kWaveformPoints - 1)) == 0, "the renderer wraps table positions by masking");
 struct Waveform {
@@ -83,6 +84,7 @@ class Renderer {
   std::vector<Vec3> rays_;  // unit ray per pixel
   int threads_ = 1;
   std::vector<float> saturation_;  // N(T) / T against |T| / W, for groups with a full well
+  double linear_below_ = 0.0;      // |T| / W below which N(T) = T to 1e-7
   const Waveform& waveform(const Material& m, int incidence_step) const;
   mutable std::mutex cache_mutex_;
   mutable std::map<std::pair<const Material*, int>, std::unique_ptr<Waveform>> cache_;
