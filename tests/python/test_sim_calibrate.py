@@ -39,6 +39,7 @@ def real(db_dir: Path) -> tuple[np.ndarray, list[str], tuple[float, float, int]]
 def test_shipped_library_covers_the_database_and_loads(real: Any) -> None:
     _, names, _ = real
     dev, lib = shipped()
+    assert dev["noise"]["read_noise"] > 0 and dev["noise"]["shot_gain"] > 0  # renders with noise
     assert sorted(m["name"] for m in lib["materials"]) == sorted(names)
     assert lib["device"] == dev["name"]
     assert sim.load_device("kinect2_tanaka2017").name == "kinect2_tanaka2017"
@@ -94,6 +95,11 @@ def test_write_outputs_gives_files_the_simulator_loads(tmp_path: Path) -> None:
     d = sim.DeviceProfile.load(paths["device"], str(tmp_path))
     m = sim.MaterialLibrary.load(paths["materials"], str(tmp_path))
     assert d.name == "kinect2_tanaka2017" and len(m) == len(mats)
+    # the blocks the fit does not determine come from the ideal profile: never a noise-free device
+    written_dev = json.loads(Path(paths["device"]).read_text())
+    ideal = json.loads((DATA / "devices" / "ideal_kinect2.json").read_text())
+    for k in ("camera", "noise", "pixel_phase", "signal"):
+        assert written_dev[k] == ideal[k], k
     written = json.loads(Path(paths["materials"]).read_text())
     assert written["version"] == 2 and all("rms_mm" in x["fit"] for x in written["materials"])
     assert Path(paths["log"]).read_text().strip() == "test"

@@ -728,16 +728,15 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
     device = dict(result.device)
     device["version"] = 2
     # blocks of the simulator's profile that this fit does not determine (camera intrinsics, noise,
-    # per-pixel phase, signal level): taken from the ideal profile when it is available
-    tpl_path = template_device or os.path.join(
-        os.path.dirname(os.path.abspath(__file__)), "..", "..", "..", "firmware", "sim", "data",
-        "devices", "ideal_kinect2.json")  # fmt: skip
-    if os.path.isfile(tpl_path):
-        with open(tpl_path) as fh:
-            tpl = json.load(fh)
-        for k in ("camera", "noise", "pixel_phase", "signal"):
-            if k in tpl and k not in device:
-                device[k] = tpl[k]
+    # per-pixel phase, signal level): taken from the ideal profile shipped with the package
+    from . import data_dir
+
+    tpl_path = template_device or os.fspath(data_dir() / "devices" / "ideal_kinect2.json")
+    with open(tpl_path) as fh:  # (missing: an error, never a silently noise-free profile)
+        tpl = json.load(fh)
+    for k in ("camera", "noise", "pixel_phase", "signal"):
+        if k in tpl and k not in device:
+            device[k] = tpl[k]
     device["notes"] = (
         "Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the 29 "
         "real curves (docs/simulator-model.md with its extensions: harmonics to h = 19/25/19, tap "
