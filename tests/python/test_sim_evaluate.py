@@ -80,3 +80,33 @@ def test_stability_distance_grows_with_orientation_and_has_a_bound() -> None:
     assert s["distance"][0] == pytest.approx(0.0, abs=1e-6)  # same geometry, no noise
     assert s["distance"][2] > s["distance"][1] > 0.0
     assert s["upper_bound"] > s["distance"][1]
+
+
+def test_session_offsets_shift_the_rows_and_cancel_in_eq11() -> None:
+    r = renderer([mat("wax", 300.0, 0.6)], noise=False)
+    c = ev.capture(r, "wax", 0.0, STAGE, seed=2)
+    s = ev.with_session_offsets(c, (2.5, -0.75))
+    diff = ev.feature_both(s) - ev.feature_both(c)
+    np.testing.assert_allclose(diff, np.broadcast_to([[2.5], [-0.75]], diff.shape), atol=1e-4)
+    for g in range(3):
+        np.testing.assert_allclose(ev.feature_depth(s, g, 10), ev.feature_depth(c, g, 10), atol=1e-4)
+    np.testing.assert_array_equal(c.depth_mm, ev.capture(r, "wax", 0.0, STAGE, seed=2).depth_mm)  # not modified
+
+
+def test_session_offset_spread_is_a_robust_sd_of_the_fitted_offsets() -> None:
+    offs = [[0.0, 0.0], [1.0, -1.0], [-1.0, 1.0], [2.0, 0.5], [-2.0, -0.5], [100.0, 50.0]]  # one wild capture
+    lib = {"materials": [{"name": f"m{i}", "fit": {"offsets_mm": o}} for i, o in enumerate(offs)]}
+    s0, s1 = ev.session_offset_spread(lib)
+    assert s0 == pytest.approx(1.4826 * 1.5) and s1 == pytest.approx(1.4826 * 0.75)
+    assert ev.session_offset_spread({"materials": [{"name": "a"}]}) == (0.0, 0.0)
+
+
+def test_session_offsets_make_frequency_features_harder_but_not_depth_ones() -> None:
+    mats = [mat("a", 150.0, 0.5), mat("b", 200.0, 0.5), mat("c", 260.0, 0.5)]
+    r = renderer(mats, noise=False)
+    names = [m["name"] for m in mats]
+    clean, _ = ev.evaluate(r, names, orientations=(0.0, 15.0, 30.0), stage_mm=STAGE, seed=4)  # type: ignore[misc]
+    shifted, _ = ev.evaluate(r, names, orientations=(0.0, 15.0, 30.0), stage_mm=STAGE, seed=4,  # type: ignore[misc]
+                             session_offsets_mm=(8.0, 2.0))
+    assert shifted.accuracy["frequency"] < clean.accuracy["frequency"]
+    assert shifted.accuracy["depth"] == clean.accuracy["depth"]

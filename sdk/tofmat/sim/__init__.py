@@ -27,8 +27,8 @@ stage_sweep = _sim.stage_sweep
 
 # The calibrated profile and library (kinect2_tanaka2017, tanaka2017) are not
 # shipped yet; these uncalibrated ones run everywhere.
-DEFAULT_DEVICE = "ideal_kinect2"
-DEFAULT_LIBRARY = "examples"
+DEFAULT_DEVICE = "kinect2_tanaka2017"  # calibrated to the real database (docs/simulator.md)
+DEFAULT_LIBRARY = "tanaka2017"
 
 
 def data_dir() -> Path:
