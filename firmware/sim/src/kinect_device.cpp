@@ -187,7 +187,7 @@ std::shared_ptr<const Frame> SimulatedKinect::truth(std::uint32_t sequence) cons
   return nullptr;
 }
 
-std::vector<std::uint8_t> SimulatedKinect::respond(const std::uint8_t* data, std::size_t size) {
+void SimulatedKinect::respond(const std::uint8_t* data, std::size_t size) {
   kinect::DecodedCommand c;
   try {
     c = kinect::decode_command(data, size);
@@ -256,11 +256,10 @@ std::vector<std::uint8_t> SimulatedKinect::respond(const std::uint8_t* data, std
   ++counters_.commands;
   if (faults_.lost_responses > 0) {
     --faults_.lost_responses;
-    return {};
+    return;
   }
   if (c.max_response > 0) replies_.push_back(r);
   replies_.push_back(kinect::encode_completion(c.sequence));
-  return {};
 }
 
 void SimulatedKinect::deliver(const std::uint8_t* data, std::size_t size, const kinect::IsoPacketHandler& handler) {

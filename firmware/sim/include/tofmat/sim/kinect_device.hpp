@@ -66,7 +66,7 @@ class SimulatedKinect : public std::enable_shared_from_this<SimulatedKinect> {
 
  private:
   friend class SimulatedKinectTransport;
-  std::vector<std::uint8_t> respond(const std::uint8_t* data, std::size_t size);  // command -> queued replies
+  void respond(const std::uint8_t* data, std::size_t size);  // command -> queued replies
   void emit_frame(const kinect::IsoPacketHandler& handler);
   void deliver(const std::uint8_t* data, std::size_t size, const kinect::IsoPacketHandler& handler);
 
