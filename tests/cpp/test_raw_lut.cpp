@@ -149,3 +149,40 @@ TEST(RawLut, MagnitudeNearestMatchesTheCodeSearch) {
     }
   }
 }
+
+TEST(RawLut, QuantiseRowMatchesTheCodeSearchAwayFromTies) {
+  // Every quarter count of both signs (exact in float, ties included), and
+  // values 0.01 either side: the row quantiser rounds through float, which
+  // moves a sample by at most 1e-3 counts, so only samples that close to a tie
+  // may go the other way.
+  std::vector<double> in;
+  for (int q = 0; q <= 4 * tofmat::kRawMaxMagnitude; ++q) {
+    for (double v : {q / 4.0, q / 4.0 - 0.01, q / 4.0 + 0.01}) {
+      if (v < 0.0 || v > tofmat::kRawMaxMagnitude) continue;
+      in.push_back(v);
+      in.push_back(-v);
+    }
+  }
+  std::vector<std::int16_t> out(in.size(), 0);
+  tofmat::raw_quantise(in.data(), in.size(), 32000.0, out.data());
+  for (std::size_t k = 0; k < in.size(); ++k) {
+    ASSERT_EQ(out[k], raw_code_value(raw_code_nearest(in[k]))) << in[k];
+  }
+}
+
+TEST(RawLut, QuantiseRowSaturatesClampsAndRejectsNaN) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<double> in{0.0, -0.0, -0.4, 16320.0, 17000.0, -17000.0, 20000.0, 20000.5, -30000.0, nan, inf, -inf};
+  std::vector<std::int16_t> out(in.size(), 1);
+  // Saturation level 20000 counts: beyond the top code the magnitude clamps to
+  // 16320 until the level, then the marker (also for NaN and infinities).
+  tofmat::raw_quantise(in.data(), in.size(), 20000.0, out.data());
+  const std::vector<std::int16_t> want{0, 0, 0, 16320, 16320, -16320, 16320, 32767, 32767, 32767, 32767, 32767};
+  EXPECT_EQ(out, want);
+  // A lower level (a profile's saturation below the code's top).
+  std::vector<std::int16_t> low(3, 1);
+  const std::vector<double> in_low{999.0, 1000.5, -1001.0};
+  tofmat::raw_quantise(in_low.data(), in_low.size(), 1000.0, low.data());
+  EXPECT_EQ(low, (std::vector<std::int16_t>{1000, 32767, 32767}));
+}
