@@ -287,3 +287,16 @@ TEST(DepthStream, RejectsPacketSizesThatCannotMarkSubPacketEnds) {
 }
 
 }  // namespace
+
+TEST(DepthStream, SequenceGapsCountSkippedFramesButNotARestartOrAReset) {
+  Harness h;
+  for (std::uint32_t f : {0u, 1u, 5u, 6u}) h.feed(iso_of_frame(f));  // 2, 3, 4 never arrived (a stall)
+  EXPECT_EQ(h.got.sequences, (std::vector<std::uint32_t>{0, 1, 5, 6}));
+  EXPECT_EQ(h.parser.counters().skipped_frames, 3u);
+  h.feed(iso_of_frame(6u + tofmat::kinect::kMaxSequenceGap));  // the device restarted its numbering
+  EXPECT_EQ(h.parser.counters().skipped_frames, 3u);
+  h.parser.reset();  // a reconnect: numbering starts again
+  h.feed(iso_of_frame(40u));
+  EXPECT_EQ(h.parser.counters().skipped_frames, 3u);
+  EXPECT_EQ(h.got.sequences.size(), 6u);
+}

@@ -2,11 +2,22 @@
 // firmware versions, serial, depth parameters, P0 tables, status) on
 // arbitrary bytes. The first byte picks the parser. The only acceptable
 // outcomes are a value within the documented limits or tofmat::FormatError.
+// The P0 parser's accepting path needs 1.3 MB: fuzz_kinect_p0 reaches it.
 #include <cstddef>
 #include <cstdint>
 
 #include "tofmat/core/error.hpp"
 #include "tofmat/kinect/command.hpp"
+
+namespace {
+
+void check_p0(const tofmat::kinect::P0Tables& t) {
+  for (const auto& tab : t.raw) {
+    if (tab.size() != 512u * 424u) __builtin_trap();
+  }
+}
+
+}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   using namespace tofmat::kinect;
@@ -37,13 +48,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 4:
         parse_depth_params(p, n);
         break;
-      case 5: {
-        const auto t = parse_p0_tables(p, n);
-        for (const auto& tab : t.raw) {
-          if (tab.size() != 512u * 424u) __builtin_trap();
-        }
+      case 5:  // (its accepting path: fuzz_kinect_p0)
+        check_p0(parse_p0_tables(p, n));
         break;
-      }
       default:
         parse_status(p, n);
         break;

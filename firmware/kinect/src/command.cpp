@@ -12,7 +12,7 @@
 namespace tofmat::kinect {
 namespace {
 
-constexpr std::uint32_t kPageMaxResponse = 0x1C0000;
+constexpr std::uint32_t kPageMaxResponse = kMaxResponseBytes;
 
 float f32(ByteReader& r, const char* field) {
   const std::uint32_t bits = r.u32(field);

@@ -84,6 +84,8 @@ void DepthStreamParser::on_sub_packet() {
   }
   if (!have_frame_ || f.sequence != sequence_) {
     finish_frame();
+    const std::uint32_t gap = f.sequence - sequence_;  // modulo 2^32
+    if (have_frame_ && gap > 1 && gap < kMaxSequenceGap) counters_.skipped_frames += gap - 1;
     have_frame_ = true;
     emitted_ = false;
     sequence_ = f.sequence;

@@ -1,6 +1,7 @@
 #include "tofmat/kinect/device.hpp"
 
 #include <chrono>
+#include <cstdio>
 #include <thread>
 
 #include "tofmat/core/error.hpp"
@@ -17,6 +18,12 @@ constexpr std::uint16_t kIsochDelayNs = 40;
 void function_suspend(UsbTransport& t, std::uint16_t options, unsigned timeout_ms) {
   t.control(kToInterface, kSetFeature, kFunctionSuspend, static_cast<std::uint16_t>(options << 8 | kControlInterface),
             timeout_ms);
+}
+
+std::string hex_id(std::uint32_t id) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "0x%02X", id);
+  return buf;
 }
 
 }  // namespace
@@ -61,25 +68,27 @@ std::vector<std::uint8_t> Kinect2Device::transact(const Command& command) {
     try {
       const auto out = encode_command(command, seq);
       if (t.bulk_write(kCommandOutEndpoint, out.data(), out.size(), options_.timeout_ms) != out.size()) {
-        throw UsbError(UsbErrorKind::kProtocol, "short write of command 0x" + std::to_string(static_cast<unsigned>(command.id)));
+        throw UsbError(UsbErrorKind::kProtocol, "short write of command " + hex_id(static_cast<std::uint32_t>(command.id)));
       }
       std::vector<std::uint8_t> response;
       if (command.max_response > 0) {
         response.resize(command.max_response);
         response.resize(t.bulk_read(kResponseInEndpoint, response.data(), response.size(), options_.timeout_ms));
         if (looks_like_completion(response.data(), response.size())) {
-          throw UsbError(UsbErrorKind::kProtocol, "premature completion of command " +
-                                                      std::to_string(static_cast<unsigned>(command.id)));
+          throw UsbError(UsbErrorKind::kProtocol,
+                         "premature completion of command " + hex_id(static_cast<std::uint32_t>(command.id)));
         }
       }
-      // Completions of earlier commands that timed out may still be queued:
-      // skip a few, bounded, before calling the exchange broken.
-      std::uint8_t buf[512];
+      // Completions of earlier commands that timed out may still be queued,
+      // and their late responses, up to the largest a command has: skip a
+      // few, bounded, before calling the exchange broken. (A smaller buffer
+      // would make a long late response a USB overflow error.)
+      late_.resize(kMaxResponseBytes);
       for (int k = 0; k < 8; ++k) {
-        const std::size_t n = t.bulk_read(kResponseInEndpoint, buf, sizeof buf, options_.timeout_ms);
+        const std::size_t n = t.bulk_read(kResponseInEndpoint, late_.data(), late_.size(), options_.timeout_ms);
         Completion c;
         try {
-          c = parse_completion(buf, n);
+          c = parse_completion(late_.data(), n);
         } catch (const FormatError&) {
           ++counters_.stale_completions;  // a late response of an earlier command
           continue;
@@ -141,10 +150,12 @@ const DeviceIdentity& Kinect2Device::start(FrameHandler on_frame) {
   wait_until_ready();
   transact(cmd_init_streams());
   t.set_interface_alt(kDepthInterface, kDepthAltStreaming);
-  transact(cmd_read_status());
-  transact(cmd_set_streaming(true));
+  // The parser before the stream starts: a packet size it cannot work with
+  // fails here, before the device is left streaming.
   parser_ = std::make_unique<DepthStreamParser>(t.iso_packet_size(kDepthIsoEndpoint), std::move(on_frame));
   DepthStreamParser* parser = parser_.get();
+  transact(cmd_read_status());
+  transact(cmd_set_streaming(true));
   t.start_iso(kDepthIsoEndpoint, options_.iso_transfers, options_.iso_packets,
               [parser](const std::uint8_t* data, std::size_t length) { parser->feed(data, length); });
   streaming_ = true;

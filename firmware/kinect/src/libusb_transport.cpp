@@ -176,7 +176,13 @@ class LibusbTransport : public UsbTransport {
       timeval tv{0, 10000};
       libusb_handle_events_timeout_completed(ctx_->ctx, &tv, nullptr);
     }
-    for (auto& s : slots_) libusb_free_transfer(s.transfer);
+    if (in_flight_ > 0) {
+      // A transfer that never called back may still be written by libusb:
+      // leak the slots (transfers and buffers) rather than free memory in use.
+      new std::vector<Slot>(std::move(slots_));
+    } else {
+      for (auto& s : slots_) libusb_free_transfer(s.transfer);
+    }
     slots_.clear();
     handler_ = nullptr;
   }
@@ -186,6 +192,12 @@ class LibusbTransport : public UsbTransport {
     timeval tv{static_cast<time_t>(timeout_ms / 1000), static_cast<suseconds_t>((timeout_ms % 1000) * 1000)};
     check(libusb_handle_events_timeout_completed(ctx_->ctx, &tv, nullptr), "USB events");
     gone();
+    // Every transfer failed to go back in flight: the stream has stopped
+    // without the device going away. Say so instead of waiting for frames.
+    if (!slots_.empty() && !stopping_ && in_flight_ == 0) {
+      throw UsbError(UsbErrorKind::kIo, std::string("depth stream stopped: no iso transfer could be resubmitted (") +
+                                            libusb_error_name(last_resubmit_error_) + ")");
+    }
   }
 
  private:
@@ -204,7 +216,12 @@ class LibusbTransport : public UsbTransport {
         self->handler_(libusb_get_iso_packet_buffer_simple(t, static_cast<unsigned>(i)), d.actual_length);
       }
     }
-    if (!self->stopping_ && !self->disconnected_ && libusb_submit_transfer(t) == 0) return;
+    if (!self->stopping_ && !self->disconnected_) {
+      const int r = libusb_submit_transfer(t);
+      if (r == 0) return;
+      self->last_resubmit_error_ = r;
+      if (r == LIBUSB_ERROR_NO_DEVICE) self->disconnected_ = true;
+    }
     --self->in_flight_;
   }
 
@@ -219,6 +236,7 @@ class LibusbTransport : public UsbTransport {
   std::vector<Slot> slots_;
   std::atomic<int> in_flight_{0};
   std::atomic<bool> stopping_{false}, disconnected_{false};
+  std::atomic<int> last_resubmit_error_{0};
 };
 
 // Finds and opens (without the port reset) the device matching `serial`.

@@ -179,6 +179,11 @@ KinectSimCounters SimulatedKinect::counters() const {
   return counters_;
 }
 
+std::vector<kinect::DecodedCommand> SimulatedKinect::command_log() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return {command_log_.begin(), command_log_.end()};
+}
+
 std::shared_ptr<const Frame> SimulatedKinect::truth(std::uint32_t sequence) const {
   std::lock_guard<std::mutex> lock(mutex_);
   for (const auto& [seq, f] : truth_) {
@@ -254,6 +259,8 @@ void SimulatedKinect::respond(const std::uint8_t* data, std::size_t size) {
   if (r.size() > c.max_response) r.resize(c.max_response);
   std::lock_guard<std::mutex> lock(mutex_);
   ++counters_.commands;
+  command_log_.push_back(c);
+  if (command_log_.size() > kCommandLogSize) command_log_.pop_front();
   if (faults_.lost_responses > 0) {
     --faults_.lost_responses;
     return;

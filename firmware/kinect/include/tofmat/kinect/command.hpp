@@ -16,6 +16,9 @@ inline constexpr std::uint32_t kCommandMagic = 0x06022009;
 inline constexpr std::uint32_t kCompletionMagic = 0x0A6FE000;
 inline constexpr std::size_t kCompletionBytes = 16;
 inline constexpr std::size_t kMaxCommandParams = 4;
+// The largest response stage of any command (ReadDataPage of the tables, 1.6):
+// a late response of a timed-out command can be this long.
+inline constexpr std::uint32_t kMaxResponseBytes = 0x1C0000;
 
 // Command IDs (1.6).
 enum class CommandId : std::uint32_t {

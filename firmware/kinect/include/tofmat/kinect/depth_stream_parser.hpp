@@ -38,7 +38,13 @@ struct DepthStreamCounters {
   std::uint64_t incomplete_frames = 0;   // frames dropped with sub-images missing
   std::uint64_t duplicate_sub_images = 0;
   std::uint64_t stray_sub_images = 0;    // for a frame already emitted
+  // Frames the device numbered but of which not one sub-image arrived (a
+  // stalled endpoint, a burst of lost packets): the gaps between the sequence
+  // numbers seen, for forward gaps below kMaxSequenceGap.
+  std::uint64_t skipped_frames = 0;
 };
+// A larger jump of the sequence number is a device restart, not lost frames.
+inline constexpr std::uint32_t kMaxSequenceGap = 1u << 16;
 
 class DepthStreamParser {
  public:

@@ -83,6 +83,7 @@ class Kinect2Device {
   DeviceIdentity identity_;
   DriverCounters counters_;
   std::unique_ptr<DepthStreamParser> parser_;
+  std::vector<std::uint8_t> late_;  // completion reads (kMaxResponseBytes: late responses fit)
 };
 
 }  // namespace tofmat::kinect

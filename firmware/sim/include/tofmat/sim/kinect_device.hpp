@@ -16,6 +16,7 @@
 #include <random>
 #include <vector>
 
+#include "tofmat/kinect/command.hpp"
 #include "tofmat/kinect/transport.hpp"
 #include "tofmat/sim/renderer.hpp"
 
@@ -60,6 +61,10 @@ class SimulatedKinect : public std::enable_shared_from_this<SimulatedKinect> {
   bool plugged() const;
 
   KinectSimCounters counters() const;
+  // The commands received, oldest first (the last kCommandLogSize are kept):
+  // what a test compares with the protocol's start, stop and close sequences.
+  static constexpr std::size_t kCommandLogSize = 256;
+  std::vector<kinect::DecodedCommand> command_log() const;
   // Ground truth of a frame sent (the last 16 are kept): nullptr if unknown.
   std::shared_ptr<const Frame> truth(std::uint32_t sequence) const;
   const Renderer& renderer() const { return *renderer_; }
@@ -78,6 +83,7 @@ class SimulatedKinect : public std::enable_shared_from_this<SimulatedKinect> {
   bool plugged_ = true, held_ = false;
   int status_polls_ = 0;
   std::deque<std::vector<std::uint8_t>> replies_;
+  std::deque<kinect::DecodedCommand> command_log_;
   KinectFaults faults_;
   std::mt19937_64 rng_;
   KinectSimCounters counters_;
