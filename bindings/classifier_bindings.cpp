@@ -6,6 +6,7 @@
 
 #include "bindings.hpp"
 #include "tofmat/core/classifier.hpp"
+#include "tofmat/core/fixed_classifier.hpp"
 
 namespace tofmat::py {
 
@@ -41,8 +42,8 @@ class Classifier {
   Classifier(std::shared_ptr<ExemplarTable> table, const std::string& backend,
              const std::optional<std::vector<std::string>>& materials)
       : table_(std::move(table)) {
-    if (backend != "float") {
-      throw pyb::value_error("unknown backend '" + backend + "': available backends are 'float'");
+    if (backend != "float" && backend != "fixed") {
+      throw pyb::value_error("unknown backend '" + backend + "': available backends are 'fixed' and 'float'");
     }
     backend_ = backend;
     std::vector<std::uint32_t> candidates;
@@ -54,7 +55,11 @@ class Classifier {
         candidates.push_back(static_cast<std::uint32_t>(i));
       }
     }
-    core_ = std::make_unique<FloatClassifier>(table_, std::move(candidates));
+    if (backend == "fixed") {
+      fixed_ = std::make_unique<FixedClassifier>(table_, std::move(candidates));
+    } else {
+      float_ = std::make_unique<FloatClassifier>(table_, std::move(candidates));
+    }
   }
 
   Result classify(const pyb::handle& query) const {
@@ -62,7 +67,7 @@ class Classifier {
     Classification c;
     {
       pyb::gil_scoped_release nogil;
-      c = core_->classify(q.data(), static_cast<std::size_t>(q.size()));
+      c = core_classify(q.data(), static_cast<std::size_t>(q.size()));
     }
     return to_result(*table_, c);
   }
@@ -78,7 +83,7 @@ class Classifier {
       pyb::gil_scoped_release nogil;
       for (std::size_t i = 0; i < n; ++i) {
         try {
-          cs[i] = core_->classify(q.data() + i * len, len);
+          cs[i] = core_classify(q.data() + i * len, len);
         } catch (const std::invalid_argument& e) {
           throw std::invalid_argument("queries[" + std::to_string(i) + "]: " + e.what());
         }
@@ -92,7 +97,7 @@ class Classifier {
 
   std::vector<std::string> materials() const {
     std::vector<std::string> out;
-    for (auto i : core_->candidates()) out.push_back(table_->materials()[i]);
+    for (auto i : fixed_ ? fixed_->candidates() : float_->candidates()) out.push_back(table_->materials()[i]);
     return out;
   }
   const std::string& backend() const { return backend_; }
@@ -103,9 +108,14 @@ class Classifier {
     return {static_cast<pyb::ssize_t>(table_->n_rows()), static_cast<pyb::ssize_t>(table_->n_bins())};
   }
 
+  Classification core_classify(const float* q, std::size_t n) const {
+    return fixed_ ? fixed_->classify(q, n) : float_->classify(q, n);
+  }
+
   std::shared_ptr<ExemplarTable> table_;
   std::string backend_;
-  std::unique_ptr<FloatClassifier> core_;
+  std::unique_ptr<FloatClassifier> float_;  // one of the two, by backend
+  std::unique_ptr<FixedClassifier> fixed_;
 };
 
 }  // namespace

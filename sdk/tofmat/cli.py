@@ -160,14 +160,17 @@ def plot_table_cmd(path: Path, output: Path) -> None:
 @click.option("--noise", default=0.3, show_default=True, help="Gaussian noise sigma, mm.")
 @click.option("--per-material", default=40, show_default=True, help="Windows per material and length.")
 @click.option("--seed", default=0, show_default=True)
+@click.option("--backends", default="float,fixed", show_default=True, help="Classifier backends to compare.")
 @click.option("--json", "as_json", is_flag=True)
 @user_errors
-def bench(table_path: Path, windows: str, noise: float, per_material: int, seed: int, as_json: bool) -> None:
-    """Accuracy and time per query on noisy windows of the table's own curves."""
+def bench(table_path: Path, windows: str, noise: float, per_material: int, seed: int, backends: str,
+          as_json: bool) -> None:  # fmt: skip
+    """Accuracy and time per query on noisy windows of the table's own curves, per backend."""
     from .tools.bench import bench_windows, format_markdown
 
     lengths = [int(w) for w in csv_list(windows) or []]
-    rows = bench_windows(open_table(table_path), lengths, noise, per_material, seed)
+    table = open_table(table_path)
+    rows = [r for b in csv_list(backends) or [] for r in bench_windows(table, lengths, noise, per_material, seed, b)]
     click.echo(json.dumps([r.as_dict() for r in rows], indent=2) if as_json else format_markdown(rows, noise))
 
 

@@ -204,13 +204,18 @@ def test_plot_table_writes_png(cli_table: Path, tmp_path: Path) -> None:
 
 def test_bench_json(cli_table: Path) -> None:
     out = json.loads(run("bench", "--table", cli_table, "--windows", "1,10", "--per-material", "3", "--json").stdout)
-    assert isinstance(out, list) and [r["window_bins"] for r in out] == [1, 10]
+    assert isinstance(out, list) and [(r["backend"], r["window_bins"]) for r in out] == [
+        ("float", 1), ("float", 10), ("fixed", 1), ("fixed", 10)]  # fmt: skip
     for r in out:
         assert 0.0 <= r["accuracy"] <= 1.0
         assert r["queries"] == 3 * 29
         assert r["us_per_query"] > 0 and r["us_per_query_batch"] > 0
-        assert r["backend"] == "float"
     assert out[1]["accuracy"] >= 0.9  # 10-bin windows: measured 100 % here (87 queries)
+    assert out[3]["accuracy"] == out[1]["accuracy"]  # the same queries, the same labels
+    only = json.loads(run("bench", "--table", cli_table, "--windows", "3", "--per-material", "2", "--backends",
+                          "fixed", "--json").stdout)  # fmt: skip
+    assert [r["backend"] for r in only] == ["fixed"]
+    assert_clean_error(run("bench", "--table", cli_table, "--backends", "fixed,nope", ok=False), "backend")
 
 
 def test_bench_on_real_database_1_bin_windows_other_seeds(db_dir: Path) -> None:

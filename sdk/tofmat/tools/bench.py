@@ -100,5 +100,5 @@ def format_markdown(rows: list[BenchRow], noise_mm: float) -> str:
     for r in rows:
         if r.confusions:
             pairs = ", ".join(f"{a}/{b} {n}" for a, b, n in r.confusions)
-            lines.append(f"most confused at {r.window_bins} bins: {pairs}")
+            lines.append(f"most confused at {r.window_bins} bins ({r.backend}): {pairs}")
     return "\n".join(lines)

@@ -1,0 +1,46 @@
+// Eq. (12) in integers: the kernel that sums squared differences between a
+// query and an exemplar over the elements valid in both, in table steps
+// (docs/numerics.md). Scalar C++ everywhere; NEON on aarch64, selected at
+// compile time. Both give the same integers bit for bit (tests/cpp/
+// test_fixed_classifier.cpp runs them side by side under qemu-aarch64).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace tofmat {
+
+// Sum of (q - e)^2 and the count of elements valid in both.
+//   q, e: int16 in [-32767, 32767] (a difference fits 17 bits, its square
+//         uint32: 65534^2 < 2^32); the sum is uint64 (2^32 per element, so
+//         2^32 elements before it could wrap: a table has at most 2^20).
+//   qmask: the query's validity, bit i % 8 of byte i / 8; emask the
+//          exemplar's, or nullptr when all its elements are valid.
+//   blocks: elements / 8 (whole blocks of kCompactBlock).
+struct SquaredSum {
+  std::uint64_t sum = 0;
+  std::uint32_t count = 0;
+  bool operator==(const SquaredSum& o) const { return sum == o.sum && count == o.count; }
+};
+
+SquaredSum squared_sum_scalar(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
+                              const std::uint8_t* emask, std::size_t blocks);
+#if defined(__aarch64__)
+SquaredSum squared_sum_neon(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
+                            const std::uint8_t* emask, std::size_t blocks);
+#endif
+
+// The build's kernel: NEON on aarch64, scalar elsewhere.
+inline SquaredSum squared_sum(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
+                              const std::uint8_t* emask, std::size_t blocks) {
+#if defined(__aarch64__)
+  return squared_sum_neon(q, qmask, e, emask, blocks);
+#else
+  return squared_sum_scalar(q, qmask, e, emask, blocks);
+#endif
+}
+
+// The name of the build's kernel ("neon" or "scalar"), for benchmarks and logs.
+const char* squared_sum_kernel();
+
+}  // namespace tofmat

@@ -1,0 +1,66 @@
+#include "tofmat/core/compact_table.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "tofmat/core/table_file.hpp"
+
+namespace tofmat {
+
+std::int16_t quantise_to_step(float value_mm, double inv_step) {
+  const double q = std::round(static_cast<double>(value_mm) * inv_step);
+  return static_cast<std::int16_t>(std::clamp(q, -32767.0, 32767.0));
+}
+
+CompactTable::CompactTable(const ExemplarTable& table, std::vector<std::uint32_t> candidates)
+    : n_rows_(table.n_rows()), n_bins_(table.n_bins()), candidates_(std::move(candidates)) {
+  if (candidates_.empty()) {
+    candidates_.resize(table.n_materials());
+    for (std::uint32_t i = 0; i < candidates_.size(); ++i) candidates_[i] = i;
+  }
+  std::sort(candidates_.begin(), candidates_.end());
+  candidates_.erase(std::unique(candidates_.begin(), candidates_.end()), candidates_.end());
+  for (std::uint32_t c : candidates_) {
+    if (c >= table.n_materials()) {
+      throw std::invalid_argument("candidate index " + std::to_string(c) + " is outside the table's " +
+                                  std::to_string(table.n_materials()) + " materials");
+    }
+  }
+  step_mm_ = table.quant_step_mm() > 0.0 ? table.quant_step_mm() : choose_quant_step_mm(table);
+  const double inv = 1.0 / step_mm_;
+  padded_bins_ = (n_bins_ + kCompactBlock - 1) / kCompactBlock * kCompactBlock;
+  const std::size_t len = padded_elements();
+  values_.assign(candidates_.size() * len, 0);
+  mask_offset_.assign(candidates_.size(), -1);
+  std::vector<std::uint8_t> bits(len / kCompactBlock);
+  for (std::size_t k = 0; k < candidates_.size(); ++k) {
+    const float* src = table.material_values(candidates_[k]);
+    std::fill(bits.begin(), bits.end(), 0);
+    bool all_valid = true;
+    for (std::uint32_t r = 0; r < n_rows_; ++r) {
+      for (std::uint32_t b = 0; b < n_bins_; ++b) {
+        const float v = src[static_cast<std::size_t>(r) * n_bins_ + b];
+        const std::size_t i = static_cast<std::size_t>(r) * padded_bins_ + b;
+        if (std::isnan(v)) {
+          all_valid = false;
+          continue;
+        }
+        values_[k * len + i] = quantise_to_step(v, inv);
+        bits[i / kCompactBlock] = static_cast<std::uint8_t>(bits[i / kCompactBlock] | (1u << (i % kCompactBlock)));
+      }
+    }
+    // (Padding needs no bit: a query's bitset never marks padding valid.)
+    if (all_valid) continue;
+    mask_offset_[k] = static_cast<std::int32_t>(masks_.size());
+    masks_.insert(masks_.end(), bits.begin(), bits.end());
+  }
+}
+
+std::size_t CompactTable::memory_bytes() const {
+  return values_.size() * sizeof(std::int16_t) + masks_.size() + mask_offset_.size() * sizeof(std::int32_t) +
+         candidates_.size() * sizeof(std::uint32_t) + sizeof(*this);
+}
+
+}  // namespace tofmat

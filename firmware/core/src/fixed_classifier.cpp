@@ -1,0 +1,93 @@
+#include "tofmat/core/fixed_classifier.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "tofmat/core/fixed_distance.hpp"
+
+namespace tofmat {
+namespace {
+
+__extension__ typedef unsigned __int128 Wide;  // sum (< 2^52) x count (< 2^21)
+
+struct Scored {
+  std::uint32_t index;  // into the source table
+  SquaredSum s;
+};
+
+// a.sum / a.count < b.sum / b.count, exactly; ties to the lower table index.
+bool ranks_before(const Scored& a, const Scored& b) {
+  const Wide l = static_cast<Wide>(a.s.sum) * b.s.count, r = static_cast<Wide>(b.s.sum) * a.s.count;
+  return l != r ? l < r : a.index < b.index;
+}
+
+}  // namespace
+
+FixedClassifier::FixedClassifier(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates)
+    : table_(table ? std::move(table) : throw std::invalid_argument("classifier needs a table")),
+      compact_(*table_, std::move(candidates)) {}
+
+Classification FixedClassifier::classify(const float* query, std::size_t n) const {
+  const std::size_t len = table_->elements_per_material();
+  if (n != len) {
+    throw std::invalid_argument("query has " + std::to_string(n) + " elements, the table needs " +
+                                std::to_string(table_->n_rows()) + " x " + std::to_string(table_->n_bins()) + " = " +
+                                std::to_string(len));
+  }
+  const std::uint32_t rows = compact_.n_rows(), bins = compact_.n_bins();
+  const std::size_t pb = compact_.padded_bins(), row_blocks = pb / kCompactBlock;
+  std::vector<std::int16_t> q(compact_.padded_elements(), 0);
+  std::vector<std::uint8_t> qmask(compact_.padded_elements() / kCompactBlock, 0);
+  // Per row, the blocks holding valid elements: a partial query (a few bins
+  // of a sweep) touches only those.
+  std::vector<std::size_t> first(rows, row_blocks), last(rows, 0);
+  const double inv = 1.0 / compact_.step_mm();
+  bool any = false;
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    for (std::uint32_t b = 0; b < bins; ++b) {
+      const std::size_t k = static_cast<std::size_t>(r) * bins + b;
+      if (std::isinf(query[k])) {
+        throw std::invalid_argument("query element " + std::to_string(k) + " is infinite (use NaN for missing)");
+      }
+      if (std::isnan(query[k])) continue;
+      const std::size_t i = static_cast<std::size_t>(r) * pb + b;
+      q[i] = quantise_to_step(query[k], inv);
+      qmask[i / kCompactBlock] = static_cast<std::uint8_t>(qmask[i / kCompactBlock] | (1u << (i % kCompactBlock)));
+      first[r] = std::min(first[r], b / kCompactBlock);
+      last[r] = b / kCompactBlock + 1;
+      any = true;
+    }
+  }
+  if (!any) throw std::invalid_argument("query has no valid element (all NaN): nothing to classify");
+
+  std::vector<Scored> scored;
+  scored.reserve(compact_.n_candidates());
+  for (std::size_t c = 0; c < compact_.n_candidates(); ++c) {
+    const std::int16_t* e = compact_.values(c);
+    const std::uint8_t* em = compact_.validity(c);
+    SquaredSum total;
+    for (std::uint32_t r = 0; r < rows; ++r) {
+      if (first[r] >= last[r]) continue;
+      const std::size_t block0 = r * row_blocks + first[r];
+      const SquaredSum s = squared_sum(q.data() + block0 * kCompactBlock, qmask.data() + block0,
+                                       e + block0 * kCompactBlock, em ? em + block0 : nullptr, last[r] - first[r]);
+      total.sum += s.sum;
+      total.count += s.count;
+    }
+    if (total.count == 0) continue;  // nothing in common: this candidate cannot be judged
+    scored.push_back({compact_.candidates()[c], total});
+  }
+  if (scored.empty()) throw std::invalid_argument("query shares no valid element with any candidate material");
+  std::sort(scored.begin(), scored.end(), ranks_before);
+  Classification out;
+  out.ranking.reserve(scored.size());
+  const double step2 = compact_.step_mm() * compact_.step_mm();
+  for (const auto& s : scored) {
+    out.ranking.push_back(Match{s.index, static_cast<double>(s.s.sum) * step2 / s.s.count, s.s.count});
+  }
+  return out;
+}
+
+}  // namespace tofmat

@@ -1,0 +1,30 @@
+#include "tofmat/core/fixed_distance.hpp"
+
+namespace tofmat {
+
+SquaredSum squared_sum_scalar(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
+                              const std::uint8_t* emask, std::size_t blocks) {
+  SquaredSum out;
+  for (std::size_t b = 0; b < blocks; ++b) {
+    const unsigned m = emask ? (qmask[b] & emask[b]) : qmask[b];
+    if (m == 0) continue;  // nothing valid in both: the common case of a partial query
+    for (unsigned j = 0; j < 8; ++j) {
+      if (!((m >> j) & 1u)) continue;
+      const std::int32_t d = static_cast<std::int32_t>(q[b * 8 + j]) - static_cast<std::int32_t>(e[b * 8 + j]);
+      const auto ad = static_cast<std::uint32_t>(d < 0 ? -d : d);
+      out.sum += static_cast<std::uint64_t>(ad * ad);  // < 2^32: no wrap in uint32
+      ++out.count;
+    }
+  }
+  return out;
+}
+
+const char* squared_sum_kernel() {
+#if defined(__aarch64__)
+  return "neon";
+#else
+  return "scalar";
+#endif
+}
+
+}  // namespace tofmat
