@@ -13,6 +13,17 @@ pyb::array_t<float> stack3(const std::array<std::vector<float>, 3>& planes, std:
   for (std::size_t g = 0; g < 3; ++g) std::memcpy(out.mutable_data() + g * pixels, planes[g].data(), pixels * sizeof(float));
   return out;
 }
+
+DecodeOptions options_of(double min_amplitude, double min_mean_amplitude, double min_unwrap_amplitude,
+                         double max_gap_16_80_mm, double max_gap_80_120_mm) {
+  DecodeOptions opt;
+  opt.min_amplitude = min_amplitude;
+  opt.min_mean_amplitude = min_mean_amplitude;
+  opt.min_unwrap_amplitude = min_unwrap_amplitude;
+  opt.max_gap_16_80_mm = max_gap_16_80_mm;
+  opt.max_gap_80_120_mm = max_gap_80_120_mm;
+  return opt;
+}
 }  // namespace
 
 void register_decode(pyb::module_& m) {
@@ -51,17 +62,20 @@ void register_decode(pyb::module_& m) {
       .def_readonly("pixels", &DecodeTables::pixels);
   m.attr("DECODE_SATURATED") = kDecodeSaturated;
   m.attr("DECODE_DARK") = kDecodeDark;
+  m.attr("DECODE_UNWRAP") = kDecodeUnwrap;
+  const DecodeOptions defaults;
 
   m.def(
       "decode_frame",
-      [](const pyb::handle& raw_obj, const pyb::object& p0_obj, double min_amplitude) {
+      [](const pyb::handle& raw_obj, const pyb::object& p0_obj, double min_amplitude, double min_mean_amplitude,
+         double min_unwrap_amplitude, double max_gap_16_80_mm, double max_gap_80_120_mm) {
         auto raw = pyb::array_t<std::int16_t, pyb::array::c_style>::ensure(raw_obj);
         if (!raw || raw.ndim() < 2 || raw.shape(0) != 9) {
           throw pyb::value_error("raw must be an int16 array of shape (9, ...) (the nine phase-step images)");
         }
         const auto pixels = static_cast<std::size_t>(raw.size() / 9);
-        DecodeOptions opt;
-        opt.min_amplitude = min_amplitude;
+        const DecodeOptions opt =
+            options_of(min_amplitude, min_mean_amplitude, min_unwrap_amplitude, max_gap_16_80_mm, max_gap_80_120_mm);
         if (pyb::isinstance<DecodeTables>(p0_obj)) {  // prepared once: no per-call P0 work
           const auto& t = p0_obj.cast<const DecodeTables&>();
           if (t.pixels != pixels) throw pyb::value_error("the decode tables are for another pixel count");
@@ -77,13 +91,19 @@ void register_decode(pyb::module_& m) {
         pyb::gil_scoped_release nogil;
         return decode_frame(raw.data(), pixels, p0, opt);
       },
-      pyb::arg("raw"), pyb::arg("p0_rad") = pyb::none(), pyb::arg("min_amplitude") = 3.0,
+      pyb::arg("raw"), pyb::arg("p0_rad") = pyb::none(), pyb::arg("min_amplitude") = defaults.min_amplitude,
+      pyb::arg("min_mean_amplitude") = defaults.min_mean_amplitude,
+      pyb::arg("min_unwrap_amplitude") = defaults.min_unwrap_amplitude,
+      pyb::arg("max_gap_16_80_mm") = defaults.max_gap_16_80_mm, pyb::arg("max_gap_80_120_mm") = defaults.max_gap_80_120_mm,
       "Decode raw (9, ...) int16 samples; p0_rad: (3, pixels) per-pixel corrections, or DecodeTables built from "
-      "them once. Outputs are flat per pixel.");
+      "them once. Outputs are flat per pixel. Flags: DECODE_SATURATED, DECODE_DARK (a group below min_amplitude or "
+      "the mean below min_mean_amplitude), DECODE_UNWRAP (16 MHz below min_unwrap_amplitude, or the unwrapped "
+      "depths more than max_gap_16_80_mm / max_gap_80_120_mm apart).");
 
   m.def(
       "decode_region",
-      [](const pyb::handle& raw_obj, const pyb::object& p0_obj, std::array<int, 4> rect, double min_amplitude) {
+      [](const pyb::handle& raw_obj, const pyb::object& p0_obj, std::array<int, 4> rect, double min_amplitude,
+         double min_mean_amplitude, double min_unwrap_amplitude, double max_gap_16_80_mm, double max_gap_80_120_mm) {
         auto raw = pyb::array_t<std::int16_t, pyb::array::c_style>::ensure(raw_obj);
         if (!raw || raw.ndim() != 3 || raw.shape(0) != 9) {
           throw pyb::value_error("raw must be an int16 array of shape (9, height, width)");
@@ -91,10 +111,10 @@ void register_decode(pyb::module_& m) {
         const int h = static_cast<int>(raw.shape(1)), w = static_cast<int>(raw.shape(2));
         const auto pixels = static_cast<std::size_t>(h) * static_cast<std::size_t>(w);
         const PixelRegion region{rect[0], rect[1], rect[2], rect[3]};
+        const DecodeOptions opt =
+            options_of(min_amplitude, min_mean_amplitude, min_unwrap_amplitude, max_gap_16_80_mm, max_gap_80_120_mm);
         if (pyb::isinstance<DecodeTables>(p0_obj)) {
           const auto& t = p0_obj.cast<const DecodeTables&>();
-          DecodeOptions opt;
-          opt.min_amplitude = min_amplitude;
           pyb::gil_scoped_release nogil;
           return decode_region(raw.data(), w, h, t, region, opt);
         }
@@ -104,12 +124,13 @@ void register_decode(pyb::module_& m) {
           if (static_cast<std::size_t>(a.shape(1)) != pixels) throw pyb::value_error("p0_rad must be (3, height * width)");
           p0.assign(a.data(), a.data() + a.size());
         }
-        DecodeOptions opt;
-        opt.min_amplitude = min_amplitude;
         pyb::gil_scoped_release nogil;
         return decode_region(raw.data(), w, h, p0, region, opt);
       },
-      pyb::arg("raw"), pyb::arg("p0_rad"), pyb::arg("rect"), pyb::arg("min_amplitude") = 3.0,
+      pyb::arg("raw"), pyb::arg("p0_rad"), pyb::arg("rect"), pyb::arg("min_amplitude") = defaults.min_amplitude,
+      pyb::arg("min_mean_amplitude") = defaults.min_mean_amplitude,
+      pyb::arg("min_unwrap_amplitude") = defaults.min_unwrap_amplitude,
+      pyb::arg("max_gap_16_80_mm") = defaults.max_gap_16_80_mm, pyb::arg("max_gap_80_120_mm") = defaults.max_gap_80_120_mm,
       "Decode only the pixels of rect = (x0, y0, x1, y1) of a (9, height, width) frame; outputs flat, row by row.");
 }
 

@@ -137,23 +137,49 @@ class DecodeTables:
 
 DECODE_SATURATED: int
 DECODE_DARK: int
+DECODE_UNWRAP: int
 
 @overload
 def decode_frame(
-    raw: npt.NDArray[np.int16], p0_rad: npt.ArrayLike | None = None, min_amplitude: float = 3.0
+    raw: npt.NDArray[np.int16],
+    p0_rad: npt.ArrayLike | None = None,
+    min_amplitude: float = 3.0,
+    min_mean_amplitude: float = 10.0,
+    min_unwrap_amplitude: float = 12.0,
+    max_gap_16_80_mm: float = 400.0,
+    max_gap_80_120_mm: float = 300.0,
 ) -> DecodedFrame: ...
 @overload
-def decode_frame(raw: npt.NDArray[np.int16], tables: DecodeTables, min_amplitude: float = 3.0) -> DecodedFrame: ...
+def decode_frame(
+    raw: npt.NDArray[np.int16],
+    tables: DecodeTables,
+    min_amplitude: float = 3.0,
+    min_mean_amplitude: float = 10.0,
+    min_unwrap_amplitude: float = 12.0,
+    max_gap_16_80_mm: float = 400.0,
+    max_gap_80_120_mm: float = 300.0,
+) -> DecodedFrame: ...
 @overload
 def decode_region(
     raw: npt.NDArray[np.int16],
     p0_rad: npt.ArrayLike | None,
     rect: tuple[int, int, int, int],
     min_amplitude: float = 3.0,
+    min_mean_amplitude: float = 10.0,
+    min_unwrap_amplitude: float = 12.0,
+    max_gap_16_80_mm: float = 400.0,
+    max_gap_80_120_mm: float = 300.0,
 ) -> DecodedFrame: ...
 @overload
 def decode_region(
-    raw: npt.NDArray[np.int16], tables: DecodeTables, rect: tuple[int, int, int, int], min_amplitude: float = 3.0
+    raw: npt.NDArray[np.int16],
+    tables: DecodeTables,
+    rect: tuple[int, int, int, int],
+    min_amplitude: float = 3.0,
+    min_mean_amplitude: float = 10.0,
+    min_unwrap_amplitude: float = 12.0,
+    max_gap_16_80_mm: float = 400.0,
+    max_gap_80_120_mm: float = 300.0,
 ) -> DecodedFrame: ...
 
 # The `sim` submodule of the extension (bindings/sim_bindings.cpp), written as a

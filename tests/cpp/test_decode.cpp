@@ -5,10 +5,13 @@
 // shared/docs/kinect2-protocol.md section 3).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "tofmat/core/decode.hpp"
@@ -234,7 +237,9 @@ TEST(DecodeFrame, FlagsSaturatedAndDarkPixelsAndKeepsValidOnes) {
   f.at(1, 2, 1) = tofmat::kRawSaturated;  // one saturated sample in group 120 MHz
   for (std::size_t g = 0; g < 3; ++g) f.set(2, g, {0.0, 0.0, 0.0});  // no signal
   f.set(3, 1, {2.0, -1.0, -1.0});                                   // 16 MHz amplitude 2 < 3
-  f.set(4, 0, {4.0, -2.0, -2.0});                                   // amplitude 4 >= 3: valid
+  // 80 MHz amplitude 4 >= 3 (the mean is far above 10): valid. Phase 4 pi / 3,
+  // d80 = 1250 mm: 139 mm from the other groups' 1111, a consistent unwrapping.
+  f.set(4, 0, {-2.0, 4.0, -2.0});
   f.set(5, 1, {0.0, 0.0, 0.0});
   f.at(5, 0, 0) = tofmat::kRawSaturated;  // saturated and dark
 
@@ -261,7 +266,7 @@ TEST(DecodeFrame, FlagsSaturatedAndDarkPixelsAndKeepsValidOnes) {
   }
   EXPECT_NEAR(out.combined_mm[0], depth, 0.1);
   EXPECT_NEAR(out.amplitude[0][4], 4.0, 1e-6);
-  EXPECT_NEAR(out.phase_rad[0][4], 0.0, 1e-6);
+  EXPECT_NEAR(out.phase_rad[0][4], 4.0 * kPi / 3.0, 1e-6);
   EXPECT_NEAR(out.amplitude[1][3], 2.0, 1e-6);
 
   // Flagged pixels: NaN depths, never a number that could be mistaken for a range.
@@ -445,3 +450,328 @@ TEST(DecodeRegion, EqualsTheFullFrameDecodeOfThosePixelsAndCarriesTheFeatures) {
   EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, p0, {3, 3, 3, 9}), std::invalid_argument);
   EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, std::vector<float>(5), r), std::invalid_argument);
 }
+
+// ---------------------------------------------------------------------------
+// Validity under read noise: the amplitude rule (each group >= 3 counts, mean
+// >= 10) and the unwrapping check (kDecodeUnwrap)
+// ---------------------------------------------------------------------------
+
+namespace {
+
+constexpr double kPiN = 3.14159265358979323846;
+const std::array<double, 3> kWrapMm = {1875.0, 9375.0, 1250.0};  // group order 80, 16, 120 MHz
+
+// splitmix64 and Box-Muller: the same normals on every platform (the
+// standard library's distributions are implementation-defined).
+class Gauss {
+ public:
+  explicit Gauss(std::uint64_t seed) : state_(seed) {}
+  double operator()() {
+    if (has_spare_) {
+      has_spare_ = false;
+      return spare_;
+    }
+    const double u1 = (static_cast<double>(next() >> 11) + 1.0) * 0x1.0p-53;  // (0, 1]
+    const double u2 = static_cast<double>(next() >> 11) * 0x1.0p-53;
+    const double r = std::sqrt(-2.0 * std::log(u1));
+    spare_ = r * std::sin(2.0 * kPiN * u2);
+    has_spare_ = true;
+    return r * std::cos(2.0 * kPiN * u2);
+  }
+
+ private:
+  std::uint64_t next() {
+    std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+  }
+  std::uint64_t state_;
+  double spare_ = 0.0;
+  bool has_spare_ = false;
+};
+
+// The phasor model of the tests above: m_j = A cos(psi_g + phi_j) + noise,
+// rounded to counts, psi_g = 2 pi (depth_g mod wrap_g) / wrap_g; depth_g is
+// the group's own depth (a material distortion moves them apart).
+void fill_pixel(std::vector<std::int16_t>& raw, std::size_t pixels, std::size_t px, double amplitude,
+                const std::array<double, 3>& depth_mm, double sigma, Gauss& gauss) {
+  for (std::size_t g = 0; g < 3; ++g) {
+    const double psi = 2.0 * kPiN * std::fmod(depth_mm[g], kWrapMm[g]) / kWrapMm[g];
+    for (std::size_t j = 0; j < 3; ++j) {
+      const double m = amplitude * std::cos(psi + tofmat::kPhaseStepsRad[j]) + (sigma > 0.0 ? sigma * gauss() : 0.0);
+      raw[(g * 3 + j) * pixels + px] = static_cast<std::int16_t>(std::lround(m));
+    }
+  }
+}
+
+struct NoiseStats {
+  std::size_t pixels = 0, valid = 0, wrong = 0;  // wrong: valid and |combined - true| > 300 mm
+  double share_valid() const { return static_cast<double>(valid) / static_cast<double>(pixels); }
+  double share_wrong() const { return valid ? static_cast<double>(wrong) / static_cast<double>(valid) : 0.0; }
+};
+
+// `pixels` pixels of amplitude A at `depth` with 3 counts of read noise,
+// decoded in chunks. Also checks that every flagged pixel has NaN depths.
+NoiseStats decode_noisy(double amplitude, double depth, std::size_t pixels, std::uint64_t seed) {
+  constexpr std::size_t kChunk = 250000;
+  constexpr double kSigma = 3.0;  // read noise of the shipped simulator profiles
+  Gauss gauss(seed);
+  NoiseStats s;
+  std::vector<std::int16_t> raw;
+  for (std::size_t done = 0; done < pixels; done += kChunk) {
+    const std::size_t n = std::min(kChunk, pixels - done);
+    raw.assign(9 * n, 0);
+    for (std::size_t px = 0; px < n; ++px) fill_pixel(raw, n, px, amplitude, {depth, depth, depth}, kSigma, gauss);
+    const auto out = tofmat::decode_frame(raw.data(), n, {});
+    for (std::size_t px = 0; px < n; ++px) {
+      if (out.flags[px]) {
+        EXPECT_TRUE(std::isnan(out.combined_mm[px]) && std::isnan(out.depth_mm[1][px]) && std::isnan(out.features[0][px]));
+        continue;
+      }
+      ++s.valid;
+      if (std::fabs(out.combined_mm[px] - depth) > 300.0) ++s.wrong;
+    }
+    s.pixels += n;
+  }
+  return s;
+}
+
+TEST(DecodeNoise, NoiseAloneIsAlmostNeverValid) {
+  // Before the mean-amplitude rule and the unwrapping check 10.9 % of these passed.
+  const NoiseStats s = decode_noisy(0.0, 1000.0, 500000, 1);
+  std::printf("[ figures  ] noise only: %zu of %zu pixels valid\n", s.valid, s.pixels);
+  RecordProperty("noise_only_valid", std::to_string(s.valid) + " of " + std::to_string(s.pixels));
+  EXPECT_LE(s.share_valid(), 1e-3);
+}
+
+TEST(DecodeNoise, ValidPixelsAreRarelyWrongAtAnySignalLevel) {
+  // Among valid pixels at most 0.5 % more than 300 mm off, at every signal
+  // level and depth: per (A, depth) where there are at least 10000 valid
+  // pixels, and pooled over the depths per A (at A = 3 and 5 the valid pixels
+  // are the few that the noise lifted over the amplitude rule: a few hundred).
+  // (Without the new rules, at 1000 mm: 42 % at A = 3, 21 % at 5, 1.9 % at 10.)
+  const std::array<double, 4> depths = {700.0, 1000.0, 2500.0, 6000.0};
+  std::uint64_t seed = 100;
+  for (double amplitude : {3.0, 5.0, 10.0, 30.0}) {
+    // A = 5 needs many pixels for a few hundred valid ones.
+    const std::size_t n = amplitude == 5.0 ? 2000000 : 250000;
+    NoiseStats pooled;
+    std::string line;
+    for (double depth : depths) {
+      const NoiseStats s = decode_noisy(amplitude, depth, n, ++seed);
+      pooled.pixels += s.pixels;
+      pooled.valid += s.valid;
+      pooled.wrong += s.wrong;
+      char buf[160];
+      std::snprintf(buf, sizeof buf, " %.0f mm: %zu/%zu valid, %zu wrong (%.3f %%);", depth, s.valid, s.pixels, s.wrong,
+                    100.0 * s.share_wrong());
+      line += buf;
+      if (s.valid >= 10000) {
+        EXPECT_LE(s.share_wrong(), 5e-3) << "A " << amplitude << " depth " << depth << ": " << s.wrong << " of " << s.valid;
+      }
+    }
+    std::printf("[ figures  ] A = %.0f:%s pooled %zu wrong of %zu valid (%.3f %%)\n", amplitude, line.c_str(), pooled.wrong,
+                pooled.valid, 100.0 * pooled.share_wrong());
+    RecordProperty("A" + std::to_string(static_cast<int>(amplitude)),
+                   std::to_string(pooled.wrong) + " wrong of " + std::to_string(pooled.valid) + " valid");
+    EXPECT_LE(pooled.share_wrong(), 5e-3) << "A " << amplitude << ": " << pooled.wrong << " of " << pooled.valid;
+    // The rules must not get there by flagging everything: a clear signal stays valid.
+    if (amplitude == 30.0) {
+      EXPECT_GE(pooled.share_valid(), 0.99);
+    }
+    if (amplitude == 10.0) {
+      EXPECT_GE(pooled.share_valid(), 0.10);
+    }
+  }
+}
+
+TEST(DecodeNoise, MaterialDistortionOf130mmStaysValid) {
+  // The real database's largest d16 - d120 differences are about 130 mm: such
+  // a pixel must not be taken for a wrong unwrapping, clean or with noise at a
+  // signal of 100 counts (D16 noise ~37 mm there).
+  Gauss gauss(7);
+  for (double depth : {700.0, 1000.0, 2500.0, 6000.0, 9000.0}) {
+    for (double sign : {1.0, -1.0}) {
+      // d80 half-way or with d16 (the gap then all between D80 and D120).
+      const std::array<std::array<double, 3>, 2> cases = {
+          std::array<double, 3>{depth + sign * 65.0, depth + sign * 130.0, depth},
+          std::array<double, 3>{depth + sign * 130.0, depth + sign * 130.0, depth}};
+      for (const auto& d : cases) {
+        std::vector<std::int16_t> clean(9);
+        fill_pixel(clean, 1, 0, 2000.0, d, 0.0, gauss);
+        const auto c = tofmat::decode_frame(clean.data(), 1, {});
+        ASSERT_EQ(c.flags[0], 0) << depth << " " << d[0] - depth;
+        EXPECT_LT(circ(c.features[0][0], sign * 130.0, 1250.0), 1.0);  // (of the wrapped depths)
+        EXPECT_NEAR(c.combined_mm[0], depth + (80.0 * (d[0] - depth) + 16.0 * (d[1] - depth)) / 216.0, 1.0);
+        const std::size_t n = 2000;
+        std::vector<std::int16_t> raw(9 * n);
+        for (std::size_t px = 0; px < n; ++px) fill_pixel(raw, n, px, 100.0, d, 3.0, gauss);
+        const auto out = tofmat::decode_frame(raw.data(), n, {});
+        std::size_t valid = 0;
+        for (std::uint8_t fl : out.flags) valid += fl == 0 ? 1u : 0u;
+        EXPECT_EQ(valid, n) << depth << " " << d[0] - depth;
+      }
+    }
+  }
+}
+
+// Samples {2k, -k, -k}: amplitude 2k, phase 0 (depth 0 in every group).
+std::vector<std::int16_t> zero_phase_pixel(const std::array<int, 3>& amplitude) {
+  std::vector<std::int16_t> raw(9);
+  for (std::size_t g = 0; g < 3; ++g) {
+    const int k = amplitude[g] / 2;
+    raw[g * 3 + 0] = static_cast<std::int16_t>(2 * k);
+    raw[g * 3 + 1] = static_cast<std::int16_t>(-k);
+    raw[g * 3 + 2] = static_cast<std::int16_t>(-k);
+  }
+  return raw;
+}
+
+TEST(DecodeFrame, DarkNeedsEachGroupAt3AndTheMeanAt10) {
+  const auto flags = [](const std::array<int, 3>& a) { return tofmat::decode_frame(zero_phase_pixel(a).data(), 1, {}).flags[0]; };
+  EXPECT_EQ(flags({4, 14, 14}), 0);                    // 80 MHz at 4 >= 3, mean 10.7
+  EXPECT_EQ(flags({4, 14, 10}), tofmat::kDecodeDark);  // mean 9.3
+  EXPECT_EQ(flags({9, 9, 9}) & tofmat::kDecodeDark, tofmat::kDecodeDark);
+  EXPECT_EQ(flags({2, 30, 30}), tofmat::kDecodeDark);  // one group below 3, mean 20.7
+  EXPECT_EQ(flags({30, 30, 30}), 0);
+  tofmat::DecodeOptions o;
+  o.min_mean_amplitude = 5.0;
+  EXPECT_EQ(tofmat::decode_frame(zero_phase_pixel({4, 14, 10}).data(), 1, {}, o).flags[0], 0);
+  o.min_mean_amplitude = 30.1;
+  EXPECT_EQ(tofmat::decode_frame(zero_phase_pixel({30, 30, 30}).data(), 1, {}, o).flags[0], tofmat::kDecodeDark);
+}
+
+TEST(DecodeFrame, UnwrapFlagWhenTheFrequenciesDisagreeOrThe16MHzGroupIsFaint) {
+  // Hand-built pixels at 3000 mm, clean, amplitude 2000 in every group unless said.
+  const double depth = 3000.0;
+  struct Case {
+    std::array<double, 3> d;  // per-group depths
+    std::array<double, 3> amplitude;
+    std::uint8_t flags;
+  };
+  const std::vector<Case> cases = {
+      {{depth, depth, depth}, {2000, 2000, 2000}, 0},
+      {{depth + 900.0, depth, depth}, {2000, 2000, 2000}, tofmat::kDecodeUnwrap},   // |D80 - D16| 900 > 400
+      {{depth + 380.0, depth, depth + 380.0}, {2000, 2000, 2000}, 0},              // 380 <= 400, D120 follows
+      {{depth, depth, depth + 500.0}, {2000, 2000, 2000}, tofmat::kDecodeUnwrap},   // |D120 - D80| 500 > 300
+      {{depth, depth, depth + 280.0}, {2000, 2000, 2000}, 0},                       // 280 <= 300
+      {{depth, depth - 1000.0, depth}, {2000, 2000, 2000}, tofmat::kDecodeUnwrap},  // D80 picks 1875 wrong: gap 875
+      {{depth, depth, depth}, {30, 11, 30}, tofmat::kDecodeUnwrap},                 // 16 MHz 11 < 12 (mean 23.7)
+      {{depth, depth, depth}, {30, 13, 30}, 0},
+  };
+  std::vector<std::int16_t> raw(9 * cases.size());
+  Gauss unused(0);
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    for (std::size_t g = 0; g < 3; ++g) {
+      std::vector<std::int16_t> one(9);
+      fill_pixel(one, 1, 0, cases[i].amplitude[g], cases[i].d, 0.0, unused);
+      for (std::size_t j = 0; j < 3; ++j) raw[(g * 3 + j) * cases.size() + i] = one[g * 3 + j];
+    }
+  }
+  const auto out = tofmat::decode_frame(raw.data(), cases.size(), {});
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    EXPECT_EQ(out.flags[i], cases[i].flags) << "case " << i;
+    if (out.flags[i]) {
+      EXPECT_TRUE(std::isnan(out.combined_mm[i])) << i;
+      for (std::size_t g = 0; g < 3; ++g) EXPECT_TRUE(std::isnan(out.depth_mm[g][i])) << i;
+      for (std::size_t r = 0; r < 2; ++r) EXPECT_TRUE(std::isnan(out.features[r][i])) << i;
+      for (std::size_t g = 0; g < 3; ++g) {
+        EXPECT_TRUE(std::isfinite(out.phase_rad[g][i]));
+        EXPECT_NEAR(out.amplitude[g][i], cases[i].amplitude[g], 1.0) << i;
+      }
+    } else {
+      EXPECT_TRUE(std::isfinite(out.combined_mm[i])) << i;
+    }
+  }
+  // Wider gaps accept the 900 mm pixel (and so a wrong depth would pass too).
+  tofmat::DecodeOptions o;
+  o.max_gap_16_80_mm = 1000.0;
+  o.max_gap_80_120_mm = 400.0;  // (the wrong D80 leaves D120 350 mm from it)
+  EXPECT_EQ(tofmat::decode_frame(raw.data(), cases.size(), {}, o).flags[1], 0);
+  o = {};
+  o.min_unwrap_amplitude = 10.0;
+  EXPECT_EQ(tofmat::decode_frame(raw.data(), cases.size(), {}, o).flags[6], 0);
+}
+
+TEST(Unwrap, ConsistencyCheckComparesTheGapsInMm) {
+  tofmat::UnwrappedDepth u{};
+  u.depth_mm = {1400.0, 1000.0, 1700.0};  // |D80 - D16| = 400, |D120 - D80| = 300
+  EXPECT_TRUE(tofmat::unwrap_consistent(u, 400.0, 300.0));
+  EXPECT_FALSE(tofmat::unwrap_consistent(u, 399.9, 300.0));
+  EXPECT_FALSE(tofmat::unwrap_consistent(u, 400.0, 299.9));
+  u.depth_mm = {600.0, 1000.0, 300.0};  // the other signs
+  EXPECT_TRUE(tofmat::unwrap_consistent(u, 400.0, 300.0));
+  EXPECT_FALSE(tofmat::unwrap_consistent(u, 400.0, 299.0));
+  u.depth_mm = {NAN, 1000.0, 1000.0};
+  EXPECT_FALSE(tofmat::unwrap_consistent(u, 400.0, 300.0));
+  // A D16 error past 937.5 mm (950): D80 one multiple off, D120 then 625 mm
+  // from it whichever multiple it takes: only the 80/120 gap catches this one.
+  const auto bad = tofmat::unwrap_depths({1000.0, 1000.0 + 950.0, 1000.0});
+  EXPECT_NEAR(bad.depth_mm[0], 2875.0, 1e-9);
+  EXPECT_NEAR(std::fabs(bad.depth_mm[2] - bad.depth_mm[0]), 625.0, 1e-9);
+  EXPECT_TRUE(tofmat::unwrap_consistent(bad, 1000.0, 700.0));
+  EXPECT_FALSE(tofmat::unwrap_consistent(bad, 1000.0, 300.0));
+}
+
+TEST(DecodeRegion, P0OverloadEqualsTheFullFrameDecodeBitForBit) {
+  // A frame of realistic pixels (valid, dark, saturated and inconsistent
+  // ones), decoded whole and by regions: every output identical, with the p0
+  // vector, with DecodeTables and without corrections.
+  const int w = 64, h = 48;
+  const std::size_t n = static_cast<std::size_t>(w * h);
+  std::vector<std::int16_t> raw(9 * n);
+  std::vector<float> p0(3 * n);
+  Gauss gauss(99);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double depth = 500.0 + 8000.0 * static_cast<double>(i) / static_cast<double>(n);
+    const double amplitude = (i % 7 == 0) ? 6.0 : (i % 5 == 0) ? 20.0 : 800.0;
+    fill_pixel(raw, n, i, amplitude, {depth, depth + 60.0, depth}, 3.0, gauss);
+  }
+  for (std::size_t g = 0; g < 3; ++g) {
+    for (std::size_t i = 0; i < n; ++i) p0[g * n + i] = static_cast<float>(0.3 * static_cast<double>(g) + 1e-4 * static_cast<double>(i));
+  }
+  raw[4 * n + 10 * w + 20] = tofmat::kRawSaturated;
+  // The p0 shifts phases: with it applied to the samples (decode subtracts it),
+  // the pixels decode to their depths; here only equality matters.
+  const tofmat::DecodeTables tables(p0, n);
+  for (const std::vector<float>& corr : {p0, std::vector<float>{}}) {
+    const auto full = tofmat::decode_frame(raw.data(), n, corr);
+    std::array<std::size_t, 4> seen{};  // valid, dark, saturated, unwrap
+    for (std::uint8_t f : full.flags) {
+      seen[0] += f == 0 ? 1u : 0u;
+      seen[1] += (f & tofmat::kDecodeDark) ? 1u : 0u;
+      seen[2] += (f & tofmat::kDecodeSaturated) ? 1u : 0u;
+      seen[3] += (f & tofmat::kDecodeUnwrap) ? 1u : 0u;
+    }
+    for (std::size_t k = 0; k < 4; ++k) EXPECT_GT(seen[k], 0u) << "flag kind " << k;
+    for (const tofmat::PixelRegion r : {tofmat::PixelRegion{0, 0, w, h}, tofmat::PixelRegion{5, 2, 17, 11},
+                                        tofmat::PixelRegion{w - 1, h - 1, w, h}, tofmat::PixelRegion{18, 8, 38, 28}}) {
+      const auto part = tofmat::decode_region(raw.data(), w, h, corr, r);
+      const auto part_t = corr.empty() ? part : tofmat::decode_region(raw.data(), w, h, tables, r);
+      ASSERT_EQ(part.pixels, static_cast<std::size_t>((r.x1 - r.x0) * (r.y1 - r.y0)));
+      std::size_t k = 0;
+      const auto same = [](float a, float b) { return (std::isnan(a) && std::isnan(b)) || a == b; };
+      for (int y = r.y0; y < r.y1; ++y) {
+        for (int x = r.x0; x < r.x1; ++x, ++k) {
+          const std::size_t i = static_cast<std::size_t>(y * w + x);
+          for (const auto* p : {&part, &part_t}) {
+            ASSERT_EQ(p->flags[k], full.flags[i]) << x << "," << y;
+            for (std::size_t g = 0; g < 3; ++g) {
+              ASSERT_EQ(p->phase_rad[g][k], full.phase_rad[g][i]);
+              ASSERT_EQ(p->amplitude[g][k], full.amplitude[g][i]);
+              ASSERT_TRUE(same(p->depth_mm[g][k], full.depth_mm[g][i]));
+            }
+            ASSERT_TRUE(same(p->combined_mm[k], full.combined_mm[i]));
+            for (std::size_t q = 0; q < 2; ++q) ASSERT_TRUE(same(p->features[q][k], full.features[q][i]));
+          }
+        }
+      }
+    }
+  }
+  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, std::vector<float>(3 * n - 1), {0, 0, 1, 1}), std::invalid_argument);
+  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, p0, {0, 0, 0, 1}), std::invalid_argument);
+  EXPECT_THROW(tofmat::decode_region(raw.data(), 0, h, p0, {0, 0, 1, 1}), std::invalid_argument);
+}
+
+}  // namespace

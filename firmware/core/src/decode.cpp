@@ -36,4 +36,10 @@ UnwrappedDepth unwrap_depths(const std::array<double, 3>& d) {
   return u;
 }
 
+bool unwrap_consistent(const UnwrappedDepth& u, double max_gap_16_80_mm, double max_gap_80_120_mm) {
+  const double gap_16_80 = std::fabs(u.depth_mm[kGroup80] - u.depth_mm[kGroup16]);
+  const double gap_80_120 = std::fabs(u.depth_mm[kGroup120] - u.depth_mm[kGroup80]);
+  return gap_16_80 <= max_gap_16_80_mm && gap_80_120 <= max_gap_80_120_mm;
+}
+
 }  // namespace tofmat
