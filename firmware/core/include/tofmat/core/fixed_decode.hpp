@@ -1,0 +1,82 @@
+// Fixed-point decode of raw frames (docs/numerics.md): the same outputs as
+// decode_frame (frame_decode.hpp), in integers. Per pixel and group the phase
+// comes from a CORDIC in Q32 turns (wrapping arithmetic does the mod 2 pi)
+// and the amplitude from the CORDIC's magnitude; depths are Q16 mm, the
+// combined depth Q8 mm. The phase/amplitude stage has a scalar and a NEON
+// kernel (aarch64) that give the same integers bit for bit; unwrapping and
+// flags run after it in shared scalar code.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "tofmat/core/frame_decode.hpp"
+
+namespace tofmat {
+
+inline constexpr int kPhaseFracBits = 32;  // phase: uint32 turns
+inline constexpr int kDepthFracBits = 16;  // per-frequency depths and features: int32 Q16 mm
+inline constexpr int kCombinedFracBits = 8;  // combined depth: int32 Q8 mm
+inline constexpr int kAmplitudeFracBits = 8;  // amplitude: uint32 Q8 counts
+inline constexpr std::int32_t kFixedInvalid = INT32_MIN;  // depth, combined, feature of an invalid pixel
+inline constexpr int kCordicIterations = 28;
+
+// p0 per pixel and group in Q32 turns (round(p0 / 2 pi * 2^32) mod 2^32).
+struct FixedDecodeTables {
+  std::size_t pixels = 0;
+  std::array<std::vector<std::uint32_t>, 3> p0_turns;
+  // p0_rad: 3 x pixels (empty: no correction). Throws std::invalid_argument on a size mismatch.
+  FixedDecodeTables(const std::vector<float>& p0_rad, std::size_t pixels);
+};
+
+struct FixedDecodedFrame {
+  std::size_t pixels = 0;
+  std::array<std::vector<std::uint32_t>, 3> phase_turns;   // group order 80, 16, 120 MHz
+  std::array<std::vector<std::uint32_t>, 3> amplitude_q8;  // |a + i b| / 1.5
+  std::array<std::vector<std::int32_t>, 3> depth_q16;      // Eq. (1), wrapped; kFixedInvalid where invalid
+  std::vector<std::int32_t> combined_q8;                   // unwrapped, frequency-weighted
+  std::array<std::vector<std::int32_t>, 2> features_q16;   // d16 - d120, d80 - d120 (wrapped depths)
+  std::vector<std::uint8_t> flags;                         // as DecodedFrame::flags
+};
+
+// Which phase/amplitude kernel: the build's best (NEON on aarch64), or scalar.
+enum class FixedKernel { kBest, kScalar };
+
+FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& tables,
+                                     const DecodeOptions& options = {}, FixedKernel kernel = FixedKernel::kBest);
+// Only the pixels of `region` (raw and tables are the full frame's).
+FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& tables,
+                                      const PixelRegion& region, const DecodeOptions& options = {},
+                                      FixedKernel kernel = FixedKernel::kBest);
+
+// The phase/amplitude kernels over n pixels of one group: samples m0, m1, m2
+// (the group's three sub-images), p0 in Q32 turns; writes phase (Q32 turns),
+// amplitude (Q8 counts) and ORs kDecodeSaturated into flags where a sample is
+// 32767. Exposed for the bit-exactness tests.
+void phase_amplitude_scalar(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
+                            const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
+                            std::uint8_t* flags);
+#if defined(__aarch64__)
+void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
+                          const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
+                          std::uint8_t* flags);
+#endif
+
+// The CORDIC's constants, shared by both kernels.
+namespace fixed_decode_detail {
+// atan(2^-i) in Q32 turns.
+extern const std::array<std::uint32_t, kCordicIterations> kAtanTurns;
+// sqrt(3) / 2 in Q31 (the imaginary part's factor; vqrdmulh's operand).
+inline constexpr std::int32_t kHalfSqrt3Q31 = 1859775393;
+// 256 / (3 K) in Q25, K the CORDIC gain: amplitude_q8 = x * kAmpScale >> (25 + shift).
+inline constexpr int kAmpScaleBits = 25;
+extern const std::uint32_t kAmpScale;
+// round(2 a b / 2^32): vqrdmulhq_s32 on one lane (no saturation: b > -2^31).
+inline std::int32_t rounding_doubling_mul_high(std::int32_t a, std::int32_t b) {
+  return static_cast<std::int32_t>((2 * static_cast<std::int64_t>(a) * b + (std::int64_t{1} << 31)) >> 32);
+}
+}  // namespace fixed_decode_detail
+
+}  // namespace tofmat

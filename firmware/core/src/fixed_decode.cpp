@@ -1,0 +1,215 @@
+#include "tofmat/core/fixed_decode.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "tofmat/core/decode.hpp"
+#include "tofmat/core/raw_lut.hpp"
+
+namespace tofmat {
+
+namespace fixed_decode_detail {
+// round(atan(2^-i) / (2 pi) * 2^32), i = 0..27 (computed at 50 digits).
+const std::array<std::uint32_t, kCordicIterations> kAtanTurns = {
+    536870912u, 316933406u, 167458907u, 85004756u, 42667331u, 21354465u, 10679838u, 5340245u, 2670163u, 1335087u,
+    667544u,    333772u,    166886u,    83443u,    41722u,    20861u,    10430u,   5215u,    2608u,    1304u,
+    652u,       326u,       163u,       81u,       41u,       20u,       10u,      5u};
+// round(2^25 * 256 / (3 K)), K = prod sqrt(1 + 2^-2i) over the 28 iterations = 1.6467602581...
+const std::uint32_t kAmpScale = 1738754331u;
+}  // namespace fixed_decode_detail
+
+namespace {
+
+using namespace fixed_decode_detail;
+
+// Unambiguous ranges c / (2 f) with the device's c = 300 mm/ns, in Q16 mm.
+constexpr std::int32_t kRangeMm[3] = {1875, 9375, 1250};
+constexpr std::int32_t kRangeQ16[3] = {1875 << 16, 9375 << 16, 1250 << 16};
+// ceil(2^32 / 27): floor(n / 27) as (n * M) >> 32, exact for 0 <= n < 8.6e8.
+constexpr std::int64_t kInv27 = 159072863;
+
+int leading_zeros(std::uint32_t v) { return __builtin_clz(v | 1u); }
+
+}  // namespace
+
+void phase_amplitude_scalar(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
+                            const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
+                            std::uint8_t* flags) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int32_t a0 = m0[i], a1 = m1[i], a2 = m2[i];
+    if (a0 == kRawSaturated || a1 == kRawSaturated || a2 == kRawSaturated) flags[i] |= kDecodeSaturated;
+    // 2 (a + i b) = (2 m0 - m1 - m2) + i sqrt(3) (m2 - m1): the phasor of the
+    // three steps, times 2 (exact in int32: |X| <= 131068, |W| <= 65534).
+    const std::int32_t X = 2 * a0 - a1 - a2, W = a2 - a1;
+    if (X == 0 && W == 0) {  // no signal: phase 0 (as phase_of), amplitude 0
+      phase[i] = 0;
+      amp_q8[i] = 0;
+      continue;
+    }
+    // Scale so that max(|X|, |W|) < 2^28: the CORDIC then works at full
+    // precision whatever the signal, and K |v| < 2^30 cannot overflow.
+    const auto mx = static_cast<std::uint32_t>(std::max(X < 0 ? -X : X, W < 0 ? -W : W));
+    const int sh = std::max(0, leading_zeros(mx) - 4);
+    std::int32_t x = X * (1 << sh);
+    std::int32_t y = 2 * rounding_doubling_mul_high(W * (1 << sh), kHalfSqrt3Q31);
+    std::uint32_t angle = 0;
+    if (x < 0) {  // into the right half-plane: a half turn
+      x = -x;
+      y = -y;
+      angle = 0x80000000u;
+    }
+    for (int k = 0; k < kCordicIterations; ++k) {
+      const std::int32_t xs = x >> k, ys = y >> k;  // arithmetic shifts (as NEON's)
+      if (y > 0) {
+        x += ys;
+        y -= xs;
+        angle += kAtanTurns[static_cast<std::size_t>(k)];
+      } else {
+        x -= ys;
+        y += xs;
+        angle -= kAtanTurns[static_cast<std::size_t>(k)];
+      }
+    }
+    phase[i] = angle - p0[i];  // mod 2^32: the wrap into [0, 2 pi)
+    amp_q8[i] = static_cast<std::uint32_t>((static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * kAmpScale) >>
+                                           (kAmpScaleBits + sh));
+  }
+}
+
+FixedDecodeTables::FixedDecodeTables(const std::vector<float>& p0_rad, std::size_t n) : pixels(n) {
+  if (!p0_rad.empty() && p0_rad.size() != 3 * n) throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
+  const double turns_per_rad = 4294967296.0 / (2.0 * kPi);
+  for (std::size_t g = 0; g < 3; ++g) {
+    auto& t = p0_turns[g];
+    t.assign(n, 0u);
+    if (p0_rad.empty()) continue;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double r = std::remainder(static_cast<double>(p0_rad[g * n + i]), 2.0 * kPi);  // |r| <= pi
+      t[i] = static_cast<std::uint32_t>(static_cast<std::int64_t>(std::llround(r * turns_per_rad)));
+    }
+  }
+}
+
+namespace {
+
+FixedDecodedFrame allocate_fixed(std::size_t pixels) {
+  FixedDecodedFrame out;
+  out.pixels = pixels;
+  for (std::size_t g = 0; g < 3; ++g) {
+    out.phase_turns[g].assign(pixels, 0u);
+    out.amplitude_q8[g].assign(pixels, 0u);
+    out.depth_q16[g].assign(pixels, kFixedInvalid);
+  }
+  out.combined_q8.assign(pixels, kFixedInvalid);
+  for (auto& f : out.features_q16) f.assign(pixels, kFixedInvalid);
+  out.flags.assign(pixels, 0);
+  return out;
+}
+
+struct Thresholds {
+  std::uint32_t amp, mean_sum, unwrap_amp;  // Q8 counts
+  std::int64_t gap_16_80, gap_80_120;       // Q16 mm
+};
+
+std::uint32_t q8_counts(double v) {
+  if (!(v > 0.0)) return 0;
+  return static_cast<std::uint32_t>(std::min(std::ceil(v * 256.0), 4294967295.0));
+}
+std::int64_t q16_mm(double v) {
+  if (!(v >= 0.0)) return -1;  // NaN or negative: nothing passes
+  return static_cast<std::int64_t>(std::min(std::floor(v * 65536.0), 9.0e18));
+}
+
+Thresholds thresholds(const DecodeOptions& o) {
+  return {q8_counts(o.min_amplitude), q8_counts(3.0 * o.min_mean_amplitude), q8_counts(o.min_unwrap_amplitude),
+          q16_mm(o.max_gap_16_80_mm), q16_mm(o.max_gap_80_120_mm)};
+}
+
+// Depths, unwrapping, flags and features of slot k (phase and amplitude done).
+void finish_pixel(FixedDecodedFrame& out, std::size_t k, const Thresholds& th) {
+  std::int32_t d[3];
+  std::uint64_t amp_sum = 0;
+  bool dark = false;
+  for (std::size_t g = 0; g < 3; ++g) {
+    d[g] = static_cast<std::int32_t>((static_cast<std::uint64_t>(out.phase_turns[g][k]) * static_cast<std::uint64_t>(kRangeMm[g])) >> 16);
+    dark = dark || out.amplitude_q8[g][k] < th.amp;
+    amp_sum += out.amplitude_q8[g][k];
+  }
+  if (dark || amp_sum < th.mean_sum) out.flags[k] |= kDecodeDark;
+  if (out.flags[k]) return;
+  // Hierarchical unwrap as unwrap_depths: D80 = d80 + k R80 nearest to D16,
+  // D120 = d120 + k' R120 nearest to D80 (halves round up), offsets keep the
+  // dividends positive.
+  const std::int32_t D16 = d[kGroup16];
+  const std::int32_t k80 = (D16 - d[kGroup80] + kRangeQ16[kGroup80] / 2 + kRangeQ16[kGroup80]) / kRangeQ16[kGroup80] - 1;
+  const std::int32_t D80 = d[kGroup80] + k80 * kRangeQ16[kGroup80];
+  const std::int32_t k120 =
+      (D80 - d[kGroup120] + kRangeQ16[kGroup120] / 2 + 2 * kRangeQ16[kGroup120]) / kRangeQ16[kGroup120] - 2;
+  const std::int32_t D120 = d[kGroup120] + k120 * kRangeQ16[kGroup120];
+  const std::int64_t gap1 = std::abs(static_cast<std::int64_t>(D80) - D16);
+  const std::int64_t gap2 = std::abs(static_cast<std::int64_t>(D120) - D80);
+  if (out.amplitude_q8[kGroup16][k] < th.unwrap_amp || gap1 > th.gap_16_80 || gap2 > th.gap_80_120) {
+    out.flags[k] = kDecodeUnwrap;
+    return;
+  }
+  for (std::size_t g = 0; g < 3; ++g) out.depth_q16[g][k] = d[g];
+  // (80 D80 + 16 D16 + 120 D120) / 216 = (10 D80 + 2 D16 + 15 D120) / 27, in Q8.
+  const std::int64_t num8 = (10 * static_cast<std::int64_t>(D80) + 2 * static_cast<std::int64_t>(D16) +
+                             15 * static_cast<std::int64_t>(D120)) >> (kDepthFracBits - kCombinedFracBits);
+  out.combined_q8[k] = static_cast<std::int32_t>((num8 * kInv27) >> 32);
+  out.features_q16[0][k] = d[kGroup16] - d[kGroup120];
+  out.features_q16[1][k] = d[kGroup80] - d[kGroup120];
+}
+
+void phase_amplitude(FixedKernel kernel, const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
+                     const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp,
+                     std::uint8_t* flags) {
+#if defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) return phase_amplitude_neon(m0, m1, m2, p0, n, phase, amp, flags);
+#endif
+  (void)kernel;
+  phase_amplitude_scalar(m0, m1, m2, p0, n, phase, amp, flags);
+}
+
+}  // namespace
+
+FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, const DecodeOptions& options,
+                                     FixedKernel kernel) {
+  const std::size_t n = t.pixels;
+  FixedDecodedFrame out = allocate_fixed(n);
+  for (std::size_t g = 0; g < 3; ++g) {
+    const std::int16_t* m = raw + 3 * g * n;
+    phase_amplitude(kernel, m, m + n, m + 2 * n, t.p0_turns[g].data(), n, out.phase_turns[g].data(),
+                    out.amplitude_q8[g].data(), out.flags.data());
+  }
+  const Thresholds th = thresholds(options);
+  for (std::size_t i = 0; i < n; ++i) finish_pixel(out, i, th);
+  return out;
+}
+
+FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& t,
+                                      const PixelRegion& r, const DecodeOptions& options, FixedKernel kernel) {
+  if (width < 1 || height < 1) throw std::invalid_argument("frame size must be positive");
+  if (r.x0 < 0 || r.y0 < 0 || r.x1 > width || r.y1 > height || r.x0 >= r.x1 || r.y0 >= r.y1) {
+    throw std::invalid_argument("decode region is empty or outside the frame");
+  }
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
+  if (t.pixels != n) throw std::invalid_argument("decode tables are for a frame of another size");
+  const std::size_t rw = static_cast<std::size_t>(r.x1 - r.x0);
+  FixedDecodedFrame out = allocate_fixed(rw * static_cast<std::size_t>(r.y1 - r.y0));
+  for (int y = r.y0; y < r.y1; ++y) {  // a row of the region is contiguous in every plane
+    const std::size_t src = static_cast<std::size_t>(y) * static_cast<std::size_t>(width) + static_cast<std::size_t>(r.x0);
+    const std::size_t dst = static_cast<std::size_t>(y - r.y0) * rw;
+    for (std::size_t g = 0; g < 3; ++g) {
+      const std::int16_t* m = raw + 3 * g * n + src;
+      phase_amplitude(kernel, m, m + n, m + 2 * n, t.p0_turns[g].data() + src, rw, out.phase_turns[g].data() + dst,
+                      out.amplitude_q8[g].data() + dst, out.flags.data() + dst);
+    }
+  }
+  const Thresholds th = thresholds(options);
+  for (std::size_t i = 0; i < out.pixels; ++i) finish_pixel(out, i, th);
+  return out;
+}
+
+}  // namespace tofmat
