@@ -76,7 +76,7 @@ test-python:
 
 # libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus.
 fuzz: setup
-	cmake -S . -B $(FUZZDIR) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DTOFMAT_FUZZ=ON -DTOFMAT_BUILD_TESTS=OFF >/dev/null
+	cmake -S . -B $(FUZZDIR) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DTOFMAT_FUZZ=ON -DTOFMAT_BUILD_TESTS=OFF -DTOFMAT_BUILD_BENCH=OFF >/dev/null
 	cmake --build $(FUZZDIR) -j$(JOBS)
 	@for t in $(FUZZDIR)/tests/fuzz/fuzz_*; do \
 	  name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
@@ -109,3 +109,23 @@ bench: setup check-db build-python $(TABLE)
 
 clean:
 	rm -rf build
+
+# Benchmarks of the fixed-point path (issue 5; docs/benchmarks.md), printed as
+# markdown: bench-cpp times float vs fixed on this host (one core); bench-cross
+# counts guest instructions of the aarch64 build under qemu-aarch64 (scalar vs
+# NEON) with a TCG plugin built for the host.
+.PHONY: bench-cpp bench-cross
+BENCH_DIR    := build/bench
+QEMU_PLUGIN  := $(BENCH_DIR)/tests/bench/qemu_insn_count.so
+
+bench-cpp:
+	cmake -S . -B $(BENCH_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_BUILD_TESTS=OFF \
+	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake --build $(BENCH_DIR) -j$(JOBS) --target tofmat_bench_fixed qemu_insn_count
+	$(BENCH_DIR)/tests/bench/tofmat_bench_fixed --op all --db $(DB)
+
+bench-cross: cross check-db
+	cmake -S . -B $(BENCH_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_BUILD_TESTS=OFF \
+	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake --build $(BENCH_DIR) -j$(JOBS) --target qemu_insn_count
+	tests/bench/insn_counts.sh $(QEMU_PLUGIN) $(CROSS)/tests/bench/tofmat_bench_fixed $(DB)

@@ -10,11 +10,6 @@
 namespace tofmat {
 
 namespace fixed_decode_detail {
-// round(atan(2^-i) / (2 pi) * 2^32), i = 0..27 (computed at 50 digits).
-const std::array<std::uint32_t, kCordicIterations> kAtanTurns = {
-    536870912u, 316933406u, 167458907u, 85004756u, 42667331u, 21354465u, 10679838u, 5340245u, 2670163u, 1335087u,
-    667544u,    333772u,    166886u,    83443u,    41722u,    20861u,    10430u,   5215u,    2608u,    1304u,
-    652u,       326u,       163u,       81u,       41u,       20u,       10u,      5u};
 // round(2^25 * 256 / (3 K)), K = prod sqrt(1 + 2^-2i) over the 28 iterations = 1.6467602581...
 const std::uint32_t kAmpScale = 1738754331u;
 }  // namespace fixed_decode_detail

@@ -6,9 +6,35 @@
 #if defined(__aarch64__)
 #include <arm_neon.h>
 
+#include <utility>
+
 #include "tofmat/core/raw_lut.hpp"
 
 namespace tofmat {
+namespace {
+
+// One CORDIC step with the shift as an immediate: the 28 steps are unrolled
+// (no loop counter, no shift or angle registers to rebuild each step).
+template <int K>
+inline void cordic_step(int32x4_t& x, int32x4_t& y, uint32x4_t& angle) {
+  int32x4_t xs = x, ys = y;
+  if constexpr (K > 0) {
+    xs = vshrq_n_s32(x, K);
+    ys = vshrq_n_s32(y, K);
+  }
+  const uint32x4_t up = vcgtzq_s32(y);
+  const uint32x4_t turn = vdupq_n_u32(fixed_decode_detail::kAtanTurns[K]);
+  x = vaddq_s32(x, vbslq_s32(up, ys, vnegq_s32(ys)));
+  y = vaddq_s32(y, vbslq_s32(up, vnegq_s32(xs), xs));
+  angle = vbslq_u32(up, vaddq_u32(angle, turn), vsubq_u32(angle, turn));
+}
+
+template <int... K>
+inline void cordic(int32x4_t& x, int32x4_t& y, uint32x4_t& angle, std::integer_sequence<int, K...>) {
+  (cordic_step<K>(x, y, angle), ...);
+}
+
+}  // namespace
 
 void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
                           const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
@@ -40,15 +66,7 @@ void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const 
     x = vbslq_s32(left, vnegq_s32(x), x);
     y = vbslq_s32(left, vnegq_s32(y), y);
     uint32x4_t angle = vandq_u32(left, vdupq_n_u32(0x80000000u));
-    for (int k = 0; k < kCordicIterations; ++k) {
-      const int32x4_t shift = vdupq_n_s32(-k);  // arithmetic right shift by k
-      const int32x4_t xs = vshlq_s32(x, shift), ys = vshlq_s32(y, shift);
-      const uint32x4_t up = vcgtzq_s32(y);
-      const uint32x4_t turn = vdupq_n_u32(kAtanTurns[static_cast<std::size_t>(k)]);
-      x = vaddq_s32(x, vbslq_s32(up, ys, vnegq_s32(ys)));
-      y = vaddq_s32(y, vbslq_s32(up, vnegq_s32(xs), xs));
-      angle = vbslq_u32(up, vaddq_u32(angle, turn), vsubq_u32(angle, turn));
-    }
+    cordic(x, y, angle, std::make_integer_sequence<int, kCordicIterations>{});
     const uint32x4_t ph = vsubq_u32(angle, vld1q_u32(p0 + i));
     vst1q_u32(phase + i, vbicq_u32(ph, none));
     // amplitude_q8 = x * kAmpScale >> (25 + sh), in 64-bit lanes.

@@ -66,8 +66,11 @@ void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const 
 
 // The CORDIC's constants, shared by both kernels.
 namespace fixed_decode_detail {
-// atan(2^-i) in Q32 turns.
-extern const std::array<std::uint32_t, kCordicIterations> kAtanTurns;
+// round(atan(2^-i) / (2 pi) * 2^32), i = 0..27 (computed at 50 digits).
+inline constexpr std::array<std::uint32_t, kCordicIterations> kAtanTurns = {
+    536870912u, 316933406u, 167458907u, 85004756u, 42667331u, 21354465u, 10679838u, 5340245u, 2670163u, 1335087u,
+    667544u,    333772u,    166886u,    83443u,    41722u,    20861u,    10430u,   5215u,    2608u,    1304u,
+    652u,       326u,       163u,       81u,       41u,       20u,       10u,      5u};
 // sqrt(3) / 2 in Q31 (the imaginary part's factor; vqrdmulh's operand).
 inline constexpr std::int32_t kHalfSqrt3Q31 = 1859775393;
 // 256 / (3 K) in Q25, K the CORDIC gain: amplitude_q8 = x * kAmpScale >> (25 + shift).

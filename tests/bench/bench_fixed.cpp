@@ -1,0 +1,679 @@
+// tofmat_bench_fixed: the fixed-point path's error against its run time
+// (issue 5). A benchmark, not a test: it prints figures and never fails on
+// timing (it exits non-zero only on bad options or a missing database).
+//
+//   tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame] [--kernel best|scalar|float]
+//                      [--reps N] [--db DIR] [--window BINS]
+//
+// --op all (the default) measures everything on this host and prints markdown
+// tables: full-frame (512x424) and 20x20 ROI decode, float reference against
+// the fixed-point scalar and best kernels, with the fixed paths' error against
+// float; nearest-neighbour queries on the real database, FloatClassifier
+// against FixedClassifier (us/query and accuracy per window length); and the
+// composite "fixed-point full-frame decode + features + per-pixel
+// classification of 29 materials" (ms per frame, one core).
+//
+// Any other --op runs only that operation with that kernel N times after its
+// set-up (N = 0: set-up only) and prints one line, so that an instruction
+// counter (qemu-aarch64 with tests/bench/qemu_insn_count.c) can take
+// (count(N) - count(0)) / (N * units) as the cost of one unit:
+//   decode  full-frame decode                      unit: a frame
+//   roi     20x20 region decode                     unit: a region
+//   nn      one query, quantised and searched       unit: a query
+//   dist    the distance kernel only (queries quantised in set-up)   unit: a query
+//   frame   fixed decode + per-pixel classification                   unit: a frame
+// Kernels: best (NEON on aarch64, scalar elsewhere), scalar, float (decode,
+// roi, nn: the float reference). nn and dist run FixedClassifier's search
+// here with the kernel given (the library's FixedClassifier always uses the
+// build's best); --op all checks that it labels every query as FixedClassifier does.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "tofmat/core/classifier.hpp"
+#include "tofmat/core/compact_table.hpp"
+#include "tofmat/core/decode.hpp"
+#include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/core/fixed_classifier.hpp"
+#include "tofmat/core/fixed_decode.hpp"
+#include "tofmat/core/fixed_distance.hpp"
+#include "tofmat/core/frame_decode.hpp"
+#include "tofmat/core/raw_lut.hpp"
+
+#ifndef TOFMAT_DB_DIR
+#define TOFMAT_DB_DIR "/work/shared/data/tanaka2017_kinect2_db"
+#endif
+
+namespace {
+
+using namespace tofmat;
+using Clock = std::chrono::steady_clock;
+
+constexpr int kWidth = 512, kHeight = 424;
+constexpr std::size_t kPixels = static_cast<std::size_t>(kWidth) * kHeight;
+constexpr double kTwoPi = 2.0 * kPi;
+constexpr double kRange[3] = {1875.0, 9375.0, 1250.0};  // group order 80, 16, 120 MHz
+constexpr PixelRegion kRoi{246, 202, 266, 222};          // 20x20 in the middle
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+volatile std::int64_t g_sink = 0;  // keeps results alive
+
+// ---------------------------------------------------------------- frames
+
+struct Frame {
+  std::vector<std::int16_t> raw;  // 9 x kPixels, sub-image-major
+  std::vector<float> p0;          // 3 x kPixels
+};
+
+std::int16_t sample(double v) {
+  const double lim = static_cast<double>(kRawMaxMagnitude);
+  return static_cast<std::int16_t>(std::clamp(std::nearbyint(v), -lim, lim));
+}
+
+// Pixel i from the phasor model m_j = B + A cos(theta_g + phi_j), theta_g =
+// 2 pi d_g / R_g + p0_g (d_g: the depth group g sees), random p0.
+template <class Rng>
+void put_pixel(Frame& f, std::size_t i, const double depth_mm[3], double amp, double offset, Rng& rng) {
+  std::uniform_real_distribution<double> p0d(-kPi, kPi);
+  for (std::size_t g = 0; g < 3; ++g) {
+    const float p0 = static_cast<float>(p0d(rng));
+    f.p0[g * kPixels + i] = p0;
+    const double theta = kTwoPi * depth_mm[g] / kRange[g] + static_cast<double>(p0);
+    for (std::size_t j = 0; j < 3; ++j) {
+      f.raw[(3 * g + j) * kPixels + i] = sample(offset + amp * std::cos(theta + kPhaseStepsRad[j]));
+    }
+  }
+}
+
+Frame empty_frame() {
+  Frame f;
+  f.raw.assign(9 * kPixels, 0);
+  f.p0.assign(3 * kPixels, 0.0f);
+  return f;
+}
+
+// As tests/cpp/test_fixed_decode.cpp's random_frame, with realistic inputs:
+// depths 500..4500 mm, amplitudes 20..3000 counts (log-uniform), offsets
+// within +-500 counts, random p0.
+Frame random_frame(std::uint32_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> depth(500.0, 4500.0), u01(0.0, 1.0);
+  Frame f = empty_frame();
+  for (std::size_t i = 0; i < kPixels; ++i) {
+    const double d = depth(rng);
+    const double amp = std::exp(std::log(20.0) + u01(rng) * (std::log(3000.0) - std::log(20.0)));
+    const double offset = (u01(rng) - 0.5) * 1000.0;
+    const double dg[3] = {d, d, d};
+    put_pixel(f, i, dg, amp, offset, rng);
+  }
+  return f;
+}
+
+// The composite benchmark's scene: depths 610..1190 mm (a ramp down the rows,
+// +-2 mm jitter), 29 vertical bands, one per material, whose pixels carry that
+// material's curves at their depth bin (d16 = d + row 0, d80 = d + row 1,
+// d120 = d: the database's sign), amplitudes 300..3000 counts.
+Frame material_frame(const ExemplarTable& t, std::uint32_t seed, std::vector<std::uint8_t>& truth) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  Frame f = empty_frame();
+  truth.assign(kPixels, 0);
+  const auto n_mat = static_cast<int>(t.n_materials());
+  for (int y = 0; y < kHeight; ++y) {
+    for (int x = 0; x < kWidth; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * kWidth + static_cast<std::size_t>(x);
+      const int m = x * n_mat / kWidth;
+      truth[i] = static_cast<std::uint8_t>(m);
+      const double d = 610.0 + 580.0 * y / (kHeight - 1) + (u01(rng) - 0.5) * 4.0;
+      const std::int32_t b = t.bins().index_of(d);
+      double c16 = 0.0, c80 = 0.0;
+      if (b >= 0) {
+        const float* v = t.material_values(static_cast<std::size_t>(m));
+        const float r0 = v[static_cast<std::size_t>(b)], r1 = v[t.n_bins() + static_cast<std::size_t>(b)];
+        c16 = std::isnan(r0) ? 0.0 : static_cast<double>(r0);
+        c80 = std::isnan(r1) ? 0.0 : static_cast<double>(r1);
+      }
+      const double dg[3] = {d + c80, d + c16, d};
+      const double amp = std::exp(std::log(300.0) + u01(rng) * (std::log(3000.0) - std::log(300.0)));
+      put_pixel(f, i, dg, amp, (u01(rng) - 0.5) * 500.0, rng);
+    }
+  }
+  return f;
+}
+
+// ---------------------------------------------------------------- decode error
+
+struct DecodeError {
+  double depth_mm[3] = {0, 0, 0};  // max per-frequency depth error (80, 16, 120 MHz)
+  double combined_mm = 0.0;
+  std::size_t both_valid = 0, flags_differ = 0;
+  double worst_depth() const { return std::max({depth_mm[0], depth_mm[1], depth_mm[2]}); }
+};
+
+DecodeError compare(const DecodedFrame& f, const FixedDecodedFrame& x) {
+  DecodeError e;
+  for (std::size_t i = 0; i < f.pixels; ++i) {
+    if (f.flags[i] != x.flags[i]) ++e.flags_differ;
+    if (f.flags[i] != 0 || x.flags[i] != 0) continue;
+    ++e.both_valid;
+    for (std::size_t g = 0; g < 3; ++g) {
+      const double d = x.depth_q16[g][i] / 65536.0;
+      e.depth_mm[g] = std::max(e.depth_mm[g], std::fabs(std::remainder(d - f.depth_mm[g][i], kRange[g])));
+    }
+    e.combined_mm = std::max(e.combined_mm, std::fabs(x.combined_q8[i] / 256.0 - f.combined_mm[i]));
+  }
+  return e;
+}
+
+// ---------------------------------------------------------------- timing
+
+template <class F>
+double median_seconds(long reps, F&& f) {
+  f();  // warm-up
+  std::vector<double> t;
+  for (long r = 0; r < std::max(1L, reps); ++r) {
+    const auto t0 = Clock::now();
+    f();
+    t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+// ---------------------------------------------------------------- nearest neighbour
+
+struct Query {
+  std::uint32_t material = 0, window = 0;
+  std::vector<float> v;  // n_rows x n_bins, NaN = missing
+};
+
+// The queries of tests/cpp/test_fixed_classifier.cpp (and `make bench`):
+// windows of consecutive bins of both rows, N(0, 0.3 mm) noise, seed 1,
+// 40 per material and window length.
+std::vector<Query> make_queries(const ExemplarTable& t) {
+  std::mt19937 rng(1);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  std::vector<Query> out;
+  for (std::uint32_t window : {1u, 3u, 10u, 30u, 100u}) {
+    std::uniform_int_distribution<std::uint32_t> start(0, t.n_bins() - window);
+    for (std::uint32_t m = 0; m < t.n_materials(); ++m) {
+      for (int k = 0; k < 40; ++k) {
+        Query q{m, window, std::vector<float>(t.elements_per_material(), kNaN)};
+        const std::uint32_t s = start(rng);
+        for (std::uint32_t r = 0; r < t.n_rows(); ++r) {
+          for (std::uint32_t b = s; b < s + window; ++b) {
+            const float v = t.material_values(m)[r * t.n_bins() + b];
+            if (!std::isnan(v)) q.v[r * t.n_bins() + b] = static_cast<float>(v + noise(rng));
+          }
+        }
+        if (std::all_of(q.v.begin(), q.v.end(), [](float v) { return std::isnan(v); })) continue;
+        out.push_back(std::move(q));
+      }
+    }
+  }
+  return out;
+}
+
+using SquaredSumFn = SquaredSum (*)(const std::int16_t*, const std::uint8_t*, const std::int16_t*, const std::uint8_t*,
+                                    std::size_t);
+
+SquaredSumFn distance_kernel(const std::string& kernel) {
+#if defined(__aarch64__)
+  if (kernel == "best") return squared_sum_neon;
+#endif
+  (void)kernel;
+  return squared_sum_scalar;
+}
+
+// FixedClassifier's search (fixed_classifier.cpp) with a chosen squared-sum
+// kernel: the query quantised to the table's step with its validity bitset and
+// per-row block range, one kernel call per candidate and row, the exact
+// rational comparison. Returns the best candidate's table index.
+class KernelSearch {
+ public:
+  struct Prepared {
+    std::vector<std::int16_t> q;
+    std::vector<std::uint8_t> mask;
+    std::vector<std::size_t> first, last;
+  };
+
+  KernelSearch(const CompactTable& c, SquaredSumFn fn) : c_(c), fn_(fn) {}
+
+  void prepare(const float* query, Prepared& p) const {
+    const std::uint32_t rows = c_.n_rows(), bins = c_.n_bins();
+    const std::size_t pb = c_.padded_bins(), row_blocks = pb / kCompactBlock;
+    p.q.assign(c_.padded_elements(), 0);
+    p.mask.assign(c_.padded_elements() / kCompactBlock, 0);
+    p.first.assign(rows, row_blocks);
+    p.last.assign(rows, 0);
+    const double inv = 1.0 / c_.step_mm();
+    for (std::uint32_t r = 0; r < rows; ++r) {
+      for (std::uint32_t b = 0; b < bins; ++b) {
+        const float v = query[static_cast<std::size_t>(r) * bins + b];
+        if (std::isnan(v)) continue;
+        const std::size_t i = static_cast<std::size_t>(r) * pb + b;
+        p.q[i] = quantise_to_step(v, inv);
+        p.mask[i / kCompactBlock] = static_cast<std::uint8_t>(p.mask[i / kCompactBlock] | (1u << (i % kCompactBlock)));
+        p.first[r] = std::min(p.first[r], static_cast<std::size_t>(b / kCompactBlock));
+        p.last[r] = b / kCompactBlock + 1;
+      }
+    }
+  }
+
+  std::uint32_t search(const Prepared& p) const {
+    __extension__ typedef unsigned __int128 Wide;
+    const std::size_t row_blocks = c_.padded_bins() / kCompactBlock;
+    bool have = false;
+    SquaredSum best{};
+    std::uint32_t best_index = 0;
+    for (std::size_t k = 0; k < c_.n_candidates(); ++k) {
+      const std::int16_t* e = c_.values(k);
+      const std::uint8_t* em = c_.validity(k);
+      SquaredSum total;
+      for (std::uint32_t r = 0; r < c_.n_rows(); ++r) {
+        if (p.first[r] >= p.last[r]) continue;
+        const std::size_t b0 = r * row_blocks + p.first[r];
+        const SquaredSum s = fn_(p.q.data() + b0 * kCompactBlock, p.mask.data() + b0, e + b0 * kCompactBlock,
+                                 em ? em + b0 : nullptr, p.last[r] - p.first[r]);
+        total.sum += s.sum;
+        total.count += s.count;
+      }
+      if (total.count == 0) continue;
+      // total / count < best / count, exactly (candidates in increasing index: ties keep the lower).
+      if (!have || static_cast<Wide>(total.sum) * best.count < static_cast<Wide>(best.sum) * total.count) {
+        have = true;
+        best = total;
+        best_index = c_.candidates()[k];
+      }
+    }
+    return best_index;
+  }
+
+ private:
+  const CompactTable& c_;
+  SquaredSumFn fn_;
+};
+
+// ---------------------------------------------------------------- per-pixel classification
+
+// Every valid pixel of a fixed-point decode classified among the table's
+// materials by its two features at its combined-depth bin, in integers: the
+// features (Q16 mm) rounded to the table's step (a power of two), each
+// material's two values at that bin from the CompactTable, the nearest by
+// Eq. (12) over the elements valid in both (1 or 2): sum / N compared as
+// sum * (2 / N), ties to the lower index. Pixels whose combined depth is
+// outside the table's bins (600 .. 1203.0 mm for the real database) or that
+// are invalid get kUnclassified.
+class PixelClassifier {
+ public:
+  static constexpr std::uint8_t kUnclassified = 255;
+
+  PixelClassifier(const CompactTable& c, const BinSpec& bins) : n_bins_(c.n_bins()) {
+    if (c.n_rows() != 2) throw std::invalid_argument("per-pixel classification needs the two-row Kinect v2 table");
+    if (c.n_candidates() > 254) throw std::invalid_argument("too many materials for uint8 labels");
+    int exp2 = 0;
+    if (std::frexp(c.step_mm(), &exp2) != 0.5) throw std::invalid_argument("table step is not a power of two");
+    shift_ = kDepthFracBits + (exp2 - 1);  // Q16 mm -> steps: >> (16 + log2 step)
+    if (shift_ < 1 || shift_ > 30) throw std::invalid_argument("table step out of range");
+    // Bin edges in Q8 mm: c_q8 / 256 >= edge  <=>  c_q8 >= ceil(edge * 256).
+    edges_.resize(n_bins_ + 1);
+    for (std::uint32_t j = 0; j <= n_bins_; ++j) {
+      edges_[j] = static_cast<std::int32_t>(std::ceil(bins.lower_edge_mm(j) * 256.0));
+    }
+    inv_width_ = static_cast<std::uint64_t>(4294967296.0 / (bins.width_mm * 256.0));
+    // Per bin, the materials with at least one valid element there.
+    offset_.assign(n_bins_ + 1, 0);
+    for (std::uint32_t b = 0; b < n_bins_; ++b) {
+      offset_[b] = static_cast<std::uint32_t>(e0_.size());
+      for (std::size_t k = 0; k < c.n_candidates(); ++k) {
+        const std::uint8_t* m = c.validity(k);
+        const std::size_t i0 = b, i1 = c.padded_bins() + b;
+        const bool v0 = m == nullptr || ((m[i0 / 8] >> (i0 % 8)) & 1), v1 = m == nullptr || ((m[i1 / 8] >> (i1 % 8)) & 1);
+        if (!v0 && !v1) continue;
+        e0_.push_back(c.values(k)[i0]);
+        e1_.push_back(c.values(k)[i1]);
+        w0_.push_back(v0 ? 1u : 0u);
+        w1_.push_back(v1 ? 1u : 0u);
+        scale_.push_back(v0 && v1 ? 1u : 2u);
+        label_.push_back(static_cast<std::uint8_t>(k));
+      }
+    }
+    offset_[n_bins_] = static_cast<std::uint32_t>(e0_.size());
+  }
+
+  // Labels (candidate index) per pixel; returns the number classified.
+  std::size_t classify(const FixedDecodedFrame& x, std::vector<std::uint8_t>& labels) const {
+    labels.assign(x.pixels, kUnclassified);
+    std::size_t n = 0;
+    const std::int32_t lo = edges_.front(), hi = edges_.back();
+    const std::int32_t half = std::int32_t{1} << (shift_ - 1);
+    for (std::size_t i = 0; i < x.pixels; ++i) {
+      const std::int32_t c = x.combined_q8[i];
+      if (x.flags[i] != 0 || c < lo || c >= hi) continue;
+      auto b = static_cast<std::uint32_t>((static_cast<std::uint64_t>(c - lo) * inv_width_) >> 32);
+      b = std::min(b, n_bins_ - 1);
+      while (b > 0 && c < edges_[b]) --b;
+      while (b + 1 < n_bins_ && c >= edges_[b + 1]) ++b;
+      // (|feature| < 9375 mm in Q16 < 2^30: adding half a step cannot overflow.)
+      const std::int32_t q0 = std::clamp((x.features_q16[0][i] + half) >> shift_, -32767, 32767);
+      const std::int32_t q1 = std::clamp((x.features_q16[1][i] + half) >> shift_, -32767, 32767);
+      std::uint64_t best = UINT64_MAX;
+      std::uint8_t best_label = kUnclassified;
+      for (std::uint32_t k = offset_[b]; k < offset_[b + 1]; ++k) {
+        // |q - e| <= 65534: its square fits uint32 (as in the Eq. (12) kernel).
+        const auto a0 = static_cast<std::uint32_t>(std::abs(q0 - e0_[k]));
+        const auto a1 = static_cast<std::uint32_t>(std::abs(q1 - e1_[k]));
+        const std::uint64_t s =
+            (static_cast<std::uint64_t>(a0 * a0) * w0_[k] + static_cast<std::uint64_t>(a1 * a1) * w1_[k]) * scale_[k];
+        if (s < best) {
+          best = s;
+          best_label = label_[k];
+        }
+      }
+      labels[i] = best_label;
+      n += best_label != kUnclassified;
+    }
+    return n;
+  }
+
+ private:
+  std::uint32_t n_bins_;
+  int shift_ = 0;
+  std::vector<std::int32_t> edges_;
+  std::uint64_t inv_width_ = 0;
+  std::vector<std::uint32_t> offset_;
+  std::vector<std::int16_t> e0_, e1_;
+  std::vector<std::uint32_t> w0_, w1_, scale_;
+  std::vector<std::uint8_t> label_;
+};
+
+// ---------------------------------------------------------------- options
+
+struct Options {
+  std::string op = "all", kernel = "best", db = TOFMAT_DB_DIR;
+  long reps = -1;  // -1: the op's default
+  std::uint32_t window = 0;  // nn/dist: only queries of this window length (0: all)
+};
+
+[[noreturn]] void usage(const char* why) {
+  std::fprintf(stderr,
+               "error: %s\nusage: tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame] [--kernel best|scalar|float]\n"
+               "                          [--reps N] [--db DIR] [--window BINS]\n",
+               why);
+  std::exit(2);
+}
+
+Options parse(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (i + 1 >= argc) usage(("missing value after " + a).c_str());
+    const std::string v = argv[++i];
+    if (a == "--op") {
+      o.op = v;
+    } else if (a == "--kernel") {
+      o.kernel = v;
+    } else if (a == "--reps") {
+      char* end = nullptr;
+      o.reps = std::strtol(v.c_str(), &end, 10);
+      if (*end != '\0' || o.reps < 0) usage("--reps takes a count >= 0");
+    } else if (a == "--db") {
+      o.db = v;
+    } else if (a == "--window") {
+      o.window = static_cast<std::uint32_t>(std::strtoul(v.c_str(), nullptr, 10));
+    } else {
+      usage(("unknown option " + a).c_str());
+    }
+  }
+  const std::vector<std::string> ops{"all", "decode", "roi", "nn", "dist", "frame"};
+  if (std::find(ops.begin(), ops.end(), o.op) == ops.end()) usage("unknown --op");
+  if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float") usage("unknown --kernel");
+  if (o.kernel == "float" && (o.op == "dist" || o.op == "frame")) usage("--kernel float is for decode, roi and nn");
+  return o;
+}
+
+FixedKernel fixed_kernel(const std::string& k) { return k == "scalar" ? FixedKernel::kScalar : FixedKernel::kBest; }
+
+const char* best_name() { return squared_sum_kernel(); }  // "neon" on aarch64, "scalar" elsewhere
+
+std::shared_ptr<const ExemplarTable> load_table(const std::string& dir) {
+  return std::make_shared<const ExemplarTable>(ExemplarTable::from_npy_dir(dir, 600.0, 1200.0));
+}
+
+// ---------------------------------------------------------------- one op (instruction counting)
+
+int run_single(const Options& o) {
+  const long reps = o.reps < 0 ? 1 : o.reps;
+  std::size_t units = 1;
+  if (o.op == "decode" || o.op == "roi") {
+    const Frame f = random_frame(7);
+    if (o.kernel == "float") {
+      const DecodeTables t(f.p0, kPixels);
+      for (long r = 0; r < reps; ++r) {
+        const DecodedFrame d = o.op == "decode" ? decode_frame(f.raw.data(), t)
+                                                : decode_region(f.raw.data(), kWidth, kHeight, t, kRoi);
+        g_sink = g_sink + d.flags[d.pixels / 2];
+      }
+    } else {
+      const FixedDecodeTables t(f.p0, kPixels);
+      const FixedKernel k = fixed_kernel(o.kernel);
+      for (long r = 0; r < reps; ++r) {
+        const FixedDecodedFrame d = o.op == "decode" ? decode_frame_fixed(f.raw.data(), t, {}, k)
+                                                     : decode_region_fixed(f.raw.data(), kWidth, kHeight, t, kRoi, {}, k);
+        g_sink = g_sink + d.combined_q8[d.pixels / 2];
+      }
+    }
+  } else if (o.op == "nn" || o.op == "dist") {
+    const auto table = load_table(o.db);
+    std::vector<Query> qs = make_queries(*table);
+    if (o.window != 0) {
+      qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != o.window; }), qs.end());
+    }
+    units = qs.size();
+    if (o.kernel == "float") {
+      const FloatClassifier fl(table);
+      for (long r = 0; r < reps; ++r) {
+        for (const auto& q : qs) g_sink = g_sink + fl.classify(q.v.data(), q.v.size()).best().index;
+      }
+    } else {
+      const CompactTable c(*table);
+      const KernelSearch ks(c, distance_kernel(o.kernel));
+      KernelSearch::Prepared p;
+      if (o.op == "nn") {
+        for (long r = 0; r < reps; ++r) {
+          for (const auto& q : qs) {
+            ks.prepare(q.v.data(), p);
+            g_sink = g_sink + ks.search(p);
+          }
+        }
+      } else {
+        std::vector<KernelSearch::Prepared> prepared(qs.size());
+        for (std::size_t i = 0; i < qs.size(); ++i) ks.prepare(qs[i].v.data(), prepared[i]);
+        for (long r = 0; r < reps; ++r) {
+          for (const auto& pq : prepared) g_sink = g_sink + ks.search(pq);
+        }
+      }
+    }
+  } else if (o.op == "frame") {
+    const auto table = load_table(o.db);
+    std::vector<std::uint8_t> truth, labels;
+    const Frame f = material_frame(*table, 3, truth);
+    const FixedDecodeTables t(f.p0, kPixels);
+    const CompactTable c(*table);
+    const PixelClassifier pc(c, table->bins());
+    const FixedKernel k = fixed_kernel(o.kernel);
+    for (long r = 0; r < reps; ++r) {
+      const FixedDecodedFrame d = decode_frame_fixed(f.raw.data(), t, {}, k);
+      g_sink = g_sink + static_cast<std::int64_t>(pc.classify(d, labels));
+    }
+  }
+  std::printf("op %s kernel %s (best = %s) reps %ld units %zu\n", o.op.c_str(), o.kernel.c_str(), best_name(), reps,
+              units);
+  return 0;
+}
+
+// ---------------------------------------------------------------- everything (timings on this host)
+
+int run_all(const Options& o) {
+  const long frame_reps = o.reps < 0 ? 11 : o.reps, roi_reps = o.reps < 0 ? 501 : o.reps,
+             nn_reps = o.reps < 0 ? 5 : o.reps;
+  std::printf("tofmat_bench_fixed: best kernel of this build = %s; frames %dx%d; one thread\n\n", best_name(), kWidth,
+              kHeight);
+
+  // Decode: float reference, fixed scalar, fixed best.
+  const Frame f = random_frame(7);
+  const DecodeTables ft(f.p0, kPixels);
+  const FixedDecodeTables xt(f.p0, kPixels);
+  const DecodedFrame ref = decode_frame(f.raw.data(), ft);
+  std::size_t ref_valid = 0;
+  for (auto fl : ref.flags) ref_valid += fl == 0;
+  std::printf("### Decode: 512x424 synthetic frame (depths 500..4500 mm, amplitudes 20..3000 counts, random p0; "
+              "%zu of %zu pixels valid in the float decode)\n\n",
+              ref_valid, kPixels);
+  std::printf("| path | full frame, ms (median of %ld) | 20x20 ROI, us (median of %ld) | max depth error vs float, mm "
+              "(80 / 16 / 120 MHz) | max combined-depth error, mm | pixels valid in both | flags differ |\n",
+              frame_reps, roi_reps);
+  std::printf("|---|---:|---:|---|---:|---:|---:|\n");
+  {
+    const double full = median_seconds(frame_reps, [&] { g_sink = g_sink + decode_frame(f.raw.data(), ft).flags[0]; });
+    const double roi = median_seconds(
+        roi_reps, [&] { g_sink = g_sink + decode_region(f.raw.data(), kWidth, kHeight, ft, kRoi).flags[0]; });
+    std::printf("| float (`decode_frame`, `DecodeTables`) | %.2f | %.1f | (reference) | | %zu | |\n", full * 1e3,
+                roi * 1e6, ref_valid);
+  }
+  for (const char* kname : {"scalar", "best"}) {
+    const FixedKernel k = fixed_kernel(kname);
+    const DecodeError e = compare(ref, decode_frame_fixed(f.raw.data(), xt, {}, k));
+    const double full =
+        median_seconds(frame_reps, [&] { g_sink = g_sink + decode_frame_fixed(f.raw.data(), xt, {}, k).flags[0]; });
+    const double roi = median_seconds(roi_reps, [&] {
+      g_sink = g_sink + decode_region_fixed(f.raw.data(), kWidth, kHeight, xt, kRoi, {}, k).flags[0];
+    });
+    std::printf("| fixed %s%s | %.2f | %.1f | %.5f / %.5f / %.5f | %.4f | %zu | %zu |\n", kname,
+                std::strcmp(kname, "best") == 0 ? (std::string(" (= ") + best_name() + ")").c_str() : "", full * 1e3,
+                roi * 1e6, e.depth_mm[0], e.depth_mm[1], e.depth_mm[2], e.combined_mm, e.both_valid, e.flags_differ);
+  }
+
+  // Nearest neighbour on the real database.
+  const auto table = load_table(o.db);
+  const FloatClassifier fl(table);
+  const FixedClassifier fx(table);
+  const std::vector<Query> qs = make_queries(*table);
+  const KernelSearch ks(fx.compact(), distance_kernel("best"));
+  std::size_t replica_differs = 0;
+  {
+    KernelSearch::Prepared p;
+    for (const auto& q : qs) {
+      ks.prepare(q.v.data(), p);
+      replica_differs += ks.search(p) != fx.classify(q.v.data(), q.v.size()).best().index;
+    }
+  }
+  std::printf("\n### Nearest neighbour (Eq. (12)): real database, %zu materials x %u bins x %u rows, fixed step %g mm "
+              "(compact table %zu bytes); queries as `make bench` (windows of consecutive bins, N(0, 0.3 mm) noise, "
+              "seed 1); time per query = median of %ld passes / queries\n\n",
+              table->n_materials(), table->n_bins(), table->n_rows(), fx.compact().step_mm(),
+              fx.compact().memory_bytes(), nn_reps);
+  std::printf("| window (bins) | queries | float us/query | fixed us/query | float accuracy | fixed accuracy | labels "
+              "differ |\n|---:|---:|---:|---:|---:|---:|---:|\n");
+  for (std::uint32_t w : {1u, 3u, 10u, 30u, 100u}) {
+    std::vector<const Query*> sel;
+    for (const auto& q : qs) {
+      if (q.window == w) sel.push_back(&q);
+    }
+    std::size_t ok_f = 0, ok_x = 0, differ = 0;
+    for (const Query* q : sel) {
+      const auto a = fl.classify(q->v.data(), q->v.size()).best().index;
+      const auto b = fx.classify(q->v.data(), q->v.size()).best().index;
+      ok_f += a == q->material;
+      ok_x += b == q->material;
+      differ += a != b;
+    }
+    const double tf = median_seconds(nn_reps, [&] {
+      for (const Query* q : sel) g_sink = g_sink + fl.classify(q->v.data(), q->v.size()).best().index;
+    });
+    const double tx = median_seconds(nn_reps, [&] {
+      for (const Query* q : sel) g_sink = g_sink + fx.classify(q->v.data(), q->v.size()).best().index;
+    });
+    const double n = static_cast<double>(sel.size());
+    std::printf("| %u | %zu | %.2f | %.2f | %.1f %% | %.1f %% | %zu |\n", w, sel.size(), tf / n * 1e6, tx / n * 1e6,
+                100.0 * static_cast<double>(ok_f) / n, 100.0 * static_cast<double>(ok_x) / n, differ);
+  }
+  std::printf("\n(The benchmark's own search loop, used by `--op nn|dist` for instruction counts, labels %zu of %zu "
+              "queries differently from FixedClassifier.)\n",
+              replica_differs, qs.size());
+
+  // The composite: fixed decode + features + per-pixel classification.
+  std::vector<std::uint8_t> truth, labels;
+  const Frame mf = material_frame(*table, 3, truth);
+  const FixedDecodeTables mt(mf.p0, kPixels);
+  const PixelClassifier pc(fx.compact(), table->bins());
+  const FixedDecodedFrame md = decode_frame_fixed(mf.raw.data(), mt, {}, FixedKernel::kBest);
+  const std::size_t classified = pc.classify(md, labels);
+  std::size_t correct = 0;
+  for (std::size_t i = 0; i < kPixels; ++i) correct += labels[i] == truth[i];
+  // The integer per-pixel labels against FloatClassifier on a one-bin query
+  // holding the pixel's two features (as floats) at its bin, every 97th pixel.
+  std::size_t checked = 0, check_differs = 0;
+  double check_gap = 0.0;  // largest float-distance margin where they differ (mm^2)
+  for (std::size_t i = 0; i < kPixels; i += 97) {
+    if (labels[i] == PixelClassifier::kUnclassified) continue;
+    const std::int32_t b = table->bins().index_of(md.combined_q8[i] / 256.0);
+    if (b < 0) continue;
+    std::vector<float> q(table->elements_per_material(), kNaN);
+    q[static_cast<std::size_t>(b)] = static_cast<float>(md.features_q16[0][i] / 65536.0);
+    q[table->n_bins() + static_cast<std::size_t>(b)] = static_cast<float>(md.features_q16[1][i] / 65536.0);
+    ++checked;
+    const Classification c = fl.classify(q.data(), q.size());
+    if (c.best().index == labels[i]) continue;
+    ++check_differs;
+    for (const auto& m : c.ranking) {
+      if (m.index == labels[i]) check_gap = std::max(check_gap, m.distance - c.best().distance);
+    }
+  }
+  std::printf("\n### Fixed-point full-frame decode + features + per-pixel classification of %zu materials (one core)\n\n"
+              "Scene: depths 610..1190 mm, %zu vertical bands each carrying one material's curves, amplitudes "
+              "300..3000 counts; %zu of %zu pixels classified, %.1f %% of them as their band's material (one bin per pixel); "
+              "check: FloatClassifier on the same two features gives another label at %zu of %zu sampled pixels (there "
+              "the float distances of the two labels differ by at most %.3g mm^2: the features' quantisation to the "
+              "table's step).\n\n",
+              table->n_materials(), table->n_materials(), classified, kPixels,
+              100.0 * static_cast<double>(correct) / static_cast<double>(std::max<std::size_t>(1, classified)),
+              check_differs, checked, check_gap);
+  std::printf("| stage | ms per frame (median of %ld) |\n|---|---:|\n", frame_reps);
+  for (const char* kname : {"scalar", "best"}) {
+    const FixedKernel k = fixed_kernel(kname);
+    const double dec =
+        median_seconds(frame_reps, [&] { g_sink = g_sink + decode_frame_fixed(mf.raw.data(), mt, {}, k).flags[0]; });
+    const double all = median_seconds(frame_reps, [&] {
+      const FixedDecodedFrame d = decode_frame_fixed(mf.raw.data(), mt, {}, k);
+      g_sink = g_sink + static_cast<std::int64_t>(pc.classify(d, labels));
+    });
+    std::printf("| fixed decode (%s kernel) | %.2f |\n", kname, dec * 1e3);
+    std::printf("| fixed decode (%s kernel) + per-pixel classification | %.2f |\n", kname, all * 1e3);
+  }
+  const double cls = median_seconds(frame_reps, [&] { g_sink = g_sink + static_cast<std::int64_t>(pc.classify(md, labels)); });
+  std::printf("| per-pixel classification alone | %.2f |\n", cls * 1e3);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const Options o = parse(argc, argv);
+  try {
+    return o.op == "all" ? run_all(o) : run_single(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tofmat_bench_fixed: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,59 @@
+#!/usr/bin/env bash
+# Guest instructions per frame / ROI / query of tofmat_bench_fixed (aarch64)
+# under qemu-aarch64 with the instruction-counting plugin (qemu_insn_count.c):
+# for each op and kernel, count(R) - count(0) over R reps, divided by R and by
+# the units a rep holds (1 frame, 1 ROI, or the number of queries). Prints a
+# markdown table. Used by `make bench-cross`.
+#   usage: insn_counts.sh PLUGIN.so BENCH_EXECUTABLE DB_DIR [R]
+set -euo pipefail
+plugin=$1 bench=$2 db=$3 reps=${4:-3}
+qemu=${QEMU_AARCH64:-qemu-aarch64}
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+
+# count OP KERNEL R -> "instructions units" (no -L: the executables are static)
+# $window: only queries of that window length (nn, dist; 0 = all five lengths)
+window=0
+count() {
+  "$qemu" -plugin "$plugin" -d plugin "$bench" --op "$1" --kernel "$2" --reps "$3" --db "$db" --window "$window" \
+    >"$tmp/out" 2>"$tmp/err" || { cat "$tmp/err" >&2; exit 1; }
+  local n u
+  n=$(sed -n 's/^insns: //p' "$tmp/err")
+  u=$(sed -n 's/.* units \([0-9]*\)$/\1/p' "$tmp/out")
+  [ -n "$n" ] && [ -n "$u" ] || { echo "no count for $*" >&2; cat "$tmp/out" "$tmp/err" >&2; exit 1; }
+  echo "$n $u"
+}
+
+# per_unit OP KERNEL -> instructions per unit (integer)
+per_unit() {
+  local c0 cr
+  read -r c0 _ < <(count "$1" "$2" 0)
+  read -r cr units < <(count "$1" "$2" "$reps")
+  echo $(((cr - c0) / (reps * units)))
+}
+
+echo "qemu: $("$qemu" --version | head -n 1); R = $reps; instructions per unit = (count(R) - count(0)) / (R x units)"
+echo
+echo "| op | unit | float | fixed scalar | fixed NEON | scalar / NEON | issue's target | met |"
+echo "|---|---|---:|---:|---:|---:|---|---|"
+row() {  # OP UNIT TARGET_RATIO (empty: none) WITH_FLOAT
+  local op=$1 unit=$2 target=$3 fl="" s n ratio met="" tgt=""
+  if [ "$4" = yes ]; then fl=$(per_unit "$op" float); fi
+  s=$(per_unit "$op" scalar)
+  n=$(per_unit "$op" best)
+  ratio=$(awk -v s="$s" -v n="$n" 'BEGIN { printf "%.2f", s / n }')
+  if [ -n "$target" ]; then
+    tgt=">= ${target}x fewer"
+    met=$(awk -v r="$ratio" -v t="$target" 'BEGIN { print (r >= t) ? "yes" : "no" }')
+  fi
+  echo "| $op | $unit | ${fl:--} | $s | $n | $ratio | ${tgt:--} | ${met:--} |"
+}
+row decode "512x424 frame" 2 yes
+row roi "20x20 region" "" yes
+row nn "query (quantise + search 29 materials)" 4 yes
+row dist "query (distance kernel calls only)" 4 no
+for window in 1 10 100; do
+  row dist "query of ${window} bins (distance kernel calls only)" "" no
+done
+window=0
+row frame "frame: decode + per-pixel classification" "" no
