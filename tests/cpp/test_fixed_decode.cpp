@@ -1,8 +1,7 @@
 // The fixed-point decode against the float reference (frame_decode.hpp) over
 // the whole input range, and its NEON kernel against the scalar one bit for
-// bit (aarch64 builds, run under qemu-aarch64). Inputs are built from the
-// phasor model m_j = B + A cos(theta + phi_j), whose decoded phasor is
-// 1.5 A e^{i theta} (the three steps cancel the e^{-i theta} term).
+// bit (aarch64 builds, run under qemu-aarch64). Inputs come from the phasor
+// model of synthetic_raw.hpp.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -17,50 +16,17 @@
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/frame_decode.hpp"
 #include "tofmat/core/raw_lut.hpp"
+#include "synthetic_raw.hpp"
 
 namespace {
 
 using namespace tofmat;
 constexpr double kTwoPi = 2.0 * kPi;
-constexpr double kRange[3] = {1875.0, 9375.0, 1250.0};
+constexpr const double* kRange = tofmat_test::kGroupRangeMm;
 
-// A frame of `n` pixels: raw (9 x n) and p0 (3 x n).
-struct Synthetic {
-  std::size_t n = 0;
-  std::vector<std::int16_t> raw;
-  std::vector<float> p0;
-};
-
-std::int16_t sample(double v) {
-  return static_cast<std::int16_t>(std::clamp(std::nearbyint(v), -static_cast<double>(kRawMaxMagnitude),
-                                              static_cast<double>(kRawMaxMagnitude)));
-}
-
-// Pixels at true depths (per group phase = depth / range turns, plus p0),
-// amplitudes and offsets drawn over the whole range the device produces.
+using Synthetic = tofmat_test::SyntheticFrame;
 Synthetic random_frame(std::size_t n, std::uint32_t seed, bool exact_wraps) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> depth(0.0, 9375.0), p0d(-kPi, kPi), u01(0.0, 1.0);
-  Synthetic s;
-  s.n = n;
-  s.raw.assign(9 * n, 0);
-  s.p0.assign(3 * n, 0.0f);
-  for (std::size_t i = 0; i < n; ++i) {
-    double d = depth(rng);
-    if (exact_wraps && i % 4 == 0) d = kRange[2] * static_cast<double>((i / 4) % 7);  // 0, 1250, ...: every group's wrap
-    if (exact_wraps && i % 4 == 1) d = kRange[0] * static_cast<double>((i / 4) % 5) - 1e-7;  // just below 80 MHz wraps
-    const double amp = std::exp(std::log(3.0) + u01(rng) * (std::log(8000.0) - std::log(3.0)));  // 3 .. 8000 counts
-    const double offset = (u01(rng) - 0.5) * 2.0 * std::max(0.0, 16000.0 - amp);
-    for (std::size_t g = 0; g < 3; ++g) {
-      const double p0 = p0d(rng);
-      s.p0[g * n + i] = static_cast<float>(p0);
-      const double theta = kTwoPi * d / kRange[g] + static_cast<double>(s.p0[g * n + i]);
-      for (std::size_t j = 0; j < 3; ++j) {
-        s.raw[(3 * g + j) * n + i] = sample(offset + amp * std::cos(theta + kPhaseStepsRad[j]));
-      }
-    }
-  }
-  return s;
+  return tofmat_test::synthetic_frame(n, seed, exact_wraps);
 }
 
 double wrapped_diff(double a, double b, double period) { return std::remainder(a - b, period); }

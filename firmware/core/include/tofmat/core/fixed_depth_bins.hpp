@@ -1,0 +1,69 @@
+// Depth-bin accumulation in fixed point (docs/numerics.md): the valid pixels
+// of a fixed-point decoded frame (or region) add their Eq. (10) features, Q16
+// mm, to the bin of their combined depth, Q8 mm, in integer sums. The bin
+// index of every pixel comes from a kernel with a scalar and a NEON version
+// (bit for bit the same); the sums are shared scalar code. The result is the
+// partial query the classifier matches as a hand-held sweep grows.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "tofmat/core/bin_spec.hpp"
+#include "tofmat/core/fixed_decode.hpp"
+
+namespace tofmat {
+
+// A BinSpec in the decode's units: bin = ((depth_q8 - start_q8) * inv_width) >> 32.
+struct FixedBinning {
+  std::int32_t start_q8 = 0;
+  std::int32_t inv_width = 0;  // round(2^32 / (width_mm * 256)) <= 2^30
+  std::uint32_t count = 0;
+  // Throws std::invalid_argument unless the bins lie within +-2^22 mm and are
+  // at least 1/64 mm wide (inv_width <= 2^30: products stay below 2^62).
+  static FixedBinning from(const BinSpec& bins);
+};
+
+// Bin of every pixel: -1 where flags != 0, the depth is invalid, or it lies
+// outside the bins. Exposed for the bit-exactness test.
+void bin_indices_scalar(const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n, const FixedBinning& b,
+                        std::int32_t* bin);
+#if defined(__aarch64__)
+void bin_indices_neon(const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n, const FixedBinning& b,
+                      std::int32_t* bin);
+#endif
+
+class FixedDepthBinAccumulator {
+ public:
+  // Observations one row and bin holds at most: beyond it a bin takes no more
+  // (the Q16 sum then stays below 2^62). A test may ask for fewer.
+  static constexpr std::uint64_t kMaxCount = std::uint64_t{1} << 32;
+
+  // n_rows: 1 or 2 (the decode's two features, d16 - d120 and d80 - d120).
+  FixedDepthBinAccumulator(BinSpec bins, std::uint32_t n_rows = 2, std::uint64_t max_count = kMaxCount);
+
+  // Adds every valid pixel of a decoded frame or region; returns how many.
+  std::size_t add_frame(const FixedDecodedFrame& frame, FixedKernel kernel = FixedKernel::kBest);
+  // n_rows x n_bins means in mm, NaN where a bin holds fewer than min_count
+  // observations: the query for Classifier / FixedClassifier.
+  std::vector<float> query(std::uint64_t min_count = 1) const;
+  std::uint64_t count(std::uint32_t row, std::uint32_t bin) const;
+  std::uint32_t bins_covered(std::uint64_t min_count = 1) const;
+  // Observations refused because their bin was full.
+  std::uint64_t refused() const { return refused_; }
+  void reset();
+  const BinSpec& bins() const { return bins_; }
+
+ private:
+  BinSpec bins_;
+  FixedBinning fixed_;
+  std::uint32_t n_rows_;
+  std::uint64_t max_count_;
+  std::vector<std::int64_t> sum_;  // Q16 mm
+  std::vector<std::uint64_t> count_;
+  std::vector<std::int32_t> bin_;  // per-frame scratch
+  std::uint64_t refused_ = 0;
+};
+
+}  // namespace tofmat

@@ -1,0 +1,110 @@
+#include "tofmat/core/fixed_depth_bins.hpp"
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace tofmat {
+
+FixedBinning FixedBinning::from(const BinSpec& bins) {
+  bins.validate();
+  constexpr double kLimitMm = 4194304.0;  // 2^22 mm: start and end in Q8 fit int32
+  if (!(std::fabs(bins.start_mm) <= kLimitMm && std::fabs(bins.end_mm()) <= kLimitMm && bins.width_mm >= 1.0 / 64.0)) {
+    throw std::invalid_argument("fixed-point bins must lie within +-4194304 mm and be at least 1/64 mm wide");
+  }
+  FixedBinning b;
+  b.start_q8 = static_cast<std::int32_t>(std::llround(bins.start_mm * 256.0));
+  b.inv_width = static_cast<std::int32_t>(std::llround(4294967296.0 / (bins.width_mm * 256.0)));
+  b.count = bins.count;
+  return b;
+}
+
+void bin_indices_scalar(const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n, const FixedBinning& b,
+                        std::int32_t* bin) {
+  for (std::size_t i = 0; i < n; ++i) {
+    // Offsets in int64: depth - start spans up to 2^32 (both within +-2^31).
+    const std::int64_t off = static_cast<std::int64_t>(depth_q8[i]) - b.start_q8;
+    const std::int64_t j = off >= 0 ? (off * b.inv_width) >> 32 : -1;
+    const bool ok = flags[i] == 0 && depth_q8[i] != kFixedInvalid && j < static_cast<std::int64_t>(b.count);
+    bin[i] = ok ? static_cast<std::int32_t>(j) : -1;
+  }
+}
+
+FixedDepthBinAccumulator::FixedDepthBinAccumulator(BinSpec bins, std::uint32_t n_rows, std::uint64_t max_count)
+    : bins_(bins), fixed_(FixedBinning::from(bins)), n_rows_(n_rows), max_count_(max_count) {
+  if (n_rows < 1 || n_rows > 2) throw std::invalid_argument("the decode has two feature rows: n_rows must be 1 or 2");
+  if (max_count < 1 || max_count > kMaxCount) throw std::invalid_argument("max_count must be 1..2^32");
+  sum_.assign(static_cast<std::size_t>(n_rows_) * bins_.count, 0);
+  count_.assign(sum_.size(), 0);
+}
+
+std::size_t FixedDepthBinAccumulator::add_frame(const FixedDecodedFrame& f, FixedKernel kernel) {
+  const std::size_t n = f.pixels;
+  if (f.combined_q8.size() != n || f.flags.size() != n || f.features_q16[0].size() != n || f.features_q16[1].size() != n) {
+    throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
+  }
+  bin_.resize(n);
+#if defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) {
+    bin_indices_neon(f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
+  } else {
+    bin_indices_scalar(f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
+  }
+#else
+  (void)kernel;
+  bin_indices_scalar(f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
+#endif
+  std::size_t added = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int32_t j = bin_[i];
+    if (j < 0) continue;
+    bool any = false;
+    for (std::uint32_t r = 0; r < n_rows_; ++r) {
+      const std::size_t k = static_cast<std::size_t>(r) * bins_.count + static_cast<std::size_t>(j);
+      if (count_[k] >= max_count_) {
+        ++refused_;
+        continue;
+      }
+      sum_[k] += f.features_q16[r][i];
+      ++count_[k];
+      any = true;
+    }
+    added += any;
+  }
+  return added;
+}
+
+std::vector<float> FixedDepthBinAccumulator::query(std::uint64_t min_count) const {
+  std::vector<float> out(sum_.size(), std::numeric_limits<float>::quiet_NaN());
+  const std::uint64_t need = min_count < 1 ? 1 : min_count;
+  for (std::size_t k = 0; k < sum_.size(); ++k) {
+    if (count_[k] >= need) {
+      out[k] = static_cast<float>(static_cast<double>(sum_[k]) / 65536.0 / static_cast<double>(count_[k]));
+    }
+  }
+  return out;
+}
+
+std::uint64_t FixedDepthBinAccumulator::count(std::uint32_t row, std::uint32_t bin) const {
+  if (row >= n_rows_ || bin >= bins_.count) throw std::out_of_range("row or bin outside the accumulator");
+  return count_[static_cast<std::size_t>(row) * bins_.count + bin];
+}
+
+std::uint32_t FixedDepthBinAccumulator::bins_covered(std::uint64_t min_count) const {
+  std::uint32_t n = 0;
+  for (std::uint32_t j = 0; j < bins_.count; ++j) {
+    bool any = false;
+    for (std::uint32_t r = 0; r < n_rows_; ++r) any = any || count_[static_cast<std::size_t>(r) * bins_.count + j] >= std::max<std::uint64_t>(1, min_count);
+    n += any;
+  }
+  return n;
+}
+
+void FixedDepthBinAccumulator::reset() {
+  std::fill(sum_.begin(), sum_.end(), 0);
+  std::fill(count_.begin(), count_.end(), 0);
+  refused_ = 0;
+}
+
+}  // namespace tofmat
