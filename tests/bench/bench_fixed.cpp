@@ -23,9 +23,8 @@
 //   dist    the distance kernel only (queries quantised in set-up)   unit: a query
 //   frame   fixed decode + per-pixel classification                   unit: a frame
 // Kernels: best (NEON on aarch64, scalar elsewhere), scalar, float (decode,
-// roi, nn: the float reference). nn and dist run FixedClassifier's search
-// here with the kernel given (the library's FixedClassifier always uses the
-// build's best); --op all checks that it labels every query as FixedClassifier does.
+// roi, nn: the float reference). nn is FixedClassifier::classify with the
+// kernel given, dist its squared_sums() on queries prepared beforehand.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -224,86 +223,6 @@ std::vector<Query> make_queries(const ExemplarTable& t) {
   return out;
 }
 
-using SquaredSumFn = SquaredSum (*)(const std::int16_t*, const std::uint8_t*, const std::int16_t*, const std::uint8_t*,
-                                    std::size_t);
-
-SquaredSumFn distance_kernel(const std::string& kernel) {
-#if defined(__aarch64__)
-  if (kernel == "best") return squared_sum_neon;
-#endif
-  (void)kernel;
-  return squared_sum_scalar;
-}
-
-// FixedClassifier's search (fixed_classifier.cpp) with a chosen squared-sum
-// kernel: the query quantised to the table's step with its validity bitset and
-// per-row block range, one kernel call per candidate and row, the exact
-// rational comparison. Returns the best candidate's table index.
-class KernelSearch {
- public:
-  struct Prepared {
-    std::vector<std::int16_t> q;
-    std::vector<std::uint8_t> mask;
-    std::vector<std::size_t> first, last;
-  };
-
-  KernelSearch(const CompactTable& c, SquaredSumFn fn) : c_(c), fn_(fn) {}
-
-  void prepare(const float* query, Prepared& p) const {
-    const std::uint32_t rows = c_.n_rows(), bins = c_.n_bins();
-    const std::size_t pb = c_.padded_bins(), row_blocks = pb / kCompactBlock;
-    p.q.assign(c_.padded_elements(), 0);
-    p.mask.assign(c_.padded_elements() / kCompactBlock, 0);
-    p.first.assign(rows, row_blocks);
-    p.last.assign(rows, 0);
-    const double inv = 1.0 / c_.step_mm();
-    for (std::uint32_t r = 0; r < rows; ++r) {
-      for (std::uint32_t b = 0; b < bins; ++b) {
-        const float v = query[static_cast<std::size_t>(r) * bins + b];
-        if (std::isnan(v)) continue;
-        const std::size_t i = static_cast<std::size_t>(r) * pb + b;
-        p.q[i] = quantise_to_step(v, inv);
-        p.mask[i / kCompactBlock] = static_cast<std::uint8_t>(p.mask[i / kCompactBlock] | (1u << (i % kCompactBlock)));
-        p.first[r] = std::min(p.first[r], static_cast<std::size_t>(b / kCompactBlock));
-        p.last[r] = b / kCompactBlock + 1;
-      }
-    }
-  }
-
-  std::uint32_t search(const Prepared& p) const {
-    __extension__ typedef unsigned __int128 Wide;
-    const std::size_t row_blocks = c_.padded_bins() / kCompactBlock;
-    bool have = false;
-    SquaredSum best{};
-    std::uint32_t best_index = 0;
-    for (std::size_t k = 0; k < c_.n_candidates(); ++k) {
-      const std::int16_t* e = c_.values(k);
-      const std::uint8_t* em = c_.validity(k);
-      SquaredSum total;
-      for (std::uint32_t r = 0; r < c_.n_rows(); ++r) {
-        if (p.first[r] >= p.last[r]) continue;
-        const std::size_t b0 = r * row_blocks + p.first[r];
-        const SquaredSum s = fn_(p.q.data() + b0 * kCompactBlock, p.mask.data() + b0, e + b0 * kCompactBlock,
-                                 em ? em + b0 : nullptr, p.last[r] - p.first[r]);
-        total.sum += s.sum;
-        total.count += s.count;
-      }
-      if (total.count == 0) continue;
-      // total / count < best / count, exactly (candidates in increasing index: ties keep the lower).
-      if (!have || static_cast<Wide>(total.sum) * best.count < static_cast<Wide>(best.sum) * total.count) {
-        have = true;
-        best = total;
-        best_index = c_.candidates()[k];
-      }
-    }
-    return best_index;
-  }
-
- private:
-  const CompactTable& c_;
-  SquaredSumFn fn_;
-};
-
 // ---------------------------------------------------------------- per-pixel classification
 
 // Every valid pixel of a fixed-point decode classified among the table's
@@ -486,21 +405,16 @@ int run_single(const Options& o) {
         for (const auto& q : qs) g_sink = g_sink + fl.classify(q.v.data(), q.v.size()).best().index;
       }
     } else {
-      const CompactTable c(*table);
-      const KernelSearch ks(c, distance_kernel(o.kernel));
-      KernelSearch::Prepared p;
+      const FixedClassifier fx(table, {}, fixed_kernel(o.kernel));
       if (o.op == "nn") {
         for (long r = 0; r < reps; ++r) {
-          for (const auto& q : qs) {
-            ks.prepare(q.v.data(), p);
-            g_sink = g_sink + ks.search(p);
-          }
+          for (const auto& q : qs) g_sink = g_sink + fx.classify(q.v.data(), q.v.size()).best().index;
         }
-      } else {
-        std::vector<KernelSearch::Prepared> prepared(qs.size());
-        for (std::size_t i = 0; i < qs.size(); ++i) ks.prepare(qs[i].v.data(), prepared[i]);
+      } else {  // the squared sums of prepared queries: the distance kernel's calls only
+        std::vector<FixedClassifier::Prepared> prepared;
+        for (const auto& q : qs) prepared.push_back(fx.prepare(q.v.data(), q.v.size()));
         for (long r = 0; r < reps; ++r) {
-          for (const auto& pq : prepared) g_sink = g_sink + ks.search(pq);
+          for (const auto& pq : prepared) g_sink = g_sink + static_cast<std::int64_t>(fx.squared_sums(pq)[0].sum);
         }
       }
     }
@@ -569,15 +483,6 @@ int run_all(const Options& o) {
   const FloatClassifier fl(table);
   const FixedClassifier fx(table);
   const std::vector<Query> qs = make_queries(*table);
-  const KernelSearch ks(fx.compact(), distance_kernel("best"));
-  std::size_t replica_differs = 0;
-  {
-    KernelSearch::Prepared p;
-    for (const auto& q : qs) {
-      ks.prepare(q.v.data(), p);
-      replica_differs += ks.search(p) != fx.classify(q.v.data(), q.v.size()).best().index;
-    }
-  }
   std::printf("\n### Nearest neighbour (Eq. (12)): real database, %zu materials x %u bins x %u rows, fixed step %g mm "
               "(compact table %zu bytes); queries as `make bench` (windows of consecutive bins, N(0, 0.3 mm) noise, "
               "seed 1); time per query = median of %ld passes / queries\n\n",
@@ -608,9 +513,6 @@ int run_all(const Options& o) {
     std::printf("| %u | %zu | %.2f | %.2f | %.1f %% | %.1f %% | %zu |\n", w, sel.size(), tf / n * 1e6, tx / n * 1e6,
                 100.0 * static_cast<double>(ok_f) / n, 100.0 * static_cast<double>(ok_x) / n, differ);
   }
-  std::printf("\n(The benchmark's own search loop, used by `--op nn|dist` for instruction counts, labels %zu of %zu "
-              "queries differently from FixedClassifier.)\n",
-              replica_differs, qs.size());
 
   // The composite: fixed decode + features + per-pixel classification.
   std::vector<std::uint8_t> truth, labels;

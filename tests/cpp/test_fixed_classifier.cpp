@@ -287,3 +287,57 @@ TEST(FixedClassifier, TiesGoToTheLowerIndexAndOutOfRangeValuesSaturate) {
 }
 
 }  // namespace
+
+namespace {
+
+// The batch kernel (every candidate at once, one row range) equals the
+// single-candidate kernel called per candidate and row, and the scalar and
+// best kernels rank alike (NEON on aarch64).
+TEST(FixedKernel, BatchOverCandidatesEqualsSingleCalls) {
+  ASSERT_DB_PRESENT();
+  const auto t = real_tmx();
+  const FixedClassifier best(t, {}, FixedKernel::kBest), scalar(t, {}, FixedKernel::kScalar);
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  for (std::uint32_t window : {1u, 2u, 9u, 17u, 200u}) {
+    for (int k = 0; k < 20; ++k) {
+      std::vector<float> q(t->elements_per_material(), kNaN);
+      const std::uint32_t m = static_cast<std::uint32_t>(rng() % t->n_materials());
+      const std::uint32_t s = static_cast<std::uint32_t>(rng() % (t->n_bins() - window + 1));
+      for (std::uint32_t r = 0; r < t->n_rows(); ++r) {
+        for (std::uint32_t b = s; b < s + window; ++b) {
+          const float v = t->material_values(m)[r * t->n_bins() + b];
+          if (!std::isnan(v)) q[r * t->n_bins() + b] = static_cast<float>(v + noise(rng));
+        }
+      }
+      if (std::all_of(q.begin(), q.end(), [](float v) { return std::isnan(v); })) continue;
+      const auto p = scalar.prepare(q.data(), q.size());
+      const auto sums = scalar.squared_sums(p);
+      const auto sums_best = best.squared_sums(p);
+      const CompactTable& c = scalar.compact();
+      const std::size_t row_blocks = c.padded_bins() / kCompactBlock;
+      for (std::size_t cand = 0; cand < c.n_candidates(); ++cand) {
+        SquaredSum want;
+        for (std::uint32_t r = 0; r < c.n_rows(); ++r) {
+          if (p.first[r] >= p.last[r]) continue;
+          const std::size_t b0 = r * row_blocks + p.first[r];
+          const std::uint8_t* em = c.validity(cand);
+          const auto one = squared_sum_scalar(p.q.data() + b0 * 8, p.mask.data() + b0, c.values(cand) + b0 * 8,
+                                              em ? em + b0 : nullptr, p.last[r] - p.first[r]);
+          want.sum += one.sum;
+          want.count += one.count;
+        }
+        ASSERT_EQ(sums[cand], want) << "window " << window << " candidate " << cand;
+        ASSERT_EQ(sums_best[cand], want) << "window " << window << " candidate " << cand;
+      }
+      const auto a = scalar.classify(q.data(), q.size()), b = best.classify(q.data(), q.size());
+      ASSERT_EQ(a.ranking.size(), b.ranking.size());
+      for (std::size_t i = 0; i < a.ranking.size(); ++i) {
+        ASSERT_EQ(a.ranking[i].index, b.ranking[i].index);
+        ASSERT_EQ(a.ranking[i].distance, b.ranking[i].distance);
+      }
+    }
+  }
+}
+
+}  // namespace

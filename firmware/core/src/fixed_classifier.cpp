@@ -25,11 +25,13 @@ bool ranks_before(const Scored& a, const Scored& b) {
 
 }  // namespace
 
-FixedClassifier::FixedClassifier(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates)
+FixedClassifier::FixedClassifier(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
+                                 FixedKernel kernel)
     : table_(table ? std::move(table) : throw std::invalid_argument("classifier needs a table")),
-      compact_(*table_, std::move(candidates)) {}
+      compact_(*table_, std::move(candidates)),
+      kernel_(kernel) {}
 
-Classification FixedClassifier::classify(const float* query, std::size_t n) const {
+FixedClassifier::Prepared FixedClassifier::prepare(const float* query, std::size_t n) const {
   const std::size_t len = table_->elements_per_material();
   if (n != len) {
     throw std::invalid_argument("query has " + std::to_string(n) + " elements, the table needs " +
@@ -38,11 +40,13 @@ Classification FixedClassifier::classify(const float* query, std::size_t n) cons
   }
   const std::uint32_t rows = compact_.n_rows(), bins = compact_.n_bins();
   const std::size_t pb = compact_.padded_bins(), row_blocks = pb / kCompactBlock;
-  std::vector<std::int16_t> q(compact_.padded_elements(), 0);
-  std::vector<std::uint8_t> qmask(compact_.padded_elements() / kCompactBlock, 0);
+  Prepared p;
+  p.q.assign(compact_.padded_elements(), 0);
+  p.mask.assign(compact_.padded_elements() / kCompactBlock, 0);
   // Per row, the blocks holding valid elements: a partial query (a few bins
   // of a sweep) touches only those.
-  std::vector<std::size_t> first(rows, row_blocks), last(rows, 0);
+  p.first.assign(rows, row_blocks);
+  p.last.assign(rows, 0);
   const double inv = 1.0 / compact_.step_mm();
   bool any = false;
   for (std::uint32_t r = 0; r < rows; ++r) {
@@ -53,31 +57,36 @@ Classification FixedClassifier::classify(const float* query, std::size_t n) cons
       }
       if (std::isnan(query[k])) continue;
       const std::size_t i = static_cast<std::size_t>(r) * pb + b;
-      q[i] = quantise_to_step(query[k], inv);
-      qmask[i / kCompactBlock] = static_cast<std::uint8_t>(qmask[i / kCompactBlock] | (1u << (i % kCompactBlock)));
-      first[r] = std::min(first[r], b / kCompactBlock);
-      last[r] = b / kCompactBlock + 1;
+      p.q[i] = quantise_to_step(query[k], inv);
+      p.mask[i / kCompactBlock] = static_cast<std::uint8_t>(p.mask[i / kCompactBlock] | (1u << (i % kCompactBlock)));
+      p.first[r] = std::min(p.first[r], b / kCompactBlock);
+      p.last[r] = b / kCompactBlock + 1;
       any = true;
     }
   }
   if (!any) throw std::invalid_argument("query has no valid element (all NaN): nothing to classify");
+  return p;
+}
 
+std::vector<SquaredSum> FixedClassifier::squared_sums(const Prepared& p) const {
+  std::vector<SquaredSum> sums(compact_.n_candidates());
+  const std::size_t row_blocks = compact_.padded_bins() / kCompactBlock;
+  for (std::uint32_t r = 0; r < compact_.n_rows(); ++r) {
+    if (p.first[r] >= p.last[r]) continue;
+    const std::size_t block0 = r * row_blocks + p.first[r];
+    tofmat::squared_sums(kernel_, compact_, block0, p.last[r] - p.first[r], p.q.data() + block0 * kCompactBlock,
+                         p.mask.data() + block0, sums.data());
+  }
+  return sums;
+}
+
+Classification FixedClassifier::classify(const float* query, std::size_t n) const {
+  const std::vector<SquaredSum> sums = squared_sums(prepare(query, n));
   std::vector<Scored> scored;
-  scored.reserve(compact_.n_candidates());
-  for (std::size_t c = 0; c < compact_.n_candidates(); ++c) {
-    const std::int16_t* e = compact_.values(c);
-    const std::uint8_t* em = compact_.validity(c);
-    SquaredSum total;
-    for (std::uint32_t r = 0; r < rows; ++r) {
-      if (first[r] >= last[r]) continue;
-      const std::size_t block0 = r * row_blocks + first[r];
-      const SquaredSum s = squared_sum(q.data() + block0 * kCompactBlock, qmask.data() + block0,
-                                       e + block0 * kCompactBlock, em ? em + block0 : nullptr, last[r] - first[r]);
-      total.sum += s.sum;
-      total.count += s.count;
-    }
-    if (total.count == 0) continue;  // nothing in common: this candidate cannot be judged
-    scored.push_back({compact_.candidates()[c], total});
+  scored.reserve(sums.size());
+  for (std::size_t c = 0; c < sums.size(); ++c) {
+    if (sums[c].count == 0) continue;  // nothing in common: this candidate cannot be judged
+    scored.push_back({compact_.candidates()[c], sums[c]});
   }
   if (scored.empty()) throw std::invalid_argument("query shares no valid element with any candidate material");
   std::sort(scored.begin(), scored.end(), ranks_before);

@@ -19,6 +19,17 @@ SquaredSum squared_sum_scalar(const std::int16_t* q, const std::uint8_t* qmask, 
   return out;
 }
 
+void squared_sums_scalar(const CompactTable& table, std::size_t block0, std::size_t blocks, const std::int16_t* q,
+                         const std::uint8_t* qmask, SquaredSum* acc) {
+  for (std::size_t k = 0; k < table.n_candidates(); ++k) {
+    const std::uint8_t* em = table.validity(k);
+    const SquaredSum s = squared_sum_scalar(q, qmask, table.values(k) + block0 * kCompactBlock, em ? em + block0 : nullptr,
+                                            blocks);
+    acc[k].sum += s.sum;
+    acc[k].count += s.count;
+  }
+}
+
 const char* squared_sum_kernel() {
 #if defined(__aarch64__)
   return "neon";

@@ -35,12 +35,10 @@ inline void masked_block(const std::int16_t* q, const std::int16_t* e, unsigned 
   acc = vpadalq_u32(acc, hi);
 }
 
-}  // namespace
+const std::uint16_t kLaneBits[8] = {1, 2, 4, 8, 16, 32, 64, 128};
 
-SquaredSum squared_sum_neon(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
-                            const std::uint8_t* emask, std::size_t blocks) {
-  static const std::uint16_t kLaneBits[8] = {1, 2, 4, 8, 16, 32, 64, 128};
-  const uint16x8_t lane_bits = vld1q_u16(kLaneBits);
+inline SquaredSum squared_sum_body(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
+                                   const std::uint8_t* emask, std::size_t blocks, uint16x8_t lane_bits) {
   uint64x2_t acc = vdupq_n_u64(0);
   std::uint32_t count = 0;
   const auto valid = [&](std::size_t b) -> unsigned { return emask ? (qmask[b] & emask[b]) : qmask[b]; };
@@ -70,6 +68,25 @@ SquaredSum squared_sum_neon(const std::int16_t* q, const std::uint8_t* qmask, co
   out.sum = vgetq_lane_u64(acc, 0) + vgetq_lane_u64(acc, 1);
   out.count = count;
   return out;
+}
+
+}  // namespace
+
+SquaredSum squared_sum_neon(const std::int16_t* q, const std::uint8_t* qmask, const std::int16_t* e,
+                            const std::uint8_t* emask, std::size_t blocks) {
+  return squared_sum_body(q, qmask, e, emask, blocks, vld1q_u16(kLaneBits));
+}
+
+void squared_sums_neon(const CompactTable& table, std::size_t block0, std::size_t blocks, const std::int16_t* q,
+                       const std::uint8_t* qmask, SquaredSum* acc) {
+  const uint16x8_t lane_bits = vld1q_u16(kLaneBits);
+  for (std::size_t k = 0; k < table.n_candidates(); ++k) {
+    const std::uint8_t* em = table.validity(k);
+    const SquaredSum s =
+        squared_sum_body(q, qmask, table.values(k) + block0 * kCompactBlock, em ? em + block0 : nullptr, blocks, lane_bits);
+    acc[k].sum += s.sum;
+    acc[k].count += s.count;
+  }
 }
 
 }  // namespace tofmat

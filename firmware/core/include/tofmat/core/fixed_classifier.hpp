@@ -14,13 +14,29 @@
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/core/fixed_distance.hpp"
+#include "tofmat/core/fixed_kernel.hpp"
 
 namespace tofmat {
 
 class FixedClassifier {
  public:
   // candidates: indices into the table (empty: all); only these are held.
-  explicit FixedClassifier(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates = {});
+  // kernel: the build's best squared-sum kernel, or the scalar one (tests, benchmarks).
+  explicit FixedClassifier(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates = {},
+                           FixedKernel kernel = FixedKernel::kBest);
+
+  // A query in the table's units: int16 steps and validity in the padded
+  // layout, and per row the blocks holding valid elements.
+  struct Prepared {
+    std::vector<std::int16_t> q;
+    std::vector<std::uint8_t> mask;
+    std::vector<std::size_t> first, last;  // per row: blocks [first, last)
+  };
+  // Validates and quantises (the errors of classify()).
+  Prepared prepare(const float* query, std::size_t n) const;
+  // Squared sums of every candidate (in candidates() order) for a prepared query.
+  std::vector<SquaredSum> squared_sums(const Prepared& p) const;
 
   // query: n_rows x n_bins, C order, NaN = missing. Throws
   // std::invalid_argument as FloatClassifier does. A value beyond +-32767
@@ -35,6 +51,7 @@ class FixedClassifier {
  private:
   std::shared_ptr<const ExemplarTable> table_;
   CompactTable compact_;
+  FixedKernel kernel_;
 };
 
 }  // namespace tofmat

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "tofmat/core/fixed_kernel.hpp"
 #include "tofmat/core/frame_decode.hpp"
 
 namespace tofmat {
@@ -40,9 +41,6 @@ struct FixedDecodedFrame {
   std::array<std::vector<std::int32_t>, 2> features_q16;   // d16 - d120, d80 - d120 (wrapped depths)
   std::vector<std::uint8_t> flags;                         // as DecodedFrame::flags
 };
-
-// Which phase/amplitude kernel: the build's best (NEON on aarch64), or scalar.
-enum class FixedKernel { kBest, kScalar };
 
 FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& tables,
                                      const DecodeOptions& options = {}, FixedKernel kernel = FixedKernel::kBest);

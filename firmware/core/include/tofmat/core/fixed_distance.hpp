@@ -8,6 +8,9 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "tofmat/core/compact_table.hpp"
+#include "tofmat/core/fixed_kernel.hpp"
+
 namespace tofmat {
 
 // Sum of (q - e)^2 and the count of elements valid in both.
@@ -38,6 +41,26 @@ inline SquaredSum squared_sum(const std::int16_t* q, const std::uint8_t* qmask, 
 #else
   return squared_sum_scalar(q, qmask, e, emask, blocks);
 #endif
+}
+
+// The same for every candidate of a table at once, over the blocks
+// [block0, block0 + blocks) of its padded layout (one row's range of a
+// query): q and qmask point at the query's block0; adds into acc[k] for
+// candidate k. One call per query row instead of one per candidate and row:
+// a short query (a few bins) costs little more than its arithmetic.
+void squared_sums_scalar(const CompactTable& table, std::size_t block0, std::size_t blocks, const std::int16_t* q,
+                         const std::uint8_t* qmask, SquaredSum* acc);
+#if defined(__aarch64__)
+void squared_sums_neon(const CompactTable& table, std::size_t block0, std::size_t blocks, const std::int16_t* q,
+                       const std::uint8_t* qmask, SquaredSum* acc);
+#endif
+inline void squared_sums(FixedKernel kernel, const CompactTable& table, std::size_t block0, std::size_t blocks,
+                         const std::int16_t* q, const std::uint8_t* qmask, SquaredSum* acc) {
+#if defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) return squared_sums_neon(table, block0, blocks, q, qmask, acc);
+#endif
+  (void)kernel;
+  squared_sums_scalar(table, block0, blocks, q, qmask, acc);
 }
 
 // The name of the build's kernel ("neon" or "scalar"), for benchmarks and logs.
