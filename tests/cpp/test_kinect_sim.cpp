@@ -54,26 +54,33 @@ std::shared_ptr<const Renderer> renderer() {
   return std::make_shared<const Renderer>(d, library());
 }
 
-// Two targets at different depths on a wall, moving 10 mm per frame.
-Scene scene_at(std::uint64_t k) {
+// The white target at (x0, y0)-(x1, y1) and the wax one right of it, on a white wall.
+Scene two_targets(double white_mm, double wax_mm, double wax_yaw_deg, int x0, int y0, int x1, int y1, int wax_x0,
+                  int wax_x1, double wall_mm) {
   Scene s;
   Target a;
   a.material = "white";
-  a.depth_mm = 700.0 + 10.0 * static_cast<double>(k);
-  a.x0 = 100;
-  a.y0 = 100;
-  a.x1 = 240;
-  a.y1 = 300;
+  a.depth_mm = white_mm;
+  a.x0 = x0;
+  a.y0 = y0;
+  a.x1 = x1;
+  a.y1 = y1;
   Target b = a;
   b.material = "wax";
-  b.depth_mm = 1100.0 - 10.0 * static_cast<double>(k);
-  b.yaw_deg = 20.0;
-  b.x0 = 280;
-  b.x1 = 420;
+  b.depth_mm = wax_mm;
+  b.yaw_deg = wax_yaw_deg;
+  b.x0 = wax_x0;
+  b.x1 = wax_x1;
   s.targets = {a, b};
   s.background_material = "white";
-  s.background_depth_mm = 2500.0;
+  s.background_depth_mm = wall_mm;
   return s;
+}
+
+// Two targets at different depths on a wall, moving 10 mm per frame.
+Scene scene_at(std::uint64_t k) {
+  const double step = 10.0 * static_cast<double>(k);
+  return two_targets(700.0 + step, 1100.0 - step, 20.0, 100, 100, 240, 300, 280, 420, 2500.0);
 }
 
 struct Received {
@@ -82,7 +89,8 @@ struct Received {
 };
 
 struct Rig {
-  std::shared_ptr<SimulatedKinect> sim = std::make_shared<SimulatedKinect>(renderer(), scene_at);
+  explicit Rig(SimulatedKinect::SceneAt scene = scene_at) : sim(std::make_shared<SimulatedKinect>(renderer(), scene)) {}
+  std::shared_ptr<SimulatedKinect> sim;
   std::unique_ptr<Kinect2Device> dev;
   std::vector<Received> frames;
 
@@ -385,22 +393,8 @@ namespace {
 // between frames), on a wall 1 m further back.
 constexpr double kDepths[] = {600.0, 900.0, 1249.0, 2000.0, 3500.0};
 Scene stage_at(std::uint64_t k) {
-  Scene s;
-  Target a;
-  a.material = "white";
-  a.depth_mm = kDepths[k % 5];
-  a.x0 = 120;
-  a.y0 = 120;
-  a.x1 = 240;
-  a.y1 = 300;
-  Target b = a;
-  b.material = "wax";
-  b.x0 = 280;
-  b.x1 = 400;
-  s.targets = {a, b};
-  s.background_material = "white";
-  s.background_depth_mm = kDepths[k % 5] + 1000.0;
-  return s;
+  const double d = kDepths[k % 5];
+  return two_targets(d, d, 0.0, 120, 120, 240, 300, 280, 400, d + 1000.0);
 }
 
 }  // namespace
@@ -410,19 +404,13 @@ Scene stage_at(std::uint64_t k) {
 // against the decode of the same scene rendered without noise (the material's
 // and the harmonics' distortion is the simulation's, not an error).
 TEST(KinectSim, EndToEndPerFrequencyDepthsForSeveralMaterialsAndDepths) {
-  auto sim = std::make_shared<SimulatedKinect>(renderer(), stage_at);
-  kinect::DriverOptions o;
-  o.status_poll_ms = 1;
-  Kinect2Device dev(sim->connect(), o);
-  std::vector<Received> frames;
-  dev.start([&](const kinect::DepthPacket& p) {
-    Received r{p.sequence, std::vector<std::int16_t>(9 * kinect::kPixels)};
-    kinect::unpack_depth_packet(p.data, r.raw.data());
-    frames.push_back(std::move(r));
-  });
-  for (int k = 0; k < 5; ++k) dev.pump(10);
-  ASSERT_EQ(frames.size(), 5u);
-  const auto p0 = dev.identity().p0.p0_rad();
+  Rig rig(stage_at);
+  rig.start();
+  rig.pump(5);
+  ASSERT_EQ(rig.frames.size(), 5u);
+  const auto& sim = rig.sim;
+  const auto& frames = rig.frames;
+  const auto p0 = rig.dev->identity().p0.p0_rad();
   const double wavelength[3] = {1875.0, 9375.0, 1250.0};  // c / (2 f) with the device's c = 300 mm/ns
   for (const auto& r : frames) {
     const auto truth = sim->truth(r.sequence);
