@@ -80,12 +80,46 @@ SquaredSum squared_sum_neon(const std::int16_t* q, const std::uint8_t* qmask, co
 void squared_sums_neon(const CompactTable& table, std::size_t block0, std::size_t blocks, const std::int16_t* q,
                        const std::uint8_t* qmask, SquaredSum* acc) {
   const uint16x8_t lane_bits = vld1q_u16(kLaneBits);
-  for (std::size_t k = 0; k < table.n_candidates(); ++k) {
-    const std::uint8_t* em = table.validity(k);
-    const SquaredSum s =
-        squared_sum_body(q, qmask, table.values(k) + block0 * kCompactBlock, em ? em + block0 : nullptr, blocks, lane_bits);
-    acc[k].sum += s.sum;
-    acc[k].count += s.count;
+  // The query's side once for all candidates, a chunk of blocks at a time:
+  // its values and its lane masks (widened to the squares' 32-bit lanes), and
+  // its count. A candidate without gaps then costs a load, two absolute
+  // differences, two squares, two masks and two accumulations per block.
+  constexpr std::size_t kChunk = 32;
+  int16x8_t qv[kChunk];
+  uint32x4_t mlo[kChunk], mhi[kChunk];
+  for (std::size_t c0 = 0; c0 < blocks; c0 += kChunk) {
+    const std::size_t n = blocks - c0 < kChunk ? blocks - c0 : kChunk;
+    std::uint32_t qcount = 0;
+    for (std::size_t b = 0; b < n; ++b) {
+      const unsigned m = qmask[c0 + b];
+      qcount += static_cast<std::uint32_t>(__builtin_popcount(m));
+      qv[b] = vld1q_s16(q + (c0 + b) * 8);
+      const uint16x8_t lanes = vtstq_u16(vdupq_n_u16(static_cast<std::uint16_t>(m)), lane_bits);
+      mlo[b] = vreinterpretq_u32_s32(vmovl_s16(vreinterpret_s16_u16(vget_low_u16(lanes))));
+      mhi[b] = vreinterpretq_u32_s32(vmovl_high_s16(vreinterpretq_s16_u16(lanes)));
+    }
+    for (std::size_t k = 0; k < table.n_candidates(); ++k) {
+      const std::uint8_t* em = table.validity(k);
+      const std::int16_t* e = table.values(k) + (block0 + c0) * kCompactBlock;
+      if (em) {  // gaps in this candidate: the general kernel
+        const SquaredSum s = squared_sum_body(q + c0 * 8, qmask + c0, e, em + block0 + c0, n, lane_bits);
+        acc[k].sum += s.sum;
+        acc[k].count += s.count;
+        continue;
+      }
+      uint64x2_t sum = vdupq_n_u64(0);
+      for (std::size_t b = 0; b < n; ++b) {
+        const int16x8_t ev = vld1q_s16(e + b * 8);
+        uint32x4_t lo = vreinterpretq_u32_s32(vabdl_s16(vget_low_s16(qv[b]), vget_low_s16(ev)));
+        uint32x4_t hi = vreinterpretq_u32_s32(vabdl_high_s16(qv[b], ev));
+        lo = vandq_u32(vmulq_u32(lo, lo), mlo[b]);
+        hi = vandq_u32(vmulq_u32(hi, hi), mhi[b]);
+        sum = vpadalq_u32(sum, lo);
+        sum = vpadalq_u32(sum, hi);
+      }
+      acc[k].sum += vaddvq_u64(sum);
+      acc[k].count += qcount;
+    }
   }
 }
 
