@@ -54,17 +54,16 @@ void phase_amplitude_scalar(const std::int16_t* m0, const std::int16_t* m1, cons
       y = -y;
       angle = 0x80000000u;
     }
+    // y > 0: x += y >> k, y -= x >> k, angle += atan(2^-k); else the
+    // opposite. Branch-free (the direction is a coin flip per step): m is -1
+    // for "else", and (v ^ m) - m is v or -v.
     for (int k = 0; k < kCordicIterations; ++k) {
       const std::int32_t xs = x >> k, ys = y >> k;  // arithmetic shifts (as NEON's)
-      if (y > 0) {
-        x += ys;
-        y -= xs;
-        angle += kAtanTurns[static_cast<std::size_t>(k)];
-      } else {
-        x -= ys;
-        y += xs;
-        angle -= kAtanTurns[static_cast<std::size_t>(k)];
-      }
+      const std::int32_t m = -static_cast<std::int32_t>(y <= 0);
+      x += (ys ^ m) - m;
+      y -= (xs ^ m) - m;
+      const auto um = static_cast<std::uint32_t>(m);
+      angle += (kAtanTurns[static_cast<std::size_t>(k)] ^ um) - um;
     }
     phase[i] = angle - p0[i];  // mod 2^32: the wrap into [0, 2 pi)
     amp_q8[i] = static_cast<std::uint32_t>((static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * kAmpScale) >>
