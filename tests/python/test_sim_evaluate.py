@@ -65,6 +65,24 @@ def test_distinct_materials_are_all_recognised_leave_one_orientation_out() -> No
     assert ev.top_confusions(result, "both") == []
 
 
+def test_fixed_backend_is_compared_on_the_same_queries() -> None:
+    mats = [mat("fast", 5.0, 0.3), mat("mid", 300.0, 0.6), mat("slow", 3000.0, 0.9)]
+    r = renderer(mats)
+    result, _ = ev.evaluate(r, [m["name"] for m in mats], orientations=(0.0, 20.0, 40.0), stage_mm=STAGE, seed=3,
+                            compare_fixed=True)  # fmt: skip
+    assert sorted(result.fixed_disagreements) == sorted(result.accuracy)  # every feature
+    # Distinct materials: far from any tie, the two backends label every query alike.
+    assert all(d == [] for d in result.fixed_disagreements.values())
+    plain, _ = ev.evaluate(r, [m["name"] for m in mats], orientations=(0.0, 20.0, 40.0), stage_mm=STAGE, seed=3)
+    assert plain.fixed_disagreements == {}
+    # Identical materials: any disagreement must be a near tie of the float path.
+    same = renderer([mat("a", 300.0, 0.6), mat("b", 300.0, 0.6)])
+    tied, _ = ev.evaluate(same, ["a", "b"], orientations=(0.0, 30.0), stage_mm=STAGE, seed=5, compare_fixed=True)
+    for differ in tied.fixed_disagreements.values():
+        for _, _, a, b, margin in differ:
+            assert a != b and 0.0 <= margin < 0.05
+
+
 def test_identical_materials_are_confused_not_crashed() -> None:
     mats = [mat("a", 300.0, 0.6), mat("b", 300.0, 0.6)]
     r = renderer(mats)

@@ -36,8 +36,10 @@ def _renderer(device: str, library: str, threads: int = 0) -> Renderer:
 @click.option("--session-offsets", default="none", show_default=True,
               help="Per-capture row offsets: 'none', 'library' (the spread the calibrated library's fits carry) "
               "or 'S0,S1' (standard deviations in mm of rows 0 and 1).")  # fmt: skip
+@click.option("--compare-fixed", is_flag=True,
+              help="Also classify every query with the fixed-point backend and report where it differs.")
 def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None, step: float, seed: int,
-                 session_offsets: str) -> None:  # fmt: skip
+                 session_offsets: str, compare_fixed: bool) -> None:  # fmt: skip
     """Leave-one-orientation-out nearest neighbour in the paper's protocol (Sec. 5)."""
     from . import evaluate as ev
     from . import plots
@@ -61,7 +63,7 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
         spread = (s0, s1)
     t0 = time.perf_counter()
     result, _ = ev.evaluate(r, names, stage_mm=stage, seed=seed, progress=lambda s: click.echo(s, err=True),
-                            session_offsets_mm=spread)  # fmt: skip
+                            session_offsets_mm=spread, compare_fixed=compare_fixed)  # fmt: skip
     click.echo(f"{len(names)} materials x {len(ev.ORIENTATIONS_DEG)} orientations, stage {stage[0]:g}..{stage[-1]:g} mm "
                f"step {step:g} mm, ROI 20x20 px, session offsets sd {spread[0]:.2f}, {spread[1]:.2f} mm, "
                f"capture {result.capture_seconds:.0f} s")
@@ -74,6 +76,11 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     for name in ("both", "depth", "frequency"):
         plots.confusion_matrix(result.confusion[name], names, f"simulated database, {name} (accuracy {result.accuracy[name]:.1f} %)",
                                out_dir / f"confusion_{name}.png")
+    for name, differ in result.fixed_disagreements.items():
+        n = len(result.materials) * len(ev.ORIENTATIONS_DEG)
+        worst = max((abs(d[4]) for d in differ), default=0.0)
+        click.echo(f"fixed vs float, {name}: {len(differ)} of {n} queries labelled differently"
+                   + (f" (largest float margin between the two labels {worst:.4f} mm^2)" if differ else ""))
     conf = {k: ev.top_confusions(result, k) for k in result.confusion}
     click.echo("most frequent confusions (both): " + ", ".join(f"{t}->{p} {n}" for t, p, n in conf["both"]))
 
@@ -95,6 +102,7 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
         "confusions": conf,
         "stability_orientation": orient,
         "stability_fold": fold,
+        "fixed_disagreements": result.fixed_disagreements,
         "seconds": {"capture": result.capture_seconds, "classify": result.classify_seconds, "total": time.perf_counter() - t0},
     }
     (out_dir / "results.json").write_text(json.dumps(summary, indent=2))

@@ -107,6 +107,10 @@ class Evaluation:
     confusion: dict[str, npt.NDArray[np.int64]] = field(default_factory=dict)  # truth x predicted
     capture_seconds: float = 0.0
     classify_seconds: dict[str, float] = field(default_factory=dict)
+    # The fixed-point backend against the float one on the same queries: per feature, the queries
+    # labelled differently, as (truth, held-out orientation, float label, fixed label, the float
+    # path's margin between the two labels in mm^2).
+    fixed_disagreements: dict[str, list[tuple[str, float, str, str, float]]] = field(default_factory=dict)
 
 
 def exemplar_table(features: list[npt.NDArray[np.float32]], names: list[str]) -> ExemplarTable:
@@ -121,17 +125,27 @@ def leave_one_orientation_out(
     materials: list[str],
     orientations: list[float],
     feature: Callable[[Capture], npt.NDArray[np.float32]],
+    disagreements: list[tuple[str, float, str, str, float]] | None = None,
 ) -> npt.NDArray[np.int64]:
-    """Confusion matrix (truth x predicted) over every material and held-out orientation."""
+    """Confusion matrix (truth x predicted) over every material and held-out orientation, with
+    the float backend. With `disagreements`, the fixed-point backend classifies the same queries
+    and every query it labels differently is appended (see Evaluation.fixed_disagreements)."""
     feats = {k: feature(c) for k, c in captures.items()}
     conf = np.zeros((len(materials), len(materials)), dtype=np.int64)
     for held in orientations:
         names = [f"{m}@{o:g}" for m in materials for o in orientations if o != held]
         train = [feats[(m, o)] for m in materials for o in orientations if o != held]
-        clf = Classifier(exemplar_table(train, names))
+        table = exemplar_table(train, names)
         queries = np.stack([feats[(m, held)] for m in materials])
-        for truth, r in enumerate(clf.classify_batch(queries)):
+        results = Classifier(table).classify_batch(queries)
+        for truth, r in enumerate(results):
             conf[truth, materials.index(r.material.split("@")[0])] += 1
+        if disagreements is None:
+            continue
+        for truth, (a, b) in enumerate(zip(results, Classifier(table, backend="fixed").classify_batch(queries))):
+            if a.material != b.material:
+                d = {m.material: m.distance for m in a.ranking}
+                disagreements.append((materials[truth], held, a.material, b.material, d[b.material] - d[a.material]))
     return conf
 
 
@@ -162,6 +176,7 @@ def evaluate(
     seed: int = 0,
     progress: Callable[[str], None] | None = None,
     session_offsets_mm: tuple[float, float] = (0.0, 0.0),
+    compare_fixed: bool = False,
 ) -> tuple[Evaluation, dict[tuple[str, float], Capture]]:
     stage = np.arange(600.0, 1250.0 + 1e-9, 1.0) if stage_mm is None else stage_mm
     t0 = time.perf_counter()
@@ -179,8 +194,11 @@ def evaluate(
     ev = Evaluation(materials, capture_seconds=time.perf_counter() - t0)
     for name, fn in feature_functions(len(stage)).items():
         t1 = time.perf_counter()
-        conf = leave_one_orientation_out(captures, materials, list(orientations), fn)
+        differ: list[tuple[str, float, str, str, float]] | None = [] if compare_fixed else None
+        conf = leave_one_orientation_out(captures, materials, list(orientations), fn, differ)
         ev.classify_seconds[name] = time.perf_counter() - t1
+        if differ is not None:
+            ev.fixed_disagreements[name] = differ
         ev.confusion[name] = conf
         ev.accuracy[name] = 100.0 * float(np.trace(conf)) / float(conf.sum())
     return ev, captures
