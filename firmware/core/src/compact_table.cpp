@@ -28,7 +28,13 @@ CompactTable::CompactTable(const ExemplarTable& table, std::vector<std::uint32_t
                                   std::to_string(table.n_materials()) + " materials");
     }
   }
-  step_mm_ = table.quant_step_mm() > 0.0 ? table.quant_step_mm() : choose_quant_step_mm(table);
+  // A table read from a .tmx file keeps the file's step (the same int16 values
+  // bit for bit). One built from floats gets four times the step that would
+  // just fit its largest value: queries share the int16 range, and a query
+  // element beyond it saturates, which can reorder candidates; 2 bits of
+  // headroom keep real queries (noise, outliers of a few times the table's
+  // range) inside it.
+  step_mm_ = table.quant_step_mm() > 0.0 ? table.quant_step_mm() : 4.0 * choose_quant_step_mm(table);
   const double inv = 1.0 / step_mm_;
   padded_bins_ = (n_bins_ + kCompactBlock - 1) / kCompactBlock * kCompactBlock;
   const std::size_t len = padded_elements();

@@ -1,26 +1,30 @@
 """Fit the forward model (docs/simulator-model.md, model_np.py) to the real Kinect v2 database.
 
-Shared device parameters (per-frequency harmonics up to h = 13, tap saturation, step gains and
-offsets; sections 2.1 and 3.1 of the spec) and
+Shared device parameters (per-frequency harmonics up to GROUP_HMAX, tap saturation, step gains
+and offsets, scale errors; sections 2.1 and 3.1 of the spec) and
 per-material response parameters are fitted so that the simulated relative distortions (rows
 d16 - d120 and d80 - d120 against the combined depth) match the 29 real curves, with one nuisance
 offset per material and row (each material was captured in its own session).
 
 Staged fit (scipy.optimize.least_squares, finite differences with a block-sparse Jacobian):
 
-1. device: random restarts of the harmonics (fitted in Cartesian form ``a e^{i psi}``, with a
-   small ridge that picks the least-amplitude solution among near-degenerate harmonic pairs) on
-   two pseudo-curves, the median of the typical (near-opaque) materials and the median of the
-   translucent group, first h <= 7, then h <= 13 with the tap saturation;
-2. per material, device fixed: kind selection among exponential / gamma / double (and slab for
-   the thin acrylics), several starting points each; the per-sample noise of section 4.1 for
-   curves that show the 120 MHz wrap inside the averaging (fakeleather);
-3. joint refinement of the device (harmonics, saturation sharpness, step gains, step offsets,
-   scale errors) and all materials, each material weighted by 1/sqrt(its rms) so that the fit
-   aims at the median of the per-material rms rather than at the worst curves;
+1. device: random restarts of the low harmonics h <= 7 (fitted in Cartesian form
+   ``a e^{i psi}``, with a small ridge that picks the least-amplitude solution among
+   near-degenerate harmonic pairs) on two pseudo-curves, the median of the typical (near-opaque)
+   materials and the median of the translucent group; the best restart goes on to all harmonics
+   (GROUP_HMAX) with the tap saturation;
+2. per material, device fixed: kind selection among exponential / gamma / double / slab (a
+   nominal 1 mm layer with a fitted path factor unless the thickness is known), several starting
+   points each; the per-sample noise of section 4.1 for curves that show the 120 MHz wrap
+   inside the averaging (fakeleather);
+3. joint refinement of the device (harmonics, saturation sharpness, full wells W_80 and W_120,
+   step gains, step offsets, scale errors) and all materials, in passes that reweight each
+   material by 1 / rms^WEIGHT_EXP (rms clipped to [WEIGHT_FLOOR_MM, WEIGHT_CAP_MM]) so that the
+   fit aims at the median of the per-material rms rather than at the worst curves; the pass with
+   the lowest median is kept;
 4. gauge: the median per-capture offsets are moved into the device's decode offsets
-   (``regauge``, exact), then (2) (warm, chosen kind only), (3) and (4) once more, and a report
-   in ``bin`` mode (the database's averaging, 0.25 mm sweep).
+   (``regauge``, exact); then KIND_CYCLES times (2) (every kind again, warm starts), (3) and (4),
+   and a report in ``bin`` mode (the database's averaging, 0.25 mm sweep).
 
 Re-run: ``python -m tofmat.sim.calibrate --db shared/data/tanaka2017_kinect2_db --out <dir>``
 writes ``<dir>/data/devices/kinect2_tanaka2017.json``, ``<dir>/data/materials/tanaka2017.json``
@@ -54,6 +58,11 @@ State: TypeAlias = dict[StateKey, float]
 # ---------------------------------------------------------------------------------------------
 THIN_ACRYLICS = {"acryl1mm": 1.0, "acryl2mm": 2.0, "acryl3mm": 3.0}
 ACRYLIC_N = 1.49
+# Every kind is a candidate for every material: a slab (a scattering layer on a backing) for a
+# material whose thickness is not known gets this nominal thickness, and the fitted path factor
+# sets its round-trip time (T = path_factor * 2 * thickness * n / c, 10 ps .. 3 ns)
+SLAB_ALL = True
+SLAB_NOMINAL_MM = 1.0
 HMAX = 32  # highest harmonic of the device model (spec section 2.1; the C++ simulator's limit)
 # highest fitted harmonic per group (80, 16, 120 MHz): the 16 MHz correlation waveform has the
 # sharpest features (its fitted amplitudes still grow at h = 25, and acryl / silicone /
@@ -65,25 +74,32 @@ HARMONICS_FIT = tuple(h for h in range(2, HMAX + 1) if h % 3)  # h = 3k cancel (
 GROUPS = (80, 16, 120)
 RIDGE = 10.0  # ridge on the harmonics' Cartesian coordinates, times sqrt(number of curves)
 OFFSET_PRIOR_MM = 10.0  # prior on the per-capture offsets: levels must come from the model
-FIT_GRID = (450.0, 1400.0, 1.5)
-COARSE_GRID = (450.0, 1400.0, 2.0)
+# sweeps of the fit (interp mode): the rows are smooth on the 3 mm bins (a 3 mm sweep changes
+# the per-material rms by < 0.001 mm against 1.5 mm) and the saturation dominates the cost
+FIT_GRID = (450.0, 1400.0, 3.0)
+COARSE_GRID = (450.0, 1400.0, 3.0)
 REPORT_GRID = (450.0, 1400.0, 0.25)
 SATURATION = True  # spec section 3.1 (tap full well); False: the linear model
 # device terms beyond the harmonics freed in the joint stage (section 2: step gains g_j, step
 # offsets o_j, scale errors s_f)
 # and full wells W_80, W_120 (W_16 = 1 is the albedo's unit)
 JOINT_DEVICE_EXTRAS = {"gain": True, "off": True, "scale": True, "full_well": True}
-# Joint fit: material weight 1 / max(rms, floor)^WEIGHT_EXP, recomputed before every pass
-# (iteratively reweighted): exponent 1 makes every material's curve count alike (the objective
-# tends to sum(log rms), aimed at the median), where 1/sqrt(rms) (~ sum of rms) let the few
-# curves a kernel cannot represent (fakeleather's noise, copper) steer the shared device.
-WEIGHT_FLOOR_MM = 0.3
-WEIGHT_EXP = 1.0
+# Joint fit: material weight 1 / clip(rms, floor, cap)^WEIGHT_EXP, recomputed before every pass
+# (iteratively reweighted). 1/sqrt(rms) (~ sum of rms) let the few curves a kernel cannot
+# represent (fakeleather's noise, copper) steer the shared device; a steeper weight aims at the
+# median; the floor stops curves already at the bin noise (~0.4 mm) from taking over, the cap
+# keeps the worst curves in play (the 2 mm bound).
+WEIGHT_FLOOR_MM = 0.45
+WEIGHT_CAP_MM = 1.5
+WEIGHT_EXP = 1.5
 # Joint passes per round (each max JOINT_NFEV function evaluations, then reweighted): the joint
 # fit is far from converged after one pass; the state with the lowest median rms is kept.
-JOINT_PASSES = (2, 7)
-# rounds after the first: choose each material's kind again against the refined device
+JOINT_PASSES = (2, 5)
+# rounds after the first: choose each material's kind again against the refined device, then
+# the joint passes, KIND_CYCLES times (the joint fit plateaus after a few passes; a new kind
+# choice moves it on)
 KIND_RESELECT = True
+KIND_CYCLES = 2
 JOINT_NFEV = 30
 
 DEV_BOUNDS = {
@@ -213,7 +229,7 @@ def _device_arrays(st: State) -> _DeviceArrays:
 
 
 def state_to_material(st: State, i: int, name: str, kind: str) -> dict[str, Any]:
-    thick = THIN_ACRYLICS.get(name, 0.0)
+    thick = THIN_ACRYLICS.get(name, SLAB_NOMINAL_MM if kind == "slab" else 0.0)
     n = ACRYLIC_N if name.startswith("acryl") else 1.5
     mat: dict[str, Any] = {
         "name": name, "kind": kind, "albedo": float(10.0 ** st[("lr", i)]) if SATURATION else 1.0, "subsurface": 0.0, "tau_ps": 100.0,
@@ -491,7 +507,7 @@ def stage_device(
     prob = Problem(np.stack(curves_), names, bins, grid=COARSE_GRID)
     kinds = ["exponential"] * len(names)
     idx = list(range(len(names)))
-    out = []
+    low = []
     for r in range(restarts):
         st = _default_state(names)
         for g in range(3):
@@ -509,17 +525,25 @@ def stage_device(
         _init_offsets(prob, st, kinds, idx)
         free: dict[int, tuple[str, ...]] = {i: ("b", "lt", "o0", "o1") for i in idx}
         prob.setup(st, kinds, idx, _dev_keys(HARMONICS_LOW, sat=False), free)
-        prob.solve(max_nfev=80)
-        if SATURATION:
-            free = {i: ("b", "lt", "o0", "o1", "lr") for i in idx}
-        prob.setup(prob.st, kinds, idx, _dev_keys(HARMONICS_FIT), free)
+        res = prob.solve(max_nfev=80)
+        rms = prob.rms(prob.st, kinds, idx)
+        log(f"  restart {r:2d} (h <= 7): rms "
+            + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms)) + f" mm (cost {res.cost:.1f})")
+        low.append((float(res.cost), prob.st))
+    # the multimodal part is the low harmonics' phases: only the best restarts go on to all
+    # harmonics with the tap saturation (the expensive fit)
+    low.sort(key=lambda t: t[0])
+    out = []
+    for r, (_, st) in enumerate(low[:keep]):
+        free = {i: ("b", "lt", "o0", "o1") + (("lr",) if SATURATION else ()) for i in idx}
+        prob.setup(st, kinds, idx, _dev_keys(HARMONICS_FIT), free)
         res = prob.solve(max_nfev=150)
         rms = prob.rms(prob.st, kinds, idx)
-        log(f"  restart {r:2d}: rms " + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms))
-            + f" mm (cost {res.cost:.1f})")  # fmt: skip
-        out.append((res.cost, prob.st))
+        log(f"  best {r + 1}, all harmonics: rms "
+            + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms)) + f" mm (cost {res.cost:.1f})")
+        out.append((float(res.cost), prob.st))
     out.sort(key=lambda t: t[0])
-    return [s for _, s in out[:keep]]
+    return [s for _, s in out]
 
 
 def joint_refine(
@@ -533,7 +557,7 @@ def joint_refine(
     best = (float(np.median(rms)), dict(st))
     for k in range(passes):
         prob.weights = np.ones(len(prob.Y))
-        prob.weights[list(idx)] = 1.0 / np.maximum(rms, WEIGHT_FLOOR_MM) ** WEIGHT_EXP
+        prob.weights[list(idx)] = 1.0 / np.clip(rms, WEIGHT_FLOOR_MM, WEIGHT_CAP_MM) ** WEIGHT_EXP
         prob.setup(st, kinds, idx, _dev_keys(HARMONICS_FIT, **JOINT_DEVICE_EXTRAS), mat_free)
         res = prob.solve(max_nfev=nfev)
         st = prob.st
@@ -564,7 +588,7 @@ def fit_material(
             s[("lt", i)], s[("b", i)], s[("lr", i)] = lt, b0, lr
             if kind == "gamma":
                 s[("lk", i)] = -0.3 if kinds[i] != "gamma" else st[("lk", i)]
-            if kind == "slab":
+            if kind == "slab" and kinds[i] != "slab":  # (warm: keep the slab's own terms)
                 s[("beta", i)], s[("lpf", i)] = 0.3, 1.0
             if kind == "double" and kinds[i] != "double":
                 s[("w", i)], s[("lt2", i)] = 0.3, min(lt + 1.5, 4.5)
@@ -683,12 +707,15 @@ def calibrate(
         + (", ".join(names[i] for i in sorted(noisy)) or "none"))  # fmt: skip
 
     kind_scores: dict[str, dict[str, float]] = {}
-    for rnd in range(rounds):
+    # rounds after the first run KIND_CYCLES cycles of (kind selection, joint passes, gauge)
+    schedule = [0] + [r for r in range(1, rounds) for _ in range(KIND_CYCLES)]
+    for rnd in schedule:
         # ---- stage 2: per-material kinds, device fixed -----------------------------------
         log(f"round {rnd + 1}: stage 2, per-material kind selection (device fixed)")
         for i in allidx:
             name = names[i]
-            cand = ["exponential", "gamma", "double"] + (["slab"] if name in THIN_ACRYLICS else [])
+            cand = ["exponential", "gamma", "double"] + (
+                ["slab"] if SLAB_ALL or name in THIN_ACRYLICS else [])
             if rnd == 0:
                 kind, st_i, rms_i, scores = fit_material(prob, st, kinds, i, cand, i in noisy)
             elif KIND_RESELECT:  # every kind again against the refined device, warm starts
@@ -743,7 +770,9 @@ def calibrate(
         kind_scores=kind_scores,
         log=logs,
         config={"restarts": restarts, "seed": seed, "rounds": rounds, "bins": list(bins),
-                "h_max": HMAX, "group_h_max": list(GROUP_HMAX), "ridge": RIDGE, "offset_prior_mm": OFFSET_PRIOR_MM},  # fmt: skip
+                "h_max": HMAX, "group_h_max": list(GROUP_HMAX), "ridge": RIDGE, "offset_prior_mm": OFFSET_PRIOR_MM,
+                "weight": {"exp": WEIGHT_EXP, "floor_mm": WEIGHT_FLOOR_MM, "cap_mm": WEIGHT_CAP_MM},
+                "joint_passes": list(JOINT_PASSES), "joint_nfev": JOINT_NFEV, "kind_cycles": KIND_CYCLES},  # fmt: skip
     )
 
 
@@ -774,7 +803,8 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
             device[k] = tpl[k]
     device["notes"] = (
         "Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the 29 "
-        "real curves (docs/simulator-model.md with its extensions: harmonics to h = 19/25/19, tap "
+        "real curves (docs/simulator-model.md with its extensions: harmonics to h = "
+        + "/".join(str(h) for h in GROUP_HMAX) + ", tap "
         "full-well saturation with full_well in units of the 16 MHz tap signal of an albedo-1 "
         "target at range_ref_mm, signal_scale per group, decode offsets carrying the common row "
         "levels). camera/noise/pixel_phase/signal are not fitted (copied from the ideal profile)."
@@ -783,7 +813,7 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
         "source": "tofmat.sim.calibrate against shared/data/tanaka2017_kinect2_db (29 materials)",
         "median_rms_mm": result.median_rms_mm,
         "runtime_s": result.runtime_s,
-        "gauges": "delta_120 = 0, s_120 = 0, step_gain[0] = 1, step_offset[0] = 0, full_well = 1; "
+        "gauges": "delta_120 = 0, s_120 = 0, step_gain[0] = 1, step_offset[0] = 0, full_well_16 = 1; "
         "the median per-capture offsets are carried by decode_offset_rad",
         **result.config,
     }

@@ -142,10 +142,13 @@ def leave_one_orientation_out(
             conf[truth, materials.index(r.material.split("@")[0])] += 1
         if disagreements is None:
             continue
+        # (Exemplars are "material@orientation": a different orientation of the same material is
+        # the same label.)
         for truth, (a, b) in enumerate(zip(results, Classifier(table, backend="fixed").classify_batch(queries))):
-            if a.material != b.material:
+            la, lb = a.material.split("@")[0], b.material.split("@")[0]
+            if la != lb:
                 d = {m.material: m.distance for m in a.ranking}
-                disagreements.append((materials[truth], held, a.material, b.material, d[b.material] - d[a.material]))
+                disagreements.append((materials[truth], held, la, lb, d[b.material] - d[a.material]))
     return conf
 
 

@@ -21,9 +21,10 @@ class CompactTable {
  public:
   // candidates: indices into `table` (empty: all), kept in increasing order
   // without duplicates. Values are quantised with the table's own step if it
-  // came from a .tmx file (exactly what the file holds), else with the
-  // smallest power-of-two step that fits the largest value in int16
-  // (choose_quant_step_mm). Throws std::invalid_argument on an index out of range.
+  // came from a .tmx file (exactly what the file holds), else with four times
+  // the smallest power-of-two step that fits the largest value in int16
+  // (choose_quant_step_mm): headroom for queries beyond the table's values.
+  // Throws std::invalid_argument on an index out of range.
   explicit CompactTable(const ExemplarTable& table, std::vector<std::uint32_t> candidates = {});
 
   double step_mm() const { return step_mm_; }

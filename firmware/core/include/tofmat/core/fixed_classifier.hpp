@@ -40,8 +40,8 @@ class FixedClassifier {
 
   // query: n_rows x n_bins, C order, NaN = missing. Throws
   // std::invalid_argument as FloatClassifier does. A value beyond +-32767
-  // steps (+-256 mm for the real database's 2^-7 mm) saturates there: far
-  // outside every exemplar, it still ranks last-but-equal (docs/numerics.md).
+  // steps (+-256 mm for the real database's 2^-7 mm) saturates there, and the
+  // ranking is that of the saturated query (docs/numerics.md: the headroom).
   Classification classify(const float* query, std::size_t n) const;
 
   const ExemplarTable& table() const { return *table_; }
