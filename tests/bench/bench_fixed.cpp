@@ -48,6 +48,7 @@
 #include "tofmat/core/fixed_distance.hpp"
 #include "tofmat/core/frame_decode.hpp"
 #include "tofmat/core/raw_lut.hpp"
+#include "synthetic_raw.hpp"
 
 #ifndef TOFMAT_DB_DIR
 #define TOFMAT_DB_DIR "/work/shared/data/tanaka2017_kinect2_db"
@@ -60,8 +61,7 @@ using Clock = std::chrono::steady_clock;
 
 constexpr int kWidth = 512, kHeight = 424;
 constexpr std::size_t kPixels = static_cast<std::size_t>(kWidth) * kHeight;
-constexpr double kTwoPi = 2.0 * kPi;
-constexpr double kRange[3] = {1875.0, 9375.0, 1250.0};  // group order 80, 16, 120 MHz
+constexpr const double* kRange = tofmat_test::kGroupRangeMm;  // group order 80, 16, 120 MHz
 constexpr PixelRegion kRoi{246, 202, 266, 222};          // 20x20 in the middle
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
@@ -74,24 +74,13 @@ struct Frame {
   std::vector<float> p0;          // 3 x kPixels
 };
 
-std::int16_t sample(double v) {
-  const double lim = static_cast<double>(kRawMaxMagnitude);
-  return static_cast<std::int16_t>(std::clamp(std::nearbyint(v), -lim, lim));
-}
-
-// Pixel i from the phasor model m_j = B + A cos(theta_g + phi_j), theta_g =
-// 2 pi d_g / R_g + p0_g (d_g: the depth group g sees), random p0.
+// Pixel i from the phasor model (tests/cpp/synthetic_raw.hpp), random p0.
 template <class Rng>
 void put_pixel(Frame& f, std::size_t i, const double depth_mm[3], double amp, double offset, Rng& rng) {
   std::uniform_real_distribution<double> p0d(-kPi, kPi);
-  for (std::size_t g = 0; g < 3; ++g) {
-    const float p0 = static_cast<float>(p0d(rng));
-    f.p0[g * kPixels + i] = p0;
-    const double theta = kTwoPi * depth_mm[g] / kRange[g] + static_cast<double>(p0);
-    for (std::size_t j = 0; j < 3; ++j) {
-      f.raw[(3 * g + j) * kPixels + i] = sample(offset + amp * std::cos(theta + kPhaseStepsRad[j]));
-    }
-  }
+  float p0[3];
+  for (float& v : p0) v = static_cast<float>(p0d(rng));
+  tofmat_test::put_synthetic_pixel(f.raw.data(), f.p0.data(), kPixels, i, depth_mm, p0, amp, offset);
 }
 
 Frame empty_frame() {

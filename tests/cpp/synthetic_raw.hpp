@@ -30,6 +30,21 @@ inline std::int16_t raw_sample(double v) {
                                               static_cast<double>(tofmat::kRawMaxMagnitude)));
 }
 
+// Pixel i of a frame of n pixels (raw: 9 x n, p0_out: 3 x n): group g sees
+// depth_mm[g] (a material distorts each frequency differently) through the
+// per-pixel correction p0[g]; samples B + A cos(theta + phi_j), rounded and
+// clamped to the 11-bit code's range.
+inline void put_synthetic_pixel(std::int16_t* raw, float* p0_out, std::size_t n, std::size_t i,
+                                const double depth_mm[3], const float p0[3], double amp, double offset) {
+  for (std::size_t g = 0; g < 3; ++g) {
+    p0_out[g * n + i] = p0[g];
+    const double theta = 2.0 * tofmat::kPi * depth_mm[g] / kGroupRangeMm[g] + static_cast<double>(p0[g]);
+    for (std::size_t j = 0; j < 3; ++j) {
+      raw[(3 * g + j) * n + i] = raw_sample(offset + amp * std::cos(theta + tofmat::kPhaseStepsRad[j]));
+    }
+  }
+}
+
 // Pixels at true depths drawn from [min_depth, max_depth) mm (per group phase
 // = depth / range turns, plus p0), amplitudes log-uniform over [min_amp,
 // max_amp] counts, offsets as large as the range allows, random p0. With
@@ -49,13 +64,10 @@ inline SyntheticFrame synthetic_frame(std::size_t n, std::uint32_t seed, bool ex
     if (exact_wraps && i % 4 == 1) d = kGroupRangeMm[0] * static_cast<double>((i / 4) % 5) - 1e-7;
     const double amp = std::exp(std::log(min_amp) + u01(rng) * (std::log(max_amp) - std::log(min_amp)));
     const double offset = (u01(rng) - 0.5) * 2.0 * std::max(0.0, 16000.0 - amp);
-    for (std::size_t g = 0; g < 3; ++g) {
-      s.p0[g * n + i] = static_cast<float>(p0d(rng));
-      const double theta = 2.0 * tofmat::kPi * d / kGroupRangeMm[g] + static_cast<double>(s.p0[g * n + i]);
-      for (std::size_t j = 0; j < 3; ++j) {
-        s.raw[(3 * g + j) * n + i] = raw_sample(offset + amp * std::cos(theta + tofmat::kPhaseStepsRad[j]));
-      }
-    }
+    float p0[3];
+    for (float& v : p0) v = static_cast<float>(p0d(rng));
+    const double dg[3] = {d, d, d};
+    put_synthetic_pixel(s.raw.data(), s.p0.data(), n, i, dg, p0, amp, offset);
   }
   return s;
 }
