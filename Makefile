@@ -12,8 +12,11 @@ TOFMAT   = $(PYTHON) -m tofmat
 SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 # Debian 12 packages: compilers and build tools, GoogleTest, zlib (CRC-32),
-# clang and its runtime for libFuzzer, libusb-1.0 (the Kinect driver).
-APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev
+# clang and its runtime for libFuzzer, libusb-1.0 (the Kinect driver); for
+# tofmatd: spdlog (logging), CLI11 (flags and config file), OpenCV imgproc
+# (label-map cleaning).
+APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev \
+                libspdlog-dev libcli11-dev libopencv-imgproc-dev
 
 CROSS    := build/aarch64
 # The aarch64 cross build: Debian's cross compiler, qemu user mode, and the

@@ -9,4 +9,6 @@ PYBIND11_MODULE(_tofmat, m) {
   tofmat::py::register_decode(m);
   tofmat::py::register_sim(m);
   tofmat::py::register_kinect(m);
+  tofmat::py::register_client(m);
+  tofmat::py::register_record(m);
 }

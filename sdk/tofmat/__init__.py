@@ -29,12 +29,33 @@ from ._tofmat import (
     unambiguous_range_mm,
 )
 
+from .client import (  # noqa: E402  (after the extension it wraps)
+    AuthenticationError,
+    Client,
+    ClientError,
+    CommandError,
+    ConnectionClosedError,
+    DaemonTimeoutError,
+    DaemonUnavailableError,
+    ProtocolError,
+    ProtocolVersionError,
+)
+
 try:
     __version__ = version("tofmat")
 except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0+unknown"
 
 __all__ = [
+    "AuthenticationError",
+    "Client",
+    "ClientError",
+    "CommandError",
+    "ConnectionClosedError",
+    "DaemonTimeoutError",
+    "DaemonUnavailableError",
+    "ProtocolError",
+    "ProtocolVersionError",
     "SPEED_OF_LIGHT_MM_PER_NS",
     "BinSpec",
     "ClassificationResult",

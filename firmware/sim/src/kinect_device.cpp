@@ -317,6 +317,13 @@ void SimulatedKinect::emit_frame(const kinect::IsoPacketHandler& handler) {
   }
   auto frame = std::make_shared<Frame>(renderer_->render(scene_(index), index + 1));
   const auto seq = static_cast<std::uint32_t>(index);
+  {
+    // The truth is known before the first packet leaves: the driver hands
+    // the frame on from inside the last packet's delivery.
+    std::lock_guard<std::mutex> lock(mutex_);
+    truth_.emplace_back(seq, frame);
+    if (truth_.size() > kTruthKept) truth_.pop_front();
+  }
   // Raw values to 11-bit codes, packed per sub-image; the tenth is unused.
   std::vector<std::uint16_t> codes(kinect::kPixels);
   std::vector<std::uint8_t> sub(kinect::kSubImageBytes);
@@ -343,8 +350,6 @@ void SimulatedKinect::emit_frame(const kinect::IsoPacketHandler& handler) {
   }
   std::lock_guard<std::mutex> lock(mutex_);
   ++counters_.frames;
-  truth_.emplace_back(seq, std::move(frame));
-  if (truth_.size() > kTruthKept) truth_.pop_front();
 }
 
 }  // namespace tofmat::sim

@@ -181,3 +181,31 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
     click.echo(f"float decode, one core (9 samples -> phase, amplitude, per-frequency depth, combined depth, Eq. (10) "
                f"features, flags): full frame median {1e3 * np.median(decode_t):.1f} ms (best {1e3 * min(decode_t):.1f}); "
                f"20x20 ROI median {1e6 * np.median(roi_t):.0f} us (best {1e6 * min(roi_t):.0f}), Python call included")
+
+
+@sim_cli.command("table")
+@click.option("--device", default=DEFAULT_DEVICE, show_default=True, help="Device profile name or path.")
+@click.option("--library", default=DEFAULT_LIBRARY, show_default=True, help="Material library name or path.")
+@click.option("--materials", help="Comma-separated subset (default: the whole library).")
+@click.option("--bins", "n_bins", default=200, show_default=True, help="Depth bins from 600 mm (the real database's).")
+@click.option("--yaw", default=10.0, show_default=True, help="Target orientation, degrees.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx).")
+def table_cmd(device: str, library: str, materials: str | None, n_bins: int, yaw: float, output: Path) -> None:
+    """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against)."""
+    from .. import BinSpec
+    from .table import simulated_table
+
+    r = _renderer(device, library)
+    names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
+    # The real database's binning: bins of (1200 - 600) / (n - 1) mm from 600 mm (3.015 mm for 200).
+    if n_bins < 2:
+        raise click.BadParameter("at least 2 bins", param_hint="--bins")
+    width = (1200.0 - 600.0) / (n_bins - 1)
+    t0 = time.perf_counter()
+    try:
+        table = simulated_table(r, names, BinSpec(600.0, width, n_bins), yaw_deg=yaw)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from e
+    output.parent.mkdir(parents=True, exist_ok=True)
+    table.save(str(output))
+    click.echo(f"{output}: {len(names)} materials x 2 rows x {n_bins} bins, recorded in {time.perf_counter() - t0:.1f} s")

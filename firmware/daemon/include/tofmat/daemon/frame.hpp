@@ -1,0 +1,45 @@
+// What travels from a source (USB/event thread) to the processing thread: one
+// depth frame as the nine raw phase-step images, the device's P0 corrections
+// it must be decoded with, and, for the simulated camera, the ground truth.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tofmat/core/fixed_decode.hpp"
+#include "tofmat/core/frame_decode.hpp"
+
+namespace tofmat::daemon {
+
+inline constexpr int kWidth = 512;
+inline constexpr int kHeight = 424;
+inline constexpr std::size_t kPixels = static_cast<std::size_t>(kWidth) * kHeight;
+
+// The decode's per-pixel corrections, built once per device start (the P0
+// tables do not change while the camera streams) and shared by its frames.
+struct Calibration {
+  explicit Calibration(const std::vector<float>& p0)
+      : p0_rad(p0), float_tables(p0, kPixels), fixed_tables(p0, kPixels) {}
+  std::vector<float> p0_rad;  // 3 x kPixels
+  DecodeTables float_tables;
+  FixedDecodeTables fixed_tables;
+};
+
+// Ground truth of a simulated frame: per pixel, the index into `materials` of
+// the target seen there (-1: none), and the true depth.
+struct FrameTruth {
+  std::vector<std::string> materials;
+  std::vector<std::int16_t> target;  // kPixels
+  std::vector<float> depth_mm;       // kPixels, NaN where nothing
+};
+
+struct RawFrame {
+  std::uint64_t sequence = 0;
+  std::uint64_t arrival_ns = 0;  // CLOCK_MONOTONIC when the last packet arrived
+  std::vector<std::int16_t> raw;  // 9 x kPixels, sub-image-major
+  std::shared_ptr<const Calibration> calibration;
+  std::shared_ptr<const FrameTruth> truth;  // null for a real camera
+};
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,65 @@
+// Scene profiles (DESIGN.md section 5): what the daemon computes for a scene,
+// and nothing else. A profile decodes only its pixels, holds only its
+// candidate materials (the compact table's subset at load) and emits events.
+//   handheld      ROI at the centre, depth-bin accumulation, partial matching
+//                 every frame, reset when the target leaves or jumps
+//   segmentation  the full frame, one position (m = 1), per-pixel labels of
+//                 a short candidate list, cleaned with OpenCV
+//   sorting       nothing until a trigger; then a burst of frames over the
+//                 belt ROI, accumulated and classified once
+#pragma once
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/core/frame_decode.hpp"
+#include "tofmat/daemon/frame.hpp"
+#include "tofmat/protocol/messages.hpp"
+
+namespace tofmat::daemon {
+
+enum class Backend { kFixed, kFloat };
+Backend parse_backend(const std::string& name);  // "fixed" | "float"; throws std::invalid_argument
+
+struct ProfileConfig {
+  std::string name = "handheld";
+  Backend backend = Backend::kFixed;
+  PixelRegion roi{232, 188, 280, 236};  // 48 x 48 at the centre
+  std::vector<std::string> candidates;  // empty: every material of the table
+  int top_k = 5;                        // ranking entries in a label event
+  int burst = 8;                        // sorting: frames per trigger
+  double min_valid_fraction = 0.5;      // handheld/sorting: a target fills the ROI
+  double jump_mm = 150.0;               // handheld: a depth jump between frames is a new target
+  int smooth = 5;                       // segmentation: box filter side for the features, median for labels
+};
+
+// Throws std::invalid_argument naming what is wrong (unknown profile,
+// ROI outside the frame, candidate not in the table).
+void validate(const ProfileConfig& config, const ExemplarTable& table);
+
+struct Emitter {
+  std::function<void(const protocol::LabelEvent&)> label;
+  std::function<void(const protocol::LabelMapEvent&)> label_map;
+  std::function<bool(const std::string& kind)> wants_depth;
+  std::function<void(const protocol::DepthEvent&)> depth;
+};
+
+class Profile {
+ public:
+  virtual ~Profile() = default;
+  virtual void process(const RawFrame& frame, const Emitter& emit) = 0;
+  virtual void reset() = 0;
+  // sorting: arm a burst of `burst` frames; returns the trigger's number.
+  // Other profiles throw std::logic_error.
+  virtual std::uint64_t trigger(int burst);
+};
+
+// Throws std::invalid_argument (as validate()).
+std::unique_ptr<Profile> make_profile(const ProfileConfig& config, std::shared_ptr<const ExemplarTable> table);
+
+// Candidate names -> table indices (empty -> empty: all). Throws std::invalid_argument.
+std::vector<std::uint32_t> candidate_indices(const ExemplarTable& table, const std::vector<std::string>& names);
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,72 @@
+// Recordings of the raw stream (`tofmat record`, `--source replay:FILE`):
+// what the camera delivered, so a session can be replayed through the same
+// pipeline. Little-endian, fixed sizes (docs/protocol.md, "Recordings"):
+//   header  "TMREC001", u32 width (512), u32 height (424), u32 flags (0),
+//           3 x width x height float32 P0 corrections (radians, finite)
+//   frames  "FRM1", u64 sequence, u64 time since the first frame (ns),
+//           9 x width x height int16 raw samples
+// A reader checks every size and value range; a recording cut short in the
+// middle of a frame ends at the last whole frame.
+#pragma once
+#include <cstdint>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tofmat/daemon/source.hpp"
+
+namespace tofmat::daemon {
+
+inline constexpr char kRecordingMagic[8] = {'T', 'M', 'R', 'E', 'C', '0', '0', '1'};
+inline constexpr char kFrameMagic[4] = {'F', 'R', 'M', '1'};
+inline constexpr std::size_t kRecordingHeaderBytes = 8 + 12 + 3 * kPixels * sizeof(float);
+inline constexpr std::size_t kRecordedFrameBytes = 4 + 16 + 9 * kPixels * sizeof(std::int16_t);
+
+class RecordingWriter {
+ public:
+  // Throws std::runtime_error if the file cannot be created.
+  RecordingWriter(const std::string& path, const std::vector<float>& p0_rad);
+  void write(const RawFrame& frame);
+  std::uint64_t frames() const { return frames_; }
+  void close();
+
+ private:
+  std::ofstream out_;
+  std::string path_;
+  std::uint64_t frames_ = 0, first_ns_ = 0;
+};
+
+struct RecordedFrame {
+  std::uint64_t sequence = 0, offset_ns = 0;
+  std::vector<std::int16_t> raw;
+};
+
+// Parses a whole recording held in memory (the fuzz target's entry point).
+// Throws tofmat::FormatError (core/error.hpp) naming what is wrong.
+struct Recording {
+  std::vector<float> p0_rad;
+  std::vector<RecordedFrame> frames;
+  bool truncated = false;  // bytes after the last whole frame
+};
+Recording parse_recording(const std::uint8_t* data, std::size_t size, std::size_t max_frames);
+
+// Streams a recording file frame by frame.
+class RecordingReader {
+ public:
+  explicit RecordingReader(const std::string& path);  // reads and checks the header
+  const std::vector<float>& p0_rad() const { return p0_rad_; }
+  // The next frame; nothing at the end (or at a cut-short frame). Throws FormatError.
+  std::optional<RecordedFrame> next();
+  void rewind();
+
+ private:
+  std::ifstream in_;
+  std::string path_;
+  std::vector<float> p0_rad_;
+};
+
+// `replay:FILE[,loop=1]`: plays the frames at the pace they were recorded.
+std::unique_ptr<Source> make_replay_source(const std::string& spec);
+
+}  // namespace tofmat::daemon

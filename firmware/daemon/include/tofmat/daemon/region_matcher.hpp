@@ -1,0 +1,52 @@
+// Decode of a pixel region, depth-bin accumulation of its Eq. (10) features
+// and Eq. (12) partial matching, on the fixed-point path (the default) or the
+// float reference: what the handheld and sorting profiles share.
+#pragma once
+#include <memory>
+#include <optional>
+#include <variant>
+
+#include "tofmat/core/classifier.hpp"
+#include "tofmat/core/depth_bins.hpp"
+#include "tofmat/core/fixed_classifier.hpp"
+#include "tofmat/core/fixed_decode.hpp"
+#include "tofmat/core/fixed_depth_bins.hpp"
+#include "tofmat/daemon/profile.hpp"
+
+namespace tofmat::daemon {
+
+class RegionMatcher {
+ public:
+  RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend);
+
+  struct Decoded {
+    std::variant<DecodedFrame, FixedDecodedFrame> frame;
+    PixelRegion region;
+    std::size_t pixels = 0, valid = 0;
+    double median_mm = 0.0;  // combined depth of the valid pixels (NaN if none)
+  };
+  Decoded decode(const RawFrame& frame, const PixelRegion& region) const;
+  void accumulate(const Decoded& d);
+  // Eq. (12) on the query so far; nothing while no bin holds an observation.
+  std::optional<Classification> classify() const;
+  std::uint32_t bins_covered() const;
+  void reset();
+  // The label event of a classification (ranking cut to top_k).
+  protocol::LabelEvent label_event(const Classification& c, int top_k) const;
+  // Depth images of a decoded region for the subscribers that want them.
+  static void emit_depths(const Decoded& d, const RawFrame& frame, const Emitter& emit);
+
+ private:
+  std::shared_ptr<const ExemplarTable> table_;
+  Backend backend_;
+  std::unique_ptr<FixedClassifier> fixed_;
+  std::unique_ptr<FloatClassifier> float_;
+  FixedDepthBinAccumulator fixed_acc_;
+  DepthBinAccumulator float_acc_;
+};
+
+// Ground truth of a region for a simulated frame: the material most of the
+// region's target pixels show and their mean true depth (nothing if no truth).
+std::optional<protocol::Truth> region_truth(const RawFrame& frame, const PixelRegion& region);
+
+}  // namespace tofmat::daemon

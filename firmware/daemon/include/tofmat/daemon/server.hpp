@@ -1,0 +1,84 @@
+// tofmatd's socket server: one thread polling the listening sockets (Unix,
+// and TCP when configured), every client connection and a wake-up eventfd.
+// It does the hello handshake (protocol version; the token on TCP), keeps
+// each client's subscriptions, passes commands to the daemon's handler, and
+// fans published events out to the subscribers. Every client has a bounded
+// send queue: a client that does not read loses its oldest events (counted),
+// and never slows the pipeline or the other clients. A malformed message, a
+// failed handshake or a hello that does not come in time closes that
+// connection only.
+#pragma once
+#include <atomic>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "tofmat/protocol/messages.hpp"
+#include "tofmat/protocol/socket.hpp"
+
+namespace tofmat::daemon {
+
+struct ServerOptions {
+  std::string socket_path;      // "" = no Unix socket
+  unsigned socket_mode = 0660;
+  std::string tcp;              // "host:port" ("" = no TCP); needs a token
+  std::string token;
+  std::size_t max_clients = 64;
+  std::size_t max_queue_bytes = 16u << 20;  // per client
+  int hello_timeout_ms = 5000;
+  std::string server_name = "tofmatd";
+  std::vector<std::string> capabilities;
+};
+
+// The streams a client can subscribe to.
+bool valid_stream(const std::string& stream);
+
+class Server {
+ public:
+  using Handler = std::function<protocol::Reply(const protocol::Request&)>;
+  // Opens the listening sockets; throws protocol::SocketError / std::invalid_argument.
+  Server(ServerOptions options, Handler handler);
+  ~Server();
+
+  // Any thread: queue a message for every subscriber of `stream`.
+  void publish(const std::string& stream, const protocol::Message& message);
+  // Whether anyone is subscribed (cheap: the profile skips work nobody wants).
+  bool has_subscribers(const std::string& stream) const;
+  void run(const std::atomic<bool>& stop);
+  void wake();
+  std::uint16_t tcp_port() const { return tcp_port_; }
+  nlohmann::json status() const;
+
+ private:
+  struct Connection;
+  void accept_from(int listener, bool tcp);
+  void read_from(Connection& c);
+  void handle(Connection& c, const protocol::Message& m);
+  void reply(Connection& c, const protocol::Reply& r);
+  void enqueue(Connection& c, std::shared_ptr<const std::vector<std::uint8_t>> bytes);
+  void write_to(Connection& c);
+  void refresh_subscriptions();
+
+  ServerOptions options_;
+  Handler handler_;
+  protocol::Fd unix_, tcp_, wake_fd_;
+  std::uint16_t tcp_port_ = 0;
+  std::map<std::uint64_t, std::unique_ptr<Connection>> connections_;  // server thread only
+  std::uint64_t next_id_ = 1;
+  // Published messages waiting for the server thread (bounded, oldest dropped).
+  mutable std::mutex inbox_mutex_;
+  std::vector<std::pair<std::string, std::shared_ptr<const std::vector<std::uint8_t>>>> inbox_;
+  std::set<std::string> subscribed_;  // union of all clients' streams (under inbox_mutex_)
+  // Counters.
+  std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, dropped_events_{0},
+      inbox_dropped_{0};
+  std::atomic<std::size_t> clients_{0};
+};
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,47 @@
+// `--source sim[:SCENE[,key=value...]]`: the simulated Kinect v2 (firmware/sim)
+// behind the driver, looking at a scripted scene, with its ground truth.
+//
+// Scenes:
+//   sweep    (default) targets of `materials` one after another, each moved by
+//            hand from `near` to `far` mm over `frames` frames, then `gap`
+//            frames with nothing in front of the camera (a hand-held sweep)
+//   static   one target of the first material at `depth` mm
+//   regions  up to six materials side by side at depths from `near` to
+//            `far` (a scene for the segmentation profile)
+// Keys: materials=a+b+c, frames=N, gap=N, near=MM, far=MM, depth=MM, yaw=DEG,
+// size=PIXELS, realtime=0|1 (30 frames/s, default 1), seed=N,
+// device=NAME, library=NAME, unplug_at=FRAME, replug_ms=MS (the simulated
+// device is unplugged in the middle of that frame and plugged back after MS).
+#pragma once
+#include <string>
+#include <vector>
+
+#include "tofmat/daemon/source.hpp"
+#include "tofmat/sim/scene.hpp"
+
+namespace tofmat::daemon {
+
+struct SimSpec {
+  std::string scene = "sweep";
+  std::vector<std::string> materials = {"cork", "pvc", "wood", "paper", "acryl"};
+  int frames = 90;
+  int gap = 15;
+  double near_mm = 600.0, far_mm = 1200.0, depth_mm = 900.0;
+  double yaw_deg = 10.0;
+  int size = 160;
+  bool realtime = true;
+  std::uint64_t seed = 1;
+  std::string device = "kinect2_tanaka2017";
+  std::string library = "tanaka2017";
+  std::int64_t unplug_at = -1;
+  int replug_ms = 500;
+};
+
+// The text after "sim:" (may be empty). Throws std::invalid_argument.
+SimSpec parse_sim_spec(const std::string& text);
+// The scene at a frame index.
+sim::Scene sim_scene_at(const SimSpec& spec, std::uint64_t frame);
+
+std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions& options);
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,46 @@
+// Frame sources of tofmatd: `kinect` (the libusb driver), `sim[:SCENE]` (the
+// simulated Kinect v2 on the same USB transport and driver) and
+// `replay:FILE` (a recording made by `tofmat record`). A source runs on the
+// daemon's USB/event thread; it survives the device going away: it reports
+// the state, waits, and opens the device again.
+#pragma once
+#include <atomic>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "tofmat/daemon/frame.hpp"
+
+namespace tofmat::daemon {
+
+enum class DeviceState { kOpening, kStreaming, kDisconnected, kStopped };
+const char* device_state_name(DeviceState s);
+
+struct SourceCallbacks {
+  std::function<void(RawFrame&&)> frame;
+  std::function<void(DeviceState, const std::string& message)> state;
+};
+
+class Source {
+ public:
+  virtual ~Source() = default;
+  virtual std::string describe() const = 0;
+  // Runs until `stop` is set (or the source is exhausted: a replay's end).
+  // Reports every state change; never throws for a device problem.
+  virtual void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) = 0;
+  // Counters for status (frames, reconnects, ...).
+  virtual nlohmann::json counters() const = 0;
+};
+
+struct SourceOptions {
+  std::string sim_data_dir;  // device profiles and material libraries of the simulator
+  int retry_ms = 500;        // wait between attempts to open a device that is gone
+};
+
+// "kinect[:SERIAL]", "sim[:SCENE[,key=value...]]", "replay:FILE[,loop=1]".
+// Throws std::invalid_argument with what is wrong with the spec.
+std::unique_ptr<Source> make_source(const std::string& spec, const SourceOptions& options);
+
+}  // namespace tofmat::daemon

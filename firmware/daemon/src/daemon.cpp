@@ -1,0 +1,168 @@
+#include "tofmat/daemon/daemon.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+
+#include "tofmat/core/table_file.hpp"
+
+namespace tofmat::daemon {
+namespace {
+
+constexpr const char* kVersion = "tofmatd 0.1.0";
+
+protocol::Reply failure(std::uint32_t id, const char* code, const std::string& why) {
+  protocol::Reply r;
+  r.id = id;
+  r.ok = false;
+  r.code = code;
+  r.error = why;
+  return r;
+}
+
+}  // namespace
+
+std::shared_ptr<const ExemplarTable> load_table_file(const std::string& path) {
+  if (std::filesystem::is_directory(path))
+    return std::make_shared<const ExemplarTable>(ExemplarTable::from_npy_dir(path, 600.0, 1250.0));  // the database's bins
+  return std::make_shared<const ExemplarTable>(load_table(path));
+}
+
+Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
+  auto table = load_table_file(options_.table);
+  pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
+  options_.server.server_name = kVersion;
+  options_.server.capabilities = {"labels",      "label_map",  "depth",         "device",  "status",
+                                  "reset",       "set_profile", "set_roi",      "set_candidates",
+                                  "load_table",  "trigger"};
+  source_ = make_source(options_.source, options_.source_options);
+  server_ = std::make_unique<Server>(options_.server, [this](const protocol::Request& r) { return handle(r); });
+  Emitter emit;
+  emit.label = [this](const protocol::LabelEvent& e) { server_->publish("labels", protocol::encode_label(e)); };
+  emit.label_map = [this](const protocol::LabelMapEvent& e) {
+    server_->publish("label_map", protocol::encode_label_map(e));
+  };
+  emit.wants_depth = [this](const std::string& kind) { return server_->has_subscribers("depth:" + kind); };
+  emit.depth = [this](const protocol::DepthEvent& e) { server_->publish("depth:" + e.kind, protocol::encode_depth(e)); };
+  pipeline_->set_emitter(std::move(emit));
+}
+
+Daemon::~Daemon() { stop(); }
+
+void Daemon::start() {
+  started_ns_ = protocol::monotonic_ns();
+  server_thread_ = std::thread([this] {
+    try {
+      server_->run(stop_);
+    } catch (const std::exception& e) {
+      spdlog::critical("server stopped: {}", e.what());
+    }
+  });
+  pipeline_thread_ = std::thread([this] { pipeline_->run(stop_); });
+  source_thread_ = std::thread([this] {
+    SourceCallbacks cb;
+    cb.frame = [this](RawFrame&& f) { pipeline_->push(std::move(f)); };
+    cb.state = [this](DeviceState s, const std::string& message) {
+      {
+        std::lock_guard<std::mutex> lock(state_mutex_);
+        if (s == device_state_ && message == device_message_) return;
+        device_state_ = s;
+        device_message_ = message;
+        ++device_changes_;
+      }
+      spdlog::info("device {}: {}", device_state_name(s), message);
+      protocol::Message m;
+      m.meta = {{"event", "device"}, {"state", device_state_name(s)}, {"message", message},
+                {"timestamp_ns", protocol::monotonic_ns()}};
+      server_->publish("device", m);
+    };
+    source_->run(cb, stop_);
+  });
+  spdlog::info("{} serving: source {}, profile {}, table {}", kVersion, source_->describe(), options_.profile.name,
+               options_.table);
+}
+
+void Daemon::stop() {
+  stop_ = true;
+  if (server_) server_->wake();
+  for (auto* t : {&source_thread_, &pipeline_thread_, &server_thread_})
+    if (t->joinable()) t->join();
+}
+
+bool Daemon::reload_table() {
+  const std::string path = pipeline_->table_path();
+  try {
+    pipeline_->set_table(load_table_file(path), path);
+    spdlog::info("reloaded table {}", path);
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    last_reload_ = {{"ok", true}, {"path", path}};
+    return true;
+  } catch (const std::exception& e) {
+    spdlog::error("table {} not reloaded, the old one keeps serving: {}", path, e.what());
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    last_reload_ = {{"ok", false}, {"path", path}, {"error", e.what()}};
+    return false;
+  }
+}
+
+nlohmann::json Daemon::status() const {
+  auto s = pipeline_->status();
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  s["server"] = kVersion;
+  s["source"] = source_->describe();
+  s["source_counters"] = source_->counters();
+  s["device"] = {{"state", device_state_name(device_state_)}, {"message", device_message_}, {"changes", device_changes_}};
+  s["clients"] = server_->status();
+  s["uptime_s"] = static_cast<double>(protocol::monotonic_ns() - started_ns_) * 1e-9;
+  s["last_reload"] = last_reload_;
+  return s;
+}
+
+protocol::Reply Daemon::handle(const protocol::Request& req) {
+  namespace codes = protocol::codes;
+  protocol::Reply r;
+  r.id = req.id;
+  const auto& a = req.args;
+  try {
+    if (req.cmd == "status") {
+      r.result = status();
+    } else if (req.cmd == "reset") {
+      pipeline_->reset();
+    } else if (req.cmd == "set_profile") {
+      pipeline_->set_profile(protocol::get_string(a, "name", protocol::kMaxNameBytes));
+    } else if (req.cmd == "set_roi") {
+      PixelRegion roi;
+      roi.x0 = static_cast<int>(protocol::get_int(a, "x0", 0, kWidth));
+      roi.y0 = static_cast<int>(protocol::get_int(a, "y0", 0, kHeight));
+      roi.x1 = static_cast<int>(protocol::get_int(a, "x1", 0, kWidth));
+      roi.y1 = static_cast<int>(protocol::get_int(a, "y1", 0, kHeight));
+      pipeline_->set_roi(roi);
+    } else if (req.cmd == "set_candidates") {
+      pipeline_->set_candidates(protocol::get_string_list(a, "materials", protocol::kMaxMaterials, protocol::kMaxNameBytes));
+    } else if (req.cmd == "load_table") {
+      const std::string path = protocol::get_string(a, "path", protocol::kMaxTextBytes);
+      std::shared_ptr<const ExemplarTable> table;
+      try {
+        table = load_table_file(path);
+      } catch (const std::exception& e) {
+        return failure(req.id, codes::kFailed, "table \"" + path + "\" not loaded (the old one keeps serving): " + e.what());
+      }
+      pipeline_->set_table(table, path);
+      r.result = {{"materials", table->materials()}};
+    } else if (req.cmd == "trigger") {
+      const int burst = a.contains("burst") ? static_cast<int>(protocol::get_int(a, "burst", 1, 300)) : 0;
+      r.result = {{"trigger", pipeline_->trigger(burst)}};
+    } else {
+      return failure(req.id, codes::kUnknownCommand, "unknown command \"" + req.cmd + "\"");
+    }
+  } catch (const protocol::ProtocolError& e) {
+    return failure(req.id, codes::kInvalidArgument, e.what());
+  } catch (const std::invalid_argument& e) {
+    return failure(req.id, codes::kInvalidArgument, e.what());
+  } catch (const std::logic_error& e) {
+    return failure(req.id, codes::kInvalidArgument, e.what());
+  }
+  return r;
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,101 @@
+#include "tofmat/daemon/device_source.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <thread>
+
+#include "tofmat/kinect/device.hpp"
+#include "tofmat/kinect/raw_unpack.hpp"
+#include "tofmat/protocol/socket.hpp"
+
+namespace tofmat::daemon {
+
+const char* device_state_name(DeviceState s) {
+  switch (s) {
+    case DeviceState::kOpening: return "opening";
+    case DeviceState::kStreaming: return "streaming";
+    case DeviceState::kDisconnected: return "disconnected";
+    case DeviceState::kStopped: return "stopped";
+  }
+  return "unknown";
+}
+
+DeviceSource::DeviceSource(std::string description, OpenTransport open, TruthOf truth, int retry_ms)
+    : description_(std::move(description)), open_(std::move(open)), truth_(std::move(truth)), retry_ms_(retry_ms) {}
+
+void DeviceSource::stream(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) {
+  callbacks.state(DeviceState::kOpening, "opening " + description_);
+  kinect::Kinect2Device device(open_());
+  device.open();
+  std::shared_ptr<const Calibration> calibration;
+  const auto& identity = device.start([&](const kinect::DepthPacket& packet) {
+    RawFrame f;
+    f.sequence = packet.sequence;
+    f.arrival_ns = protocol::monotonic_ns();
+    f.raw.resize(9 * kPixels);
+    kinect::unpack_depth_packet(packet.data, f.raw.data());
+    f.calibration = calibration;
+    if (truth_) f.truth = truth_(packet.sequence);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      ++frames_;
+    }
+    callbacks.frame(std::move(f));
+  });
+  // Frames arrive only from pump(): the calibration is in place before the first.
+  calibration = std::make_shared<const Calibration>(identity.p0.p0_rad());
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++opens_;
+  }
+  callbacks.state(DeviceState::kStreaming,
+                  "streaming from " + device.describe() + " (serial " + identity.serial + ", firmware " +
+                      identity.firmware + ")");
+  while (!stop.load()) {
+    device.pump(100);
+    std::lock_guard<std::mutex> lock(mutex_);
+    driver_skipped_ = device.stream_counters().incomplete_frames;
+  }
+  device.stop();
+  device.close();
+}
+
+void DeviceSource::run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) {
+  std::string reported;
+  while (!stop.load()) {
+    try {
+      stream(callbacks, stop);
+    } catch (const kinect::UsbError& e) {
+      const std::string message = std::string(kinect::usb_error_kind_name(e.kind())) + ": " + e.what();
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        last_error_ = message;
+        if (e.kind() == kinect::UsbErrorKind::kDisconnected) ++disconnects_;
+      }
+      // Say it once per distinct problem (a missing camera is retried quietly).
+      if (message != reported) {
+        spdlog::warn("{}: {}; retrying every {} ms", description_, message, retry_ms_);
+        reported = message;
+      }
+      callbacks.state(DeviceState::kDisconnected, message);
+      const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(retry_ms_);
+      while (!stop.load() && std::chrono::steady_clock::now() < until)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      continue;
+    }
+    reported.clear();
+  }
+  callbacks.state(DeviceState::kStopped, "stopped");
+}
+
+nlohmann::json DeviceSource::counters() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return {{"frames", frames_},
+          {"opens", opens_},
+          {"disconnects", disconnects_},
+          {"incomplete_frames", driver_skipped_},
+          {"last_error", last_error_}};
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,73 @@
+// The handheld profile: a person moves the target through the depth range in
+// front of the camera; every frame adds the ROI's features to their depth
+// bins and the growing partial query is matched (Eq. (12)), as the paper's
+// real-time demo does.
+#include <cmath>
+
+#include "tofmat/daemon/region_matcher.hpp"
+
+namespace tofmat::daemon {
+namespace {
+
+class HandheldProfile : public Profile {
+ public:
+  HandheldProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
+      : config_(c), table_(table), matcher_(table, candidate_indices(*table, c.candidates), c.backend) {}
+
+  void process(const RawFrame& frame, const Emitter& emit) override {
+    const auto d = matcher_.decode(frame, config_.roi);
+    RegionMatcher::emit_depths(d, frame, emit);
+    const BinSpec& bins = table_->bins();
+    // A target is there when most of the ROI decodes and its depth is in (or
+    // near) the table's range; a jump in depth means another target.
+    const bool present = static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels) &&
+                         d.median_mm >= bins.start_mm - 50.0 && d.median_mm <= bins.end_mm() + 50.0;
+    if (!present) {
+      if (tracking_) {
+        matcher_.reset();
+        tracking_ = false;
+        protocol::LabelEvent e;
+        e.state = "no_target";
+        emit.label(stamp(e, frame));
+      }
+      return;
+    }
+    if (tracking_ && std::abs(d.median_mm - last_mm_) > config_.jump_mm) matcher_.reset();
+    tracking_ = true;
+    last_mm_ = d.median_mm;
+    matcher_.accumulate(d);
+    if (const auto c = matcher_.classify()) {
+      auto e = matcher_.label_event(*c, config_.top_k);
+      e.state = "tracking";
+      emit.label(stamp(e, frame));
+    }
+  }
+
+  void reset() override {
+    matcher_.reset();
+    tracking_ = false;
+  }
+
+ private:
+  protocol::LabelEvent& stamp(protocol::LabelEvent& e, const RawFrame& frame) const {
+    e.frame = frame.sequence;
+    e.timestamp_ns = frame.arrival_ns;
+    e.profile = "handheld";
+    e.truth = region_truth(frame, config_.roi);
+    return e;
+  }
+
+  ProfileConfig config_;
+  std::shared_ptr<const ExemplarTable> table_;
+  RegionMatcher matcher_;
+  bool tracking_ = false;
+  double last_mm_ = 0.0;
+};
+
+}  // namespace
+
+std::unique_ptr<Profile> make_handheld(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table) {
+  return std::make_unique<HandheldProfile>(c, std::move(table));
+}
+
+}  // namespace tofmat::daemon

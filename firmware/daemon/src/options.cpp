@@ -1,0 +1,90 @@
+#include "tofmat/daemon/options.hpp"
+
+#include <CLI/CLI.hpp>
+
+#include <fstream>
+#include <sstream>
+
+namespace tofmat::daemon {
+namespace {
+
+PixelRegion parse_roi(const std::string& text) {
+  PixelRegion r;
+  char c1 = 0, c2 = 0, c3 = 0;
+  std::istringstream in(text);
+  if (!(in >> r.x0 >> c1 >> r.y0 >> c2 >> r.x1 >> c3 >> r.y1) || c1 != ',' || c2 != ',' || c3 != ',' || !in.eof())
+    throw CLI::ValidationError("--roi", "expected X0,Y0,X1,Y1 (pixels), got \"" + text + "\"");
+  return r;
+}
+
+std::string read_token(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw CLI::ValidationError("--token-file", "cannot read \"" + path + "\"");
+  std::string token;
+  std::getline(in, token);
+  while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
+  if (token.size() < 16) throw CLI::ValidationError("--token-file", "the token must be at least 16 characters");
+  return token;
+}
+
+}  // namespace
+
+std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_code) {
+  CommandLine cl;
+  DaemonOptions& o = cl.daemon;
+  o.server.socket_path = "/run/tofmat/tofmatd.sock";
+  o.source_options.sim_data_dir = TOFMAT_SIM_DATA_DIR;
+  std::string profile = o.profile.name, backend = "fixed", roi, tcp, token_file, socket_mode = "0660";
+  std::vector<std::string> candidates;
+
+  CLI::App app{"tofmatd: material labels from a Time-of-Flight camera, served over a socket"};
+  app.set_version_flag("--version", "tofmatd 0.1.0");
+  app.set_config("--config", "", "configuration file (TOML/INI, the long flags as keys)");
+  app.add_option("--source", o.source, "kinect[:SERIAL] | sim[:SCENE[,key=value...]] | replay:FILE[,loop=1]")
+      ->capture_default_str();
+  app.add_option("--profile", profile, "handheld | segmentation | sorting")->capture_default_str();
+  app.add_option("--table", o.table, "exemplar table (.tmx, or a folder of <material>.npy)")->required();
+  app.add_option("--socket", o.server.socket_path, "Unix socket path (\"\" for none)")->capture_default_str();
+  app.add_option("--socket-mode", socket_mode, "permissions of the Unix socket (octal)")->capture_default_str();
+  app.add_option("--tcp", tcp, "also listen on HOST:PORT (needs --token-file; use 127.0.0.1 unless you mean it)");
+  app.add_option("--token-file", token_file, "file whose first line is the TCP clients' shared secret");
+  app.add_option("--backend", backend, "fixed (integer path, NEON on aarch64) | float (reference)")
+      ->capture_default_str();
+  app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
+  app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
+  app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
+  app.add_option("--burst", o.profile.burst, "sorting: frames per trigger")->capture_default_str();
+  app.add_option("--smooth", o.profile.smooth, "segmentation: window side (odd pixels)")->capture_default_str();
+  app.add_option("--queue-frames", o.queue_frames, "frames waiting for processing before the oldest is dropped")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  app.add_option("--max-clients", o.server.max_clients, "connections at once")->capture_default_str()->check(CLI::Range(1, 1024));
+  app.add_option("--sim-data", o.source_options.sim_data_dir, "simulator device profiles and material libraries")
+      ->capture_default_str();
+  app.add_option("--log-level", cl.log_level, "trace | debug | info | warn | error")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
+  try {
+    app.parse(argc, argv);
+    o.profile.name = profile;
+    o.profile.backend = parse_backend(backend);
+    o.profile.candidates = candidates;
+    if (!roi.empty()) o.profile.roi = parse_roi(roi);
+    o.server.tcp = tcp;
+    if (!token_file.empty()) o.server.token = read_token(token_file);
+    if (!tcp.empty() && token_file.empty()) throw CLI::ValidationError("--tcp", "TCP needs --token-file");
+    std::size_t used = 0;
+    const unsigned long mode = std::stoul(socket_mode, &used, 8);
+    if (used != socket_mode.size() || mode > 0777) throw CLI::ValidationError("--socket-mode", "expected octal like 0660");
+    o.server.socket_mode = static_cast<unsigned>(mode);
+  } catch (const CLI::ParseError& e) {
+    exit_code = app.exit(e);
+    return std::nullopt;
+  } catch (const std::exception& e) {
+    exit_code = app.exit(CLI::ValidationError(e.what()));
+    return std::nullopt;
+  }
+  return cl;
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,112 @@
+#include "tofmat/daemon/pipeline.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+
+#include "tofmat/protocol/socket.hpp"
+
+namespace tofmat::daemon {
+
+Pipeline::Pipeline(std::shared_ptr<const ExemplarTable> table, std::string table_path, ProfileConfig config,
+                   std::size_t queue_frames)
+    : queue_(queue_frames) {
+  apply(config, std::move(table), table_path);
+}
+
+void Pipeline::apply(const ProfileConfig& config, std::shared_ptr<const ExemplarTable> table, const std::string& path) {
+  auto profile = make_profile(config, table);  // validates; throws before anything changes
+  std::lock_guard<std::mutex> lock(mutex_);
+  profile_ = std::move(profile);
+  config_ = config;
+  table_ = std::move(table);
+  table_path_ = path;
+}
+
+void Pipeline::run(const std::atomic<bool>& stop) {
+  while (!stop.load()) {
+    auto frame = queue_.pop(std::chrono::milliseconds(100));
+    if (!frame) continue;
+    if (!frame->calibration || frame->raw.size() != 9 * kPixels) continue;
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      profile_->process(*frame, emit_);
+      ++processed_;
+    } catch (const std::exception& e) {
+      // One bad frame costs itself only; say it once per distinct reason.
+      ++errors_;
+      if (last_error_ != e.what()) spdlog::error("processing frame {}: {}", frame->sequence, e.what());
+      last_error_ = e.what();
+    }
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    process_ms_ewma_ = processed_ + errors_ <= 1 ? ms : 0.9 * process_ms_ewma_ + 0.1 * ms;
+    recent_ns_.push_back(frame->arrival_ns);
+    while (!recent_ns_.empty() && recent_ns_.front() + 1'000'000'000ull < frame->arrival_ns) recent_ns_.pop_front();
+  }
+}
+
+void Pipeline::reset() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  profile_->reset();
+}
+
+void Pipeline::set_profile(const std::string& name) {
+  auto c = config();
+  c.name = name;
+  apply(c, table(), table_path());
+}
+
+void Pipeline::set_roi(const PixelRegion& roi) {
+  auto c = config();
+  c.roi = roi;
+  apply(c, table(), table_path());
+}
+
+void Pipeline::set_candidates(const std::vector<std::string>& names) {
+  auto c = config();
+  c.candidates = names;
+  apply(c, table(), table_path());
+}
+
+void Pipeline::set_table(std::shared_ptr<const ExemplarTable> table, const std::string& path) {
+  auto c = config();
+  // Candidates the new table lacks would make it unusable: refuse, keep the old.
+  apply(c, std::move(table), path);
+}
+
+std::uint64_t Pipeline::trigger(int burst) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return profile_->trigger(burst);
+}
+
+ProfileConfig Pipeline::config() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return config_;
+}
+std::string Pipeline::table_path() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return table_path_;
+}
+std::shared_ptr<const ExemplarTable> Pipeline::table() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return table_;
+}
+
+nlohmann::json Pipeline::status() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto& r = config_.roi;
+  return {{"profile", config_.name},
+          {"backend", config_.backend == Backend::kFixed ? "fixed" : "float"},
+          {"roi", {r.x0, r.y0, r.x1, r.y1}},
+          {"candidates", config_.candidates},
+          {"table", {{"path", table_path_}, {"materials", table_->materials()}, {"bins", table_->n_bins()}}},
+          {"frames_processed", processed_},
+          {"frames_dropped", queue_.dropped()},
+          {"processing_errors", errors_},
+          {"last_error", last_error_},
+          {"fps", static_cast<double>(recent_ns_.size())},
+          {"process_ms", process_ms_ewma_}};
+}
+
+}  // namespace tofmat::daemon

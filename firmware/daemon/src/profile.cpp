@@ -1,0 +1,62 @@
+#include "tofmat/daemon/profile.hpp"
+
+#include <stdexcept>
+
+#include "tofmat/core/features.hpp"
+
+namespace tofmat::daemon {
+
+std::unique_ptr<Profile> make_handheld(const ProfileConfig&, std::shared_ptr<const ExemplarTable>);
+std::unique_ptr<Profile> make_segmentation(const ProfileConfig&, std::shared_ptr<const ExemplarTable>);
+std::unique_ptr<Profile> make_sorting(const ProfileConfig&, std::shared_ptr<const ExemplarTable>);
+
+Backend parse_backend(const std::string& name) {
+  if (name == "fixed") return Backend::kFixed;
+  if (name == "float") return Backend::kFloat;
+  throw std::invalid_argument("unknown backend \"" + name + "\" (fixed, float)");
+}
+
+std::uint64_t Profile::trigger(int) { throw std::logic_error("only the sorting profile takes triggers"); }
+
+std::vector<std::uint32_t> candidate_indices(const ExemplarTable& table, const std::vector<std::string>& names) {
+  std::vector<std::uint32_t> out;
+  for (const auto& n : names) {
+    const auto i = table.index_of(n);
+    if (i < 0) throw std::invalid_argument("candidate \"" + n + "\" is not in the table");
+    out.push_back(static_cast<std::uint32_t>(i));
+  }
+  return out;
+}
+
+void validate(const ProfileConfig& c, const ExemplarTable& table) {
+  if (c.name != "handheld" && c.name != "segmentation" && c.name != "sorting")
+    throw std::invalid_argument("unknown profile \"" + c.name + "\" (handheld, segmentation, sorting)");
+  const PixelRegion& r = c.roi;
+  if (r.x0 < 0 || r.y0 < 0 || r.x1 > kWidth || r.y1 > kHeight || r.x0 >= r.x1 || r.y0 >= r.y1)
+    throw std::invalid_argument("ROI [" + std::to_string(r.x0) + ", " + std::to_string(r.x1) + ") x [" +
+                                std::to_string(r.y0) + ", " + std::to_string(r.y1) +
+                                ") is empty or outside the 512 x 424 frame");
+  candidate_indices(table, c.candidates);
+  if (c.name == "segmentation" && c.candidates.size() > 254)
+    throw std::invalid_argument("segmentation: at most 254 candidates (the label map is uint8)");
+  if (c.top_k < 1 || c.top_k > 64) throw std::invalid_argument("top_k must lie in [1, 64]");
+  if (c.burst < 1 || c.burst > 300) throw std::invalid_argument("burst must lie in [1, 300] frames");
+  if (c.smooth < 1 || c.smooth > 15 || c.smooth % 2 == 0)
+    throw std::invalid_argument("smooth must be an odd number of pixels in [1, 15]");
+  if (!(c.min_valid_fraction > 0.0 && c.min_valid_fraction <= 1.0))
+    throw std::invalid_argument("min_valid_fraction must lie in (0, 1]");
+  // The decode's features are the Kinect v2 rows: the table must be made of them.
+  const auto& rows = table.rows();
+  if (rows.size() != 2 || rows[0].freq_mhz != 16.0 || rows[0].ref_freq_mhz != 120.0 || rows[1].freq_mhz != 80.0 ||
+      rows[1].ref_freq_mhz != 120.0)
+    throw std::invalid_argument("the table's rows must be d(16 MHz) - d(120 MHz) and d(80 MHz) - d(120 MHz)");
+}
+
+std::unique_ptr<Profile> make_profile(const ProfileConfig& config, std::shared_ptr<const ExemplarTable> table) {
+  validate(config, *table);
+  if (config.name == "handheld") return make_handheld(config, std::move(table));
+  if (config.name == "segmentation") return make_segmentation(config, std::move(table));
+  return make_sorting(config, std::move(table));
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,191 @@
+#include "tofmat/daemon/recording.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <thread>
+
+#include "tofmat/core/error.hpp"
+#include "tofmat/protocol/socket.hpp"
+
+namespace tofmat::daemon {
+namespace {
+
+static_assert(sizeof(float) == 4, "recordings store IEEE float32");
+
+void put_u32(std::ostream& out, std::uint32_t v) {
+  std::uint8_t b[4];
+  for (int i = 0; i < 4; ++i) b[i] = static_cast<std::uint8_t>(v >> (8 * i));
+  out.write(reinterpret_cast<const char*>(b), 4);
+}
+void put_u64(std::ostream& out, std::uint64_t v) {
+  std::uint8_t b[8];
+  for (int i = 0; i < 8; ++i) b[i] = static_cast<std::uint8_t>(v >> (8 * i));
+  out.write(reinterpret_cast<const char*>(b), 8);
+}
+std::uint32_t get_u32(const std::uint8_t* p) {
+  std::uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = v << 8 | p[i];
+  return v;
+}
+std::uint64_t get_u64(const std::uint8_t* p) {
+  std::uint64_t v = 0;
+  for (int i = 7; i >= 0; --i) v = v << 8 | p[i];
+  return v;
+}
+
+// The header's checks, shared by the in-memory parser and the file reader.
+std::vector<float> parse_header(const std::uint8_t* h) {
+  if (std::memcmp(h, kRecordingMagic, 8) != 0) throw FormatError("not a tofmat recording (bad magic)");
+  const std::uint32_t width = get_u32(h + 8), height = get_u32(h + 12), flags = get_u32(h + 16);
+  if (width != static_cast<std::uint32_t>(kWidth) || height != static_cast<std::uint32_t>(kHeight))
+    throw FormatError("recording is " + std::to_string(width) + " x " + std::to_string(height) +
+                      ", expected the Kinect v2's 512 x 424");
+  if (flags != 0) throw FormatError("recording has unknown flags " + std::to_string(flags));
+  std::vector<float> p0(3 * kPixels);
+  std::memcpy(p0.data(), h + 20, p0.size() * sizeof(float));
+  for (float v : p0)
+    if (!std::isfinite(v) || std::abs(v) > 1000.0f) throw FormatError("recording holds a P0 correction that is not a finite phase");
+  return p0;
+}
+
+RecordedFrame parse_frame(const std::uint8_t* p) {
+  if (std::memcmp(p, kFrameMagic, 4) != 0) throw FormatError("recording frame has a bad marker");
+  RecordedFrame f;
+  f.sequence = get_u64(p + 4);
+  f.offset_ns = get_u64(p + 12);
+  f.raw.resize(9 * kPixels);
+  std::memcpy(f.raw.data(), p + 20, f.raw.size() * sizeof(std::int16_t));
+  return f;
+}
+
+}  // namespace
+
+RecordingWriter::RecordingWriter(const std::string& path, const std::vector<float>& p0_rad)
+    : out_(path, std::ios::binary | std::ios::trunc), path_(path) {
+  if (!out_) throw std::runtime_error("cannot create recording \"" + path + "\"");
+  if (p0_rad.size() != 3 * kPixels) throw std::invalid_argument("recording: P0 corrections must be 3 x 512 x 424");
+  out_.write(kRecordingMagic, 8);
+  put_u32(out_, kWidth);
+  put_u32(out_, kHeight);
+  put_u32(out_, 0);
+  out_.write(reinterpret_cast<const char*>(p0_rad.data()), static_cast<std::streamsize>(p0_rad.size() * sizeof(float)));
+}
+
+void RecordingWriter::write(const RawFrame& frame) {
+  if (frame.raw.size() != 9 * kPixels) throw std::invalid_argument("recording: a frame must hold 9 x 512 x 424 samples");
+  if (frames_ == 0) first_ns_ = frame.arrival_ns;
+  out_.write(kFrameMagic, 4);
+  put_u64(out_, frame.sequence);
+  put_u64(out_, frame.arrival_ns - first_ns_);
+  out_.write(reinterpret_cast<const char*>(frame.raw.data()),
+             static_cast<std::streamsize>(frame.raw.size() * sizeof(std::int16_t)));
+  if (!out_) throw std::runtime_error("cannot write recording \"" + path_ + "\" (disk full?)");
+  ++frames_;
+}
+
+void RecordingWriter::close() {
+  out_.flush();
+  if (!out_) throw std::runtime_error("cannot write recording \"" + path_ + "\"");
+  out_.close();
+}
+
+Recording parse_recording(const std::uint8_t* data, std::size_t size, std::size_t max_frames) {
+  if (size < kRecordingHeaderBytes) throw FormatError("recording is shorter than its header");
+  Recording r;
+  r.p0_rad = parse_header(data);
+  std::size_t at = kRecordingHeaderBytes;
+  while (size - at >= kRecordedFrameBytes && r.frames.size() < max_frames) {
+    r.frames.push_back(parse_frame(data + at));
+    at += kRecordedFrameBytes;
+  }
+  r.truncated = at != size && r.frames.size() < max_frames;
+  return r;
+}
+
+RecordingReader::RecordingReader(const std::string& path) : in_(path, std::ios::binary), path_(path) {
+  if (!in_) throw std::runtime_error("cannot open recording \"" + path + "\"");
+  std::vector<std::uint8_t> header(kRecordingHeaderBytes);
+  if (!in_.read(reinterpret_cast<char*>(header.data()), static_cast<std::streamsize>(header.size())))
+    throw FormatError("recording \"" + path + "\" is shorter than its header");
+  p0_rad_ = parse_header(header.data());
+}
+
+std::optional<RecordedFrame> RecordingReader::next() {
+  std::vector<std::uint8_t> buf(kRecordedFrameBytes);
+  if (!in_.read(reinterpret_cast<char*>(buf.data()), static_cast<std::streamsize>(buf.size()))) return std::nullopt;
+  return parse_frame(buf.data());
+}
+
+void RecordingReader::rewind() {
+  in_.clear();
+  in_.seekg(static_cast<std::streamoff>(kRecordingHeaderBytes));
+}
+
+namespace {
+
+class ReplaySource : public Source {
+ public:
+  ReplaySource(std::string path, bool loop) : path_(std::move(path)), loop_(loop), reader_(path_) {}
+  std::string describe() const override { return "replay of " + path_; }
+  nlohmann::json counters() const override {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return {{"frames", frames_}, {"loops", loops_}};
+  }
+  void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) override {
+    auto calibration = std::make_shared<const Calibration>(reader_.p0_rad());
+    callbacks.state(DeviceState::kStreaming, describe());
+    const auto start = std::chrono::steady_clock::now();
+    std::uint64_t base_ns = 0, last_ns = 0;
+    while (!stop.load()) {
+      auto f = reader_.next();
+      if (!f) {
+        if (!loop_) break;
+        reader_.rewind();
+        base_ns = last_ns + 33'333'333;  // keep the pace across the loop
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++loops_;
+        continue;
+      }
+      last_ns = base_ns + f->offset_ns;
+      std::this_thread::sleep_until(start + std::chrono::nanoseconds(last_ns));
+      RawFrame frame;
+      frame.sequence = f->sequence;
+      frame.arrival_ns = protocol::monotonic_ns();
+      frame.raw = std::move(f->raw);
+      frame.calibration = calibration;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        ++frames_;
+      }
+      callbacks.frame(std::move(frame));
+    }
+    callbacks.state(DeviceState::kStopped, stop.load() ? "stopped" : "end of recording");
+  }
+
+ private:
+  std::string path_;
+  bool loop_;
+  RecordingReader reader_;
+  mutable std::mutex mutex_;
+  std::uint64_t frames_ = 0, loops_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Source> make_replay_source(const std::string& spec) {
+  std::string path = spec;
+  bool loop = false;
+  const auto comma = spec.rfind(",loop=");
+  if (comma != std::string::npos) {
+    const std::string v = spec.substr(comma + 6);
+    if (v != "0" && v != "1") throw std::invalid_argument("replay: loop must be 0 or 1");
+    loop = v == "1";
+    path = spec.substr(0, comma);
+  }
+  if (path.empty()) throw std::invalid_argument("replay: needs a file (replay:FILE)");
+  return std::make_unique<ReplaySource>(path, loop);
+}
+
+}  // namespace tofmat::daemon

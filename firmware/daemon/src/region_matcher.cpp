@@ -1,0 +1,154 @@
+#include "tofmat/daemon/region_matcher.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+namespace tofmat::daemon {
+namespace {
+
+double median_of(std::vector<double>& v) {
+  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+}  // namespace
+
+RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
+                             Backend backend)
+    : table_(std::move(table)),
+      backend_(backend),
+      fixed_acc_(table_->bins(), table_->n_rows()),
+      float_acc_(table_->bins(), table_->n_rows()) {
+  if (backend_ == Backend::kFixed)
+    fixed_ = std::make_unique<FixedClassifier>(table_, candidates);
+  else
+    float_ = std::make_unique<FloatClassifier>(table_, candidates);
+}
+
+RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelRegion& region) const {
+  Decoded d;
+  d.region = region;
+  std::vector<double> depths;
+  if (backend_ == Backend::kFixed) {
+    auto f = decode_region_fixed(frame.raw.data(), kWidth, kHeight, frame.calibration->fixed_tables, region);
+    d.pixels = f.pixels;
+    for (std::size_t i = 0; i < f.pixels; ++i)
+      if (f.flags[i] == 0) depths.push_back(f.combined_q8[i] / 256.0);
+    d.frame = std::move(f);
+  } else {
+    auto f = decode_region(frame.raw.data(), kWidth, kHeight, frame.calibration->float_tables, region);
+    d.pixels = f.pixels;
+    for (std::size_t i = 0; i < f.pixels; ++i)
+      if (f.flags[i] == 0) depths.push_back(f.combined_mm[i]);
+    d.frame = std::move(f);
+  }
+  d.valid = depths.size();
+  d.median_mm = median_of(depths);
+  return d;
+}
+
+void RegionMatcher::accumulate(const Decoded& d) {
+  if (backend_ == Backend::kFixed) {
+    fixed_acc_.add_frame(std::get<FixedDecodedFrame>(d.frame));
+    return;
+  }
+  const auto& f = std::get<DecodedFrame>(d.frame);
+  float row[2];
+  for (std::size_t i = 0; i < f.pixels; ++i) {
+    if (f.flags[i] != 0) continue;
+    row[0] = f.features[0][i];
+    row[1] = f.features[1][i];
+    float_acc_.add(f.combined_mm[i], row);
+  }
+}
+
+std::optional<Classification> RegionMatcher::classify() const {
+  const std::vector<float> q = backend_ == Backend::kFixed ? fixed_acc_.query() : float_acc_.query();
+  if (std::none_of(q.begin(), q.end(), [](float v) { return std::isfinite(v); })) return std::nullopt;
+  try {
+    return backend_ == Backend::kFixed ? fixed_->classify(q.data(), q.size()) : float_->classify(q.data(), q.size());
+  } catch (const std::invalid_argument&) {
+    return std::nullopt;  // no candidate shares an observed element yet
+  }
+}
+
+std::uint32_t RegionMatcher::bins_covered() const {
+  return backend_ == Backend::kFixed ? fixed_acc_.bins_covered() : float_acc_.bins_covered();
+}
+
+void RegionMatcher::reset() {
+  fixed_acc_.reset();
+  float_acc_.reset();
+}
+
+protocol::LabelEvent RegionMatcher::label_event(const Classification& c, int top_k) const {
+  protocol::LabelEvent e;
+  const auto& names = table_->materials();
+  e.material = names[c.best().index];
+  e.index = static_cast<std::int32_t>(c.best().index);
+  e.distance = c.best().distance;
+  e.valid = c.best().valid;
+  e.bins_covered = bins_covered();
+  const std::size_t k = std::min(c.ranking.size(), static_cast<std::size_t>(std::max(top_k, 1)));
+  for (std::size_t i = 0; i < k; ++i) e.ranking.push_back({names[c.ranking[i].index], c.ranking[i].distance});
+  return e;
+}
+
+void RegionMatcher::emit_depths(const Decoded& d, const RawFrame& frame, const Emitter& emit) {
+  static const char* const kinds[4] = {"80", "16", "120", "combined"};
+  for (int k = 0; k < 4; ++k) {
+    if (!emit.wants_depth || !emit.wants_depth(kinds[k])) continue;
+    protocol::DepthEvent e;
+    e.frame = frame.sequence;
+    e.timestamp_ns = frame.arrival_ns;
+    e.kind = kinds[k];
+    e.x0 = d.region.x0;
+    e.y0 = d.region.y0;
+    e.width = d.region.x1 - d.region.x0;
+    e.height = d.region.y1 - d.region.y0;
+    e.depth_mm.resize(d.pixels);
+    if (const auto* f = std::get_if<FixedDecodedFrame>(&d.frame)) {
+      for (std::size_t i = 0; i < d.pixels; ++i) {
+        const std::int32_t v = k < 3 ? f->depth_q16[static_cast<std::size_t>(k)][i] : f->combined_q8[i];
+        e.depth_mm[i] = v == kFixedInvalid ? std::numeric_limits<float>::quiet_NaN()
+                                           : static_cast<float>(k < 3 ? v / 65536.0 : v / 256.0);
+      }
+    } else {
+      const auto& g = std::get<DecodedFrame>(d.frame);
+      e.depth_mm = k < 3 ? g.depth_mm[static_cast<std::size_t>(k)] : g.combined_mm;
+    }
+    emit.depth(e);
+  }
+}
+
+std::optional<protocol::Truth> region_truth(const RawFrame& frame, const PixelRegion& region) {
+  if (!frame.truth) return std::nullopt;
+  const FrameTruth& t = *frame.truth;
+  std::map<std::int16_t, std::pair<std::size_t, double>> seen;  // target -> pixels, depth sum
+  std::size_t pixels = 0;
+  for (int y = region.y0; y < region.y1; ++y)
+    for (int x = region.x0; x < region.x1; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * kWidth + static_cast<std::size_t>(x);
+      ++pixels;
+      if (t.target[i] < 0 || static_cast<std::size_t>(t.target[i]) >= t.materials.size()) continue;
+      auto& s = seen[t.target[i]];
+      ++s.first;
+      s.second += t.depth_mm[i];
+    }
+  protocol::Truth out;
+  std::size_t best = 0;
+  for (const auto& [target, s] : seen)
+    if (s.first > best) {
+      best = s.first;
+      out.material = t.materials[static_cast<std::size_t>(target)];
+      out.depth_mm = s.second / static_cast<double>(s.first);
+    }
+  if (best * 2 < pixels) out = protocol::Truth{};  // no target fills the region
+  return out;
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,333 @@
+#include "tofmat/daemon/server.hpp"
+
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <cerrno>
+#include <deque>
+
+namespace tofmat::daemon {
+namespace {
+
+using Bytes = std::shared_ptr<const std::vector<std::uint8_t>>;
+constexpr std::size_t kInboxLimit = 256;
+constexpr std::size_t kMaxSubscriptions = 16;
+constexpr std::size_t kMaxQueuedMessages = 1024;
+
+// Compares without leaking where the first difference is.
+bool same_token(const std::string& a, const std::string& b) {
+  unsigned char diff = a.size() == b.size() ? 0 : 1;
+  for (std::size_t i = 0; i < a.size(); ++i) diff |= static_cast<unsigned char>(a[i] ^ (i < b.size() ? b[i] : 0));
+  return diff == 0 && !a.empty();
+}
+
+Bytes encoded(const protocol::Message& m) { return std::make_shared<const std::vector<std::uint8_t>>(protocol::encode(m)); }
+
+}  // namespace
+
+bool valid_stream(const std::string& s) {
+  return s == "labels" || s == "label_map" || s == "device" || s == "depth:80" || s == "depth:16" ||
+         s == "depth:120" || s == "depth:combined";
+}
+
+struct Server::Connection {
+  std::uint64_t id = 0;
+  protocol::Fd fd;
+  bool tcp = false;
+  bool ready = false;    // hello done
+  bool closing = false;  // close once the queue is written (a refused hello's reply)
+  std::uint64_t accepted_ns = 0;
+  protocol::MessageReader reader{protocol::kMaxRequestPayloadBytes};
+  std::deque<Bytes> out;
+  std::size_t out_offset = 0, out_bytes = 0;
+  std::set<std::string> streams;
+  std::uint64_t dropped = 0;
+  bool dead = false;
+};
+
+Server::Server(ServerOptions options, Handler handler) : options_(std::move(options)), handler_(std::move(handler)) {
+  wake_fd_ = protocol::Fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
+  if (!wake_fd_) throw protocol::SocketError("eventfd failed", errno);
+  if (!options_.socket_path.empty()) unix_ = protocol::listen_unix(options_.socket_path, options_.socket_mode);
+  if (!options_.tcp.empty()) {
+    if (options_.token.empty())
+      throw std::invalid_argument("TCP needs a token (token_file): without one anybody on the network could connect");
+    const auto a = protocol::parse_address(options_.tcp);
+    if (!a.tcp) throw std::invalid_argument("tcp must be HOST:PORT, got \"" + options_.tcp + "\"");
+    tcp_ = protocol::listen_tcp(a.host, a.port);
+    tcp_port_ = protocol::local_port(tcp_.get());
+  }
+  if (!unix_ && !tcp_) throw std::invalid_argument("no socket to listen on (give a socket path or tcp)");
+}
+
+Server::~Server() {
+  if (unix_ && !options_.socket_path.empty()) ::unlink(options_.socket_path.c_str());
+}
+
+void Server::wake() {
+  const std::uint64_t one = 1;
+  [[maybe_unused]] const auto n = ::write(wake_fd_.get(), &one, sizeof one);
+}
+
+void Server::publish(const std::string& stream, const protocol::Message& message) {
+  if (!has_subscribers(stream)) return;
+  auto bytes = encoded(message);
+  {
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    if (inbox_.size() >= kInboxLimit) {
+      inbox_.erase(inbox_.begin());
+      ++inbox_dropped_;
+    }
+    inbox_.emplace_back(stream, std::move(bytes));
+  }
+  wake();
+}
+
+bool Server::has_subscribers(const std::string& stream) const {
+  std::lock_guard<std::mutex> lock(inbox_mutex_);
+  return subscribed_.count(stream) > 0;
+}
+
+void Server::refresh_subscriptions() {
+  std::set<std::string> all;
+  for (const auto& [id, c] : connections_) all.insert(c->streams.begin(), c->streams.end());
+  std::lock_guard<std::mutex> lock(inbox_mutex_);
+  subscribed_ = std::move(all);
+}
+
+void Server::accept_from(int listener, bool tcp) {
+  for (;;) {
+    protocol::Fd fd(::accept4(listener, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));
+    if (!fd) return;  // EAGAIN: nothing more waiting (or a transient error)
+    if (connections_.size() >= options_.max_clients) {
+      ++rejected_;
+      spdlog::warn("refusing a client: {} connected already", connections_.size());
+      continue;  // closes it
+    }
+    auto c = std::make_unique<Connection>();
+    c->id = next_id_++;
+    c->fd = std::move(fd);
+    c->tcp = tcp;
+    c->accepted_ns = protocol::monotonic_ns();
+    protocol::Hello h;
+    h.server = options_.server_name;
+    h.capabilities = options_.capabilities;
+    h.auth_required = tcp;
+    enqueue(*c, encoded(protocol::encode_hello(h)));
+    ++accepted_;
+    spdlog::info("client {} connected ({})", c->id, tcp ? "tcp" : "unix");
+    connections_.emplace(c->id, std::move(c));
+  }
+  clients_ = connections_.size();
+}
+
+void Server::enqueue(Connection& c, Bytes bytes) {
+  // Drop the oldest whole messages (never the one half written) until this fits.
+  while (!c.out.empty() && (c.out_bytes + bytes->size() > options_.max_queue_bytes || c.out.size() >= kMaxQueuedMessages)) {
+    const std::size_t victim = c.out_offset > 0 ? 1 : 0;
+    if (victim >= c.out.size()) break;
+    c.out_bytes -= c.out[victim]->size();
+    c.out.erase(c.out.begin() + static_cast<std::ptrdiff_t>(victim));
+    ++c.dropped;
+    ++dropped_events_;
+  }
+  c.out_bytes += bytes->size();
+  c.out.push_back(std::move(bytes));
+}
+
+void Server::reply(Connection& c, const protocol::Reply& r) { enqueue(c, encoded(protocol::encode_reply(r))); }
+
+void Server::handle(Connection& c, const protocol::Message& m) {
+  const protocol::Request req = protocol::decode_request(m);  // ProtocolError closes the connection
+  protocol::Reply r;
+  r.id = req.id;
+  auto refuse = [&](const char* code, const std::string& why, bool close) {
+    r.ok = false;
+    r.code = code;
+    r.error = why;
+    reply(c, r);
+    c.closing = c.closing || close;
+  };
+  if (!c.ready) {
+    if (req.cmd != "hello") return refuse(protocol::codes::kHelloFirst, "send hello first", true);
+    const auto& args = req.args;
+    if (!args.contains("protocol") || !args["protocol"].is_number_unsigned() ||
+        args["protocol"].get<std::uint64_t>() != protocol::kProtocolVersion)
+      return refuse(protocol::codes::kVersion,
+                    "this daemon speaks protocol version " + std::to_string(protocol::kProtocolVersion), true);
+    if (c.tcp) {
+      const std::string token = args.contains("token") && args["token"].is_string() ? args["token"].get<std::string>() : "";
+      if (!same_token(token, options_.token)) {
+        ++auth_failures_;
+        spdlog::warn("client {}: wrong or missing token", c.id);
+        return refuse(protocol::codes::kAuth, "a TCP client must send the daemon's token", true);
+      }
+    }
+    c.ready = true;
+    r.result = {{"protocol", protocol::kProtocolVersion}, {"client_id", c.id}};
+    return reply(c, r);
+  }
+  if (req.cmd == "hello") return refuse(protocol::codes::kInvalidArgument, "hello was already done", false);
+  if (req.cmd == "subscribe" || req.cmd == "unsubscribe") {
+    std::vector<std::string> streams;
+    try {
+      streams = req.args.contains("streams") ? protocol::get_string_list(req.args, "streams", kMaxSubscriptions,
+                                                                         protocol::kMaxNameBytes)
+                                             : std::vector<std::string>{};
+    } catch (const protocol::ProtocolError& e) {
+      return refuse(protocol::codes::kInvalidArgument, e.what(), false);
+    }
+    for (const auto& s : streams)
+      if (!valid_stream(s))
+        return refuse(protocol::codes::kInvalidArgument,
+                      "unknown stream \"" + s + "\" (labels, label_map, device, depth:80|16|120|combined)", false);
+    if (req.cmd == "subscribe") {
+      c.streams.insert(streams.begin(), streams.end());
+    } else if (streams.empty()) {
+      c.streams.clear();
+    } else {
+      for (const auto& s : streams) c.streams.erase(s);
+    }
+    refresh_subscriptions();
+    r.result = {{"streams", std::vector<std::string>(c.streams.begin(), c.streams.end())}};
+    return reply(c, r);
+  }
+  if (req.cmd == "server_status") {
+    r.result = status();
+    return reply(c, r);
+  }
+  reply(c, handler_(req));
+}
+
+void Server::read_from(Connection& c) {
+  std::uint8_t buf[65536];
+  for (;;) {
+    const ssize_t n = ::recv(c.fd.get(), buf, sizeof buf, 0);
+    if (n == 0) {
+      c.dead = true;
+      return;
+    }
+    if (n < 0) {
+      if (errno == EAGAIN || errno == EWOULDBLOCK) return;
+      if (errno == EINTR) continue;
+      c.dead = true;
+      return;
+    }
+    if (c.closing) continue;  // the answer is on its way; ignore the rest
+    try {
+      c.reader.feed(buf, static_cast<std::size_t>(n));
+      while (auto m = c.reader.next()) {
+        handle(c, *m);
+        if (c.closing) break;
+      }
+    } catch (const protocol::ProtocolError& e) {
+      ++protocol_errors_;
+      spdlog::warn("client {}: {}; closing it", c.id, e.what());
+      c.dead = true;
+      return;
+    }
+  }
+}
+
+void Server::write_to(Connection& c) {
+  while (!c.out.empty()) {
+    const auto& front = *c.out.front();
+    const ssize_t n = ::send(c.fd.get(), front.data() + c.out_offset, front.size() - c.out_offset, MSG_NOSIGNAL);
+    if (n < 0) {
+      if (errno == EAGAIN || errno == EWOULDBLOCK) return;
+      if (errno == EINTR) continue;
+      c.dead = true;
+      return;
+    }
+    c.out_offset += static_cast<std::size_t>(n);
+    if (c.out_offset == front.size()) {
+      c.out_bytes -= front.size();
+      c.out.pop_front();
+      c.out_offset = 0;
+    }
+  }
+  if (c.closing) c.dead = true;
+}
+
+void Server::run(const std::atomic<bool>& stop) {
+  std::vector<pollfd> fds;
+  std::vector<std::uint64_t> ids;
+  while (!stop.load()) {
+    // Published messages to their subscribers.
+    decltype(inbox_) batch;
+    {
+      std::lock_guard<std::mutex> lock(inbox_mutex_);
+      batch.swap(inbox_);
+    }
+    for (auto& [stream, bytes] : batch)
+      for (auto& [id, c] : connections_)
+        if (c->ready && !c->closing && c->streams.count(stream)) enqueue(*c, bytes);
+
+    fds.clear();
+    ids.clear();
+    fds.push_back({wake_fd_.get(), POLLIN, 0});
+    if (unix_) fds.push_back({unix_.get(), POLLIN, 0});
+    if (tcp_) fds.push_back({tcp_.get(), POLLIN, 0});
+    const std::size_t first_client = fds.size();
+    for (auto& [id, c] : connections_) {
+      fds.push_back({c->fd.get(), static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
+      ids.push_back(id);
+    }
+    const int r = ::poll(fds.data(), fds.size(), 200);
+    if (r < 0 && errno != EINTR) throw protocol::SocketError("poll failed", errno);
+    if (fds[0].revents & POLLIN) {
+      std::uint64_t v;
+      [[maybe_unused]] const auto n = ::read(wake_fd_.get(), &v, sizeof v);
+    }
+    std::size_t k = 1;
+    if (unix_ && (fds[k++].revents & POLLIN)) accept_from(unix_.get(), false);
+    if (tcp_ && (fds[k++].revents & POLLIN)) accept_from(tcp_.get(), true);
+    const std::uint64_t now = protocol::monotonic_ns();
+    bool changed = false;
+    for (std::size_t i = first_client; i < fds.size(); ++i) {
+      auto it = connections_.find(ids[i - first_client]);
+      if (it == connections_.end()) continue;
+      Connection& c = *it->second;
+      if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) read_from(c);
+      if (!c.dead && (fds[i].revents & POLLOUT)) write_to(c);
+      if (!c.dead && c.out.empty() && c.closing) c.dead = true;
+      if (!c.ready && now - c.accepted_ns > static_cast<std::uint64_t>(options_.hello_timeout_ms) * 1'000'000ull) {
+        spdlog::warn("client {}: no hello within {} ms; closing it", c.id, options_.hello_timeout_ms);
+        c.dead = true;
+      }
+      if (c.dead) {
+        spdlog::info("client {} disconnected ({} events dropped for it)", c.id, c.dropped);
+        connections_.erase(it);
+        changed = true;
+      }
+    }
+    // Replies queued while reading go out without waiting for the next poll.
+    for (auto& [id, c] : connections_)
+      if (!c->out.empty()) write_to(*c);
+    for (auto it = connections_.begin(); it != connections_.end();) {
+      if (it->second->dead) {
+        it = connections_.erase(it);
+        changed = true;
+      } else {
+        ++it;
+      }
+    }
+    if (changed) refresh_subscriptions();
+    clients_ = connections_.size();
+  }
+}
+
+nlohmann::json Server::status() const {
+  return {{"clients", clients_.load()},
+          {"accepted", accepted_.load()},
+          {"rejected", rejected_.load()},
+          {"protocol_errors", protocol_errors_.load()},
+          {"auth_failures", auth_failures_.load()},
+          {"dropped_events", dropped_events_.load() + inbox_dropped_.load()}};
+}
+
+}  // namespace tofmat::daemon

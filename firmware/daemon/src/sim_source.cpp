@@ -1,0 +1,172 @@
+#include "tofmat/daemon/sim_source.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "tofmat/daemon/device_source.hpp"
+#include "tofmat/sim/kinect_device.hpp"
+#include "tofmat/sim/profile_io.hpp"
+#include "tofmat/sim/renderer.hpp"
+
+namespace tofmat::daemon {
+namespace {
+
+double to_number(const std::string& key, const std::string& value) {
+  try {
+    std::size_t used = 0;
+    const double v = std::stod(value, &used);
+    if (used == value.size() && std::isfinite(v)) return v;
+  } catch (const std::exception&) {
+  }
+  throw std::invalid_argument("sim: " + key + "=" + value + " is not a number");
+}
+
+int to_int(const std::string& key, const std::string& value, int lo, int hi) {
+  const double v = to_number(key, value);
+  if (v != std::floor(v) || v < lo || v > hi)
+    throw std::invalid_argument("sim: " + key + " must be an integer in [" + std::to_string(lo) + ", " +
+                                std::to_string(hi) + "], got " + value);
+  return static_cast<int>(v);
+}
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  std::string part;
+  while (std::getline(in, part, sep)) out.push_back(part);
+  return out;
+}
+
+}  // namespace
+
+SimSpec parse_sim_spec(const std::string& text) {
+  SimSpec s;
+  auto parts = split(text, ',');
+  std::size_t first = 0;
+  if (!parts.empty() && parts[0].find('=') == std::string::npos) {
+    if (!parts[0].empty()) s.scene = parts[0];
+    first = 1;
+  }
+  if (s.scene != "sweep" && s.scene != "static" && s.scene != "regions")
+    throw std::invalid_argument("sim: unknown scene \"" + s.scene + "\" (sweep, static, regions)");
+  for (std::size_t i = first; i < parts.size(); ++i) {
+    const auto eq = parts[i].find('=');
+    if (eq == std::string::npos) throw std::invalid_argument("sim: \"" + parts[i] + "\" is not key=value");
+    const std::string key = parts[i].substr(0, eq), value = parts[i].substr(eq + 1);
+    if (key == "materials") {
+      s.materials = split(value, '+');
+      if (s.materials.empty() || s.materials.size() > 64)
+        throw std::invalid_argument("sim: materials= needs 1 to 64 names joined by +");
+    } else if (key == "frames") {
+      s.frames = to_int(key, value, 2, 100000);
+    } else if (key == "gap") {
+      s.gap = to_int(key, value, 0, 100000);
+    } else if (key == "near") {
+      s.near_mm = to_number(key, value);
+    } else if (key == "far") {
+      s.far_mm = to_number(key, value);
+    } else if (key == "depth") {
+      s.depth_mm = to_number(key, value);
+    } else if (key == "yaw") {
+      s.yaw_deg = to_number(key, value);
+    } else if (key == "size") {
+      s.size = to_int(key, value, 4, 424);
+    } else if (key == "realtime") {
+      s.realtime = to_int(key, value, 0, 1) == 1;
+    } else if (key == "seed") {
+      s.seed = static_cast<std::uint64_t>(to_int(key, value, 0, 1 << 30));
+    } else if (key == "device") {
+      s.device = value;
+    } else if (key == "library") {
+      s.library = value;
+    } else if (key == "unplug_at") {
+      s.unplug_at = to_int(key, value, 0, 1 << 30);
+    } else if (key == "replug_ms") {
+      s.replug_ms = to_int(key, value, 0, 3600000);
+    } else {
+      throw std::invalid_argument("sim: unknown key \"" + key + "\"");
+    }
+  }
+  for (double d : {s.near_mm, s.far_mm, s.depth_mm})
+    if (d < 300.0 || d > 8000.0) throw std::invalid_argument("sim: depths must lie in [300, 8000] mm");
+  if (std::abs(s.yaw_deg) > 85.0) throw std::invalid_argument("sim: yaw must lie in [-85, 85] degrees");
+  if (s.scene == "regions" && s.materials.size() > 6)
+    throw std::invalid_argument("sim: the regions scene holds at most 6 materials");
+  return s;
+}
+
+sim::Scene sim_scene_at(const SimSpec& spec, std::uint64_t frame) {
+  if (spec.scene == "static") return sim::Scene::centred_target(spec.materials[0], spec.depth_mm, spec.yaw_deg, spec.size);
+  if (spec.scene == "regions") {
+    // A 3 x 2 grid of rectangles with a margin, depths spread near..far.
+    sim::Scene scene;
+    const std::size_t n = spec.materials.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      sim::Target t;
+      t.material = spec.materials[i];
+      const int col = static_cast<int>(i % 3), row = static_cast<int>(i / 3);
+      t.x0 = 16 + col * 164;
+      t.x1 = t.x0 + 152;
+      t.y0 = 32 + row * 188;
+      t.y1 = t.y0 + 172;
+      t.depth_mm = n > 1 ? spec.near_mm + (spec.far_mm - spec.near_mm) * static_cast<double>(i) / static_cast<double>(n - 1)
+                         : spec.depth_mm;
+      t.yaw_deg = spec.yaw_deg;
+      scene.targets.push_back(t);
+    }
+    return scene;
+  }
+  const std::uint64_t period = static_cast<std::uint64_t>(spec.frames + spec.gap);
+  const std::uint64_t k = frame / period, t = frame % period;
+  if (t >= static_cast<std::uint64_t>(spec.frames)) return sim::Scene{};  // nothing in front of the camera
+  const std::string& material = spec.materials[k % spec.materials.size()];
+  const double depth = spec.near_mm + (spec.far_mm - spec.near_mm) * static_cast<double>(t) / (spec.frames - 1);
+  return sim::Scene::centred_target(material, depth, spec.yaw_deg, spec.size);
+}
+
+std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions& options) {
+  auto device = sim::load_device(spec.device, options.sim_data_dir);
+  auto library = sim::load_library(spec.library, options.sim_data_dir);
+  for (const auto& m : spec.materials) library.find(m);  // throws, naming a material the library lacks
+  // One render thread: the daemon's other threads need the other core.
+  auto renderer = std::make_shared<const sim::Renderer>(std::move(device), std::move(library), 1);
+  const SimSpec s = spec;
+  auto kinect = std::make_shared<sim::SimulatedKinect>(
+      renderer, [s](std::uint64_t frame) { return sim_scene_at(s, frame); }, spec.realtime);
+  if (spec.unplug_at >= 0) {
+    sim::KinectFaults faults;
+    faults.unplug_at_frame = spec.unplug_at;
+    kinect->set_faults(faults);
+  }
+  // The simulated replug: once unplugged, the next open after replug_ms
+  // plugs it back in (as a person would) and only then succeeds.
+  auto unplugged_since = std::make_shared<std::chrono::steady_clock::time_point>();
+  const int replug_ms = spec.replug_ms;
+  auto open = [kinect, unplugged_since, replug_ms]() -> std::unique_ptr<kinect::UsbTransport> {
+    if (!kinect->plugged()) {
+      const auto now = std::chrono::steady_clock::now();
+      if (*unplugged_since == std::chrono::steady_clock::time_point{}) *unplugged_since = now;
+      if (now - *unplugged_since >= std::chrono::milliseconds(replug_ms)) {
+        kinect->replug();
+        *unplugged_since = {};
+      }
+    }
+    return kinect->connect();
+  };
+  auto truth = [kinect, s](std::uint32_t sequence) -> std::shared_ptr<const FrameTruth> {
+    auto frame = kinect->truth(sequence);
+    if (!frame || frame->width != kWidth || frame->height != kHeight) return nullptr;
+    auto t = std::make_shared<FrameTruth>();
+    for (const auto& target : sim_scene_at(s, sequence).targets) t->materials.push_back(target.material);
+    t->target = frame->target;
+    t->depth_mm = frame->depth_mm;
+    return t;
+  };
+  std::string description = "simulated Kinect v2 (scene " + spec.scene + ", device " + spec.device + ")";
+  return std::make_unique<DeviceSource>(description, open, truth, std::min(options.retry_ms, 100));
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,86 @@
+// The framing of tofmatd's socket protocol (docs/protocol.md): every message
+// is a 12-byte header (magic "TMAT", version, type, payload length) and a
+// payload of a JSON object (the metadata) followed by an optional binary blob
+// (label maps, depth images). Every length read from the wire is checked
+// against a bound before anything is allocated, and anything malformed is a
+// ProtocolError: the connection it came from is closed, nothing else is.
+#pragma once
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+namespace tofmat::protocol {
+
+using Json = nlohmann::json;
+
+inline constexpr std::uint16_t kProtocolVersion = 1;
+inline constexpr char kMagic[4] = {'T', 'M', 'A', 'T'};
+inline constexpr std::size_t kHeaderBytes = 12;
+// The metadata of any message (the largest, a hello or status with 255
+// material names of 64 bytes, is ~20 KiB: 64 KiB leaves room without
+// letting a peer make us parse megabytes of JSON).
+inline constexpr std::size_t kMaxMetaBytes = 64 * 1024;
+// A whole payload from the daemon: a 512 x 424 float32 depth image is
+// 868,352 bytes.
+inline constexpr std::size_t kMaxPayloadBytes = 4 * 1024 * 1024;
+// What the daemon accepts from a client: requests carry no blob.
+inline constexpr std::size_t kMaxRequestPayloadBytes = 4 + kMaxMetaBytes;
+// JSON nesting the parser accepts (requests are at most 3 deep).
+inline constexpr int kMaxJsonDepth = 8;
+
+enum class MessageType : std::uint8_t {
+  kHello = 1,    // daemon -> client, first message of a connection
+  kRequest = 2,  // client -> daemon: {"id", "cmd", "args"}
+  kReply = 3,    // daemon -> client: {"id", "ok", "error"?, "code"?, "result"?}
+  kEvent = 4,    // daemon -> client: {"event": "label" | "label_map" | "depth" | "device" | "status", ...}
+};
+const char* message_type_name(MessageType type);
+
+struct Message {
+  MessageType type = MessageType::kEvent;
+  Json meta = Json::object();
+  std::vector<std::uint8_t> blob;
+};
+
+class ProtocolError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+// The peer frames its messages with another protocol version.
+class VersionError : public ProtocolError {
+ public:
+  using ProtocolError::ProtocolError;
+};
+
+// Header + payload. Throws ProtocolError if meta is not an object or the
+// message would exceed kMaxMetaBytes / kMaxPayloadBytes.
+std::vector<std::uint8_t> encode(const Message& message);
+
+// Incremental decoder of a byte stream: feed() what the socket gave, then
+// take messages with next() until it returns nothing. Throws ProtocolError on
+// a bad magic, version, type, length, or payload; after that the stream
+// cannot be resynchronised and the connection must be closed.
+class MessageReader {
+ public:
+  explicit MessageReader(std::size_t max_payload_bytes = kMaxPayloadBytes);
+  void feed(const std::uint8_t* data, std::size_t size);
+  std::optional<Message> next();
+  // Bytes held that do not yet make a whole message.
+  std::size_t buffered() const { return buffer_.size() - start_; }
+
+ private:
+  std::size_t max_payload_;
+  std::vector<std::uint8_t> buffer_;
+  std::size_t start_ = 0;  // consumed prefix of buffer_
+};
+
+// The payload's JSON object, parsed with a depth limit (no exceptions escape
+// but ProtocolError). Exposed for the fuzz target.
+Json parse_meta(const std::uint8_t* data, std::size_t size);
+
+}  // namespace tofmat::protocol

@@ -1,0 +1,336 @@
+"""The Python client of tofmatd, built on the C++ client (firmware/protocol) through pybind11.
+
+>>> import tofmat
+>>> with tofmat.Client("/run/tofmat/tofmatd.sock") as c:          # or "127.0.0.1:7020", token=...
+...     for label in c.labels(timeout=5.0):
+...         print(label.material, label.distance, [r.material for r in label.ranking])
+
+The connection, handshake, framing and every bound on what the daemon sends are C++'s; this
+module turns events into dataclasses and numpy arrays, keeps the subscriptions, and reconnects
+(re-subscribing) when the daemon restarts.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Iterator
+
+import numpy as np
+import numpy.typing as npt
+
+from . import _tofmat
+from ._tofmat import (
+    AuthenticationError,
+    ClientError,
+    CommandError,
+    ConnectionClosedError,
+    DaemonTimeoutError,
+    DaemonUnavailableError,
+    ProtocolError,
+    ProtocolVersionError,
+)
+
+DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
+STREAMS = ("labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined")
+
+
+@dataclass(frozen=True)
+class Rank:
+    material: str
+    distance: float  # Eq. (12), mm^2
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth, sent only by a simulated source."""
+
+    material: str  # "" when no target fills the region
+    depth_mm: float
+
+
+@dataclass(frozen=True)
+class Label:
+    frame: int
+    timestamp_ns: int  # CLOCK_MONOTONIC when the daemon had the whole frame
+    received_ns: int  # CLOCK_MONOTONIC when this client read it
+    profile: str
+    state: str  # "tracking", "no_target", "final"
+    material: str | None  # None when state is "no_target"
+    index: int
+    distance: float
+    valid: int
+    bins_covered: int
+    ranking: tuple[Rank, ...]
+    trigger: int | None
+    truth: Truth | None
+
+    @property
+    def latency_ms(self) -> float:
+        """From the frame's arrival in the daemon to this client (same host: one clock)."""
+        return (self.received_ns - self.timestamp_ns) * 1e-6
+
+
+@dataclass(frozen=True)
+class LabelMap:
+    frame: int
+    timestamp_ns: int
+    labels: npt.NDArray[np.uint8]  # (height, width); 255 = no label
+    materials: list[str]
+    truth_accuracy: float | None
+
+    NO_LABEL = 255
+
+
+@dataclass(frozen=True)
+class DepthImage:
+    frame: int
+    timestamp_ns: int
+    kind: str  # "80", "16", "120" (wrapped) or "combined"
+    x0: int
+    y0: int
+    depth_mm: npt.NDArray[np.float32]  # (height, width), NaN where invalid
+
+
+@dataclass(frozen=True)
+class DeviceEvent:
+    state: str  # opening, streaming, disconnected, stopped
+    message: str
+    timestamp_ns: int
+
+
+Event = Label | LabelMap | DepthImage | DeviceEvent
+
+
+def _event(meta: dict[str, Any], blob: bytes) -> Event:
+    name = meta["event"]
+    now = time.monotonic_ns()
+    if name == "label":
+        truth = meta.get("truth")
+        return Label(
+            frame=meta["frame"],
+            timestamp_ns=meta["timestamp_ns"],
+            received_ns=now,
+            profile=meta["profile"],
+            state=meta["state"],
+            material=meta["material"] or None,
+            index=meta["index"],
+            distance=meta["distance"],
+            valid=meta["valid"],
+            bins_covered=meta["bins_covered"],
+            ranking=tuple(Rank(r["material"], r["distance"]) for r in meta["ranking"]),
+            trigger=meta.get("trigger"),
+            truth=Truth(truth["material"], truth["depth_mm"]) if truth else None,
+        )
+    if name == "label_map":
+        labels = np.frombuffer(blob, np.uint8).reshape(meta["height"], meta["width"])
+        return LabelMap(meta["frame"], meta["timestamp_ns"], labels, list(meta["materials"]), meta.get("truth_accuracy"))
+    if name == "depth":
+        depth = np.frombuffer(blob, "<f4").reshape(meta["height"], meta["width"])
+        return DepthImage(meta["frame"], meta["timestamp_ns"], meta["kind"], meta["x0"], meta["y0"], depth)
+    if name == "device":
+        return DeviceEvent(meta["state"], meta["message"], meta["timestamp_ns"])
+    raise ProtocolError(f"unknown event {name!r} from tofmatd")
+
+
+class Client:
+    """A connection to tofmatd by Unix socket path or ``host:port`` (TCP needs ``token``).
+
+    Raises DaemonUnavailableError (nothing listens), DaemonTimeoutError, ProtocolVersionError,
+    AuthenticationError; all are ``tofmat.ClientError``. With ``reconnect`` (the default) a lost
+    connection is opened again, for up to ``reconnect_timeout`` seconds, and the subscriptions are
+    restored, so an iterator survives a daemon restart.
+    """
+
+    def __init__(
+        self,
+        address: str | os.PathLike[str] | None = None,
+        *,
+        token: str | None = None,
+        timeout: float = 5.0,
+        reconnect: bool = True,
+        reconnect_timeout: float = 30.0,
+    ) -> None:
+        if timeout <= 0:
+            raise ValueError("timeout must be positive")
+        self.address = str(address) if address is not None else os.environ.get("TOFMAT_SOCKET", DEFAULT_SOCKET)
+        self._token = token or ""
+        self._timeout = timeout
+        self._reconnect = reconnect
+        self._reconnect_timeout = reconnect_timeout
+        self._streams: set[str] = set()
+        self.reconnects = 0
+        self._conn: _tofmat.ClientConnection | None = _tofmat.ClientConnection(self.address, self._token, timeout)
+
+    # --- connection ------------------------------------------------------------------------
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object | TracebackType) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+        self._conn = None
+
+    @property
+    def hello(self) -> dict[str, Any]:
+        return dict(self._connection().hello)
+
+    def _connection(self) -> _tofmat.ClientConnection:
+        if self._conn is None:
+            raise ConnectionClosedError("the client is closed")
+        return self._conn
+
+    def _reopen(self) -> None:
+        """Connects again until reconnect_timeout, restoring the subscriptions."""
+        deadline = time.monotonic() + self._reconnect_timeout
+        delay = 0.05
+        while True:
+            try:
+                self._conn = _tofmat.ClientConnection(self.address, self._token, self._timeout)
+                if self._streams:
+                    self._conn.request("subscribe", json.dumps({"streams": sorted(self._streams)}))
+                self.reconnects += 1
+                return
+            except (DaemonUnavailableError, ConnectionClosedError, DaemonTimeoutError):
+                if time.monotonic() + delay > deadline:
+                    raise
+                time.sleep(delay)
+                delay = min(delay * 2, 1.0)
+
+    def _call(self, cmd: str, args: dict[str, Any] | None = None) -> dict[str, Any]:
+        try:
+            result: dict[str, Any] = self._connection().request(cmd, json.dumps(args or {}))
+            return result
+        except ConnectionClosedError:
+            if not self._reconnect or self._conn is None:
+                raise
+            self._reopen()
+            result = self._connection().request(cmd, json.dumps(args or {}))
+            return result
+
+    # --- commands ----------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        """Source, device state, profile, table, frame rate, drops, errors, clients."""
+        return self._call("status")
+
+    def reset(self) -> None:
+        """Forget the accumulated observations (handheld) or the armed burst (sorting)."""
+        self._call("reset")
+
+    def set_profile(self, name: str) -> None:
+        self._call("set_profile", {"name": name})
+
+    def set_roi(self, x0: int, y0: int, x1: int, y1: int) -> None:
+        self._call("set_roi", {"x0": x0, "y0": y0, "x1": x1, "y1": y1})
+
+    def set_candidates(self, materials: list[str] | None) -> None:
+        """Restrict the materials considered (None or []: all of the table's)."""
+        self._call("set_candidates", {"materials": list(materials or [])})
+
+    def load_table(self, path: str | os.PathLike[str]) -> list[str]:
+        """Makes the daemon load another table file (a path on the daemon's machine)."""
+        materials: list[str] = self._call("load_table", {"path": str(Path(path).resolve())})["materials"]
+        return materials
+
+    def trigger(self, burst: int | None = None) -> int:
+        """Sorting profile: start a burst now; returns the trigger number its label will carry."""
+        trigger: int = self._call("trigger", {"burst": burst} if burst else {})["trigger"]
+        return trigger
+
+    # --- streams -----------------------------------------------------------------------------
+    def subscribe(self, *streams: str) -> None:
+        for s in streams:
+            if s not in STREAMS:
+                raise ValueError(f"unknown stream {s!r}; one of {', '.join(STREAMS)}")
+        self._call("subscribe", {"streams": list(streams)})
+        self._streams.update(streams)
+
+    def unsubscribe(self, *streams: str) -> None:
+        self._call("unsubscribe", {"streams": list(streams)})
+        self._streams.difference_update(streams) if streams else self._streams.clear()
+
+    def events(self, timeout: float | None = None) -> Iterator[Event]:
+        """Events of the subscribed streams, in order. Raises DaemonTimeoutError when none comes
+        within ``timeout`` seconds (None: wait forever)."""
+        while True:
+            try:
+                item = self._connection().next_event(-1.0 if timeout is None else timeout)
+            except ConnectionClosedError:
+                if not self._reconnect or self._conn is None:
+                    raise
+                self._reopen()
+                continue
+            if item is None:
+                raise DaemonTimeoutError(f"no event from tofmatd within {timeout} s")
+            meta, blob = item
+            yield _event(meta, blob)
+
+    def labels(self, timeout: float | None = 5.0) -> Iterator[Label]:
+        """Live labels (subscribes to them)."""
+        if "labels" not in self._streams:
+            self.subscribe("labels")
+        for e in self.events(timeout):
+            if isinstance(e, Label):
+                yield e
+
+    def label_map(self, timeout: float | None = 5.0) -> LabelMap:
+        """The next per-pixel label map (segmentation profile)."""
+        if "label_map" not in self._streams:
+            self.subscribe("label_map")
+        for e in self.events(timeout):
+            if isinstance(e, LabelMap):
+                return e
+        raise AssertionError("unreachable")
+
+    def depth(self, kind: str = "combined", timeout: float | None = 5.0) -> DepthImage:
+        """The next depth image of the profile's region: "80", "16", "120" or "combined"."""
+        stream = f"depth:{kind}"
+        if stream not in self._streams:
+            self.subscribe(stream)
+        for e in self.events(timeout):
+            if isinstance(e, DepthImage) and e.kind == kind:
+                return e
+        raise AssertionError("unreachable")
+
+
+def daemon_binary() -> Path:
+    """The tofmatd that ships with this package (TOFMAT_DAEMON overrides it)."""
+    env = os.environ.get("TOFMAT_DAEMON")
+    path = Path(env) if env else Path(__file__).parent / "bin" / "tofmatd"
+    if not path.is_file():
+        raise FileNotFoundError(f"tofmatd not found at {path} (reinstall the SDK, or set TOFMAT_DAEMON)")
+    return path
+
+
+def sim_data_dir() -> Path:
+    from .sim import data_dir
+
+    return data_dir()
+
+
+__all__ = [
+    "AuthenticationError",
+    "Client",
+    "ClientError",
+    "CommandError",
+    "ConnectionClosedError",
+    "DaemonTimeoutError",
+    "DaemonUnavailableError",
+    "DepthImage",
+    "DeviceEvent",
+    "Event",
+    "Label",
+    "LabelMap",
+    "ProtocolError",
+    "ProtocolVersionError",
+    "Rank",
+    "Truth",
+    "daemon_binary",
+]
