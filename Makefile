@@ -104,8 +104,14 @@ cross-test: cross check-db
 $(TABLE): check-db
 	$(TOFMAT) table import $(DB) -o $(TABLE)
 
-demo: setup check-db build-python $(TABLE)
-	$(TOFMAT) demo --table $(TABLE)
+# tofmatd on the simulated camera (hand-held sweeps of five materials), watched
+# through the Python client; records the simulated camera's table once.
+SIM_TABLE := build/sim_table.tmx
+$(SIM_TABLE):
+	$(TOFMAT) sim table -o $(SIM_TABLE)
+
+demo: setup build-python $(SIM_TABLE)
+	$(TOFMAT) demo --table $(SIM_TABLE)
 
 bench: setup check-db build-python $(TABLE)
 	$(TOFMAT) bench --table $(TABLE)

@@ -174,7 +174,7 @@ def bench(table_path: Path, windows: str, noise: float, per_material: int, seed:
     click.echo(json.dumps([r.as_dict() for r in rows], indent=2) if as_json else format_markdown(rows, noise))
 
 
-@main.command()
+@main.command("sweeps")
 @click.option("--table", "table_path", required=True, type=click.Path(exists=True, path_type=Path), help="Table file or .npy folder.")
 @click.option("--sweeps", default=8, show_default=True)
 @click.option("--sweep-bins", default=60, show_default=True, help="Depth bins one sweep passes through.")
@@ -182,11 +182,112 @@ def bench(table_path: Path, windows: str, noise: float, per_material: int, seed:
 @click.option("--noise", default=0.3, show_default=True, help="Per-frame noise sigma, mm.")
 @click.option("--seed", default=1, show_default=True)
 @user_errors
-def demo(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: int, noise: float, seed: int) -> None:
-    """Simulated hand-held sweeps classified live as they grow (partial matching)."""
+def sweeps_cmd(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: int, noise: float, seed: int) -> None:
+    """Partial matching on noisy windows of the table's own curves (no camera, no daemon)."""
     from .tools.demo import run_demo
 
     run_demo(open_table(table_path), sweeps, sweep_bins, frames_per_bin, noise, seed, echo=click.echo)
+
+
+@main.command()
+@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@click.option("--materials", default="cork,pvc,wood,paper,acryl", show_default=True, help="Targets swept, in order.")
+@click.option("--frames", default=60, show_default=True, help="Frames per sweep (600 to 1200 mm).")
+@click.option("--gap", default=10, show_default=True, help="Frames with no target between sweeps.")
+@user_errors
+def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None:
+    """tofmatd on the simulated camera, live labels through the Python client, accuracy and latency."""
+    from .tools.live_demo import ensure_sim_table, run_live_demo
+
+    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
+    try:
+        run_live_demo(table, csv_list(materials) or [], frames, gap, echo=click.echo)
+    except RuntimeError as e:
+        raise click.ClickException(str(e)) from e
+
+
+def _client_options(fn: F) -> F:
+    fn = click.option("--token-file", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+                      help="File holding the daemon's TCP token.")(fn)  # fmt: skip
+    fn = click.option("--address", envvar="TOFMAT_SOCKET", default="/run/tofmat/tofmatd.sock", show_default=True,
+                      help="Unix socket path or host:port of tofmatd.")(fn)  # fmt: skip
+    return fn
+
+
+def _connect(address: str, token_file: Path | None) -> Any:
+    from .client import Client, ClientError
+
+    token = token_file.read_text().splitlines()[0].strip() if token_file else None
+    try:
+        return Client(address, token=token)
+    except ClientError as e:
+        raise click.ClickException(str(e)) from e
+
+
+@main.command()
+@_client_options
+@click.option("--top", default=3, show_default=True, help="Ranking entries shown.")
+@click.option("--count", default=0, help="Stop after this many labels (0: until interrupted).")
+def watch(address: str, token_file: Path | None, top: int, count: int) -> None:
+    """Live labels from tofmatd with their ranking, in the terminal."""
+    from .client import ClientError, DeviceEvent, Label
+
+    redraw = sys.stdout.isatty()
+    n = 0
+    with _connect(address, token_file) as client:
+        click.echo(f"{client.hello['server']} at {address}: profile {client.status()['profile']}")
+        client.subscribe("labels", "device")
+        try:
+            for e in client.events(timeout=None):
+                if isinstance(e, DeviceEvent):
+                    click.echo(f"\ndevice {e.state}: {e.message}")
+                    continue
+                if not isinstance(e, Label):
+                    continue
+                if e.state == "no_target":
+                    line = f"frame {e.frame:6d}  (no target)"
+                else:
+                    ranks = "  ".join(f"{r.material} {r.distance:.2f}" for r in e.ranking[:top])
+                    line = f"frame {e.frame:6d}  bins {e.bins_covered:3d}  {e.material:12s}  | {ranks} mm^2"
+                if e.truth is not None and e.truth.material:
+                    line += f"  [truth {e.truth.material}]"
+                click.echo(("\r\033[K" + line) if redraw else line, nl=not redraw)
+                n += 1
+                if count and n >= count:
+                    break
+        except KeyboardInterrupt:
+            pass
+        except ClientError as err:
+            raise click.ClickException(str(err)) from err
+        if redraw:
+            click.echo("")
+
+
+@main.command()
+@_client_options
+def status(address: str, token_file: Path | None) -> None:
+    """tofmatd's status as JSON."""
+    with _connect(address, token_file) as client:
+        click.echo(json.dumps(client.status(), indent=2))
+
+
+@main.command()
+@click.option("--source", default="sim", show_default=True, help="kinect[:SERIAL] | sim[:SCENE,...] | replay:FILE")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Recording file.")
+@click.option("--frames", default=30, show_default=True, help="Frames to record (2.6 MB each).")
+@click.option("--timeout", default=60.0, show_default=True, help="Seconds to wait for them.")
+@user_errors
+def record(source: str, output: Path, frames: int, timeout: float) -> None:
+    """Record a source's raw frames for `tofmatd --source replay:FILE`."""
+    from . import _tofmat
+    from .client import sim_data_dir
+
+    try:
+        n = _tofmat.record(source, str(output), frames, str(sim_data_dir()), timeout)
+    except RuntimeError as e:
+        raise click.ClickException(str(e)) from e
+    click.echo(f"{output}: {n} frames from {source}")
 
 
 @main.command()

@@ -56,7 +56,7 @@ def test_version_and_help() -> None:
     p = run("--version")
     assert tofmat.__version__ in p.stdout
     p = run("--help")
-    for cmd in ("table", "classify", "plot", "bench", "demo"):
+    for cmd in ("table", "classify", "plot", "bench", "sweeps", "demo", "watch", "status", "record"):
         assert cmd in p.stdout
     # `python -m tofmat` is the same command.
     p2 = subprocess.run([sys.executable, "-m", "tofmat", "--version"], capture_output=True, text=True, timeout=60)
@@ -229,8 +229,8 @@ def test_bench_on_real_database_1_bin_windows_other_seeds(db_dir: Path) -> None:
     assert 0.0 <= out[0]["accuracy"] <= 1.0
 
 
-def test_demo_runs(cli_table: Path) -> None:
-    p = run("demo", "--table", cli_table, "--sweeps", "3", "--sweep-bins", "30")
+def test_sweeps_runs(cli_table: Path) -> None:
+    p = run("sweeps", "--table", cli_table, "--sweeps", "3", "--sweep-bins", "30")
     assert "final labels:" in p.stdout
     assert p.stdout.count("sweep ") >= 3
 

@@ -192,18 +192,15 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx).")
 def table_cmd(device: str, library: str, materials: str | None, n_bins: int, yaw: float, output: Path) -> None:
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against)."""
-    from .. import BinSpec
-    from .table import simulated_table
+    from .table import database_bins, simulated_table
 
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
-    # The real database's binning: bins of (1200 - 600) / (n - 1) mm from 600 mm (3.015 mm for 200).
     if n_bins < 2:
         raise click.BadParameter("at least 2 bins", param_hint="--bins")
-    width = (1200.0 - 600.0) / (n_bins - 1)
     t0 = time.perf_counter()
     try:
-        table = simulated_table(r, names, BinSpec(600.0, width, n_bins), yaw_deg=yaw)
+        table = simulated_table(r, names, database_bins(n_bins), yaw_deg=yaw)
     except ValueError as e:
         raise click.ClickException(str(e)) from e
     output.parent.mkdir(parents=True, exist_ok=True)

@@ -19,6 +19,11 @@ ROWS = [(16, 120), (80, 120)]
 ROI = (232, 188, 280, 236)  # tofmatd's default handheld ROI: 48 x 48 at the centre
 
 
+def database_bins(n_bins: int = 200) -> BinSpec:
+    """The real database's binning: n bins of (1200 - 600) / (n - 1) mm from 600 mm (3.015 mm for 200)."""
+    return BinSpec(600.0, (1200.0 - 600.0) / (n_bins - 1), n_bins)
+
+
 def roi_observation(
     renderer: Renderer, p0: np.ndarray, material: str, depth_mm: float, yaw_deg: float, seed: int
 ) -> tuple[float, np.ndarray] | None:
