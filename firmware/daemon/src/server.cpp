@@ -56,9 +56,13 @@ Server::Server(ServerOptions options, Handler handler) : options_(std::move(opti
   if (!options_.tcp.empty()) {
     if (options_.token.empty())
       throw std::invalid_argument("TCP needs a token (token_file): without one anybody on the network could connect");
-    const auto a = protocol::parse_address(options_.tcp);
+    // Port 0 (any free port, tcp_port() says which) is valid for listening
+    // only: parse_address refuses it, as a client cannot connect to it.
+    const std::string& spec = options_.tcp;
+    const bool any_port = spec.size() >= 2 && spec.compare(spec.size() - 2, 2, ":0") == 0;
+    const auto a = protocol::parse_address(any_port ? spec.substr(0, spec.size() - 1) + "1" : spec);
     if (!a.tcp) throw std::invalid_argument("tcp must be HOST:PORT, got \"" + options_.tcp + "\"");
-    tcp_ = protocol::listen_tcp(a.host, a.port);
+    tcp_ = protocol::listen_tcp(a.host, any_port ? 0 : a.port);
     tcp_port_ = protocol::local_port(tcp_.get());
   }
   if (!unix_ && !tcp_) throw std::invalid_argument("no socket to listen on (give a socket path or tcp)");

@@ -56,7 +56,9 @@ SimSpec parse_sim_spec(const std::string& text) {
     const auto eq = parts[i].find('=');
     if (eq == std::string::npos) throw std::invalid_argument("sim: \"" + parts[i] + "\" is not key=value");
     const std::string key = parts[i].substr(0, eq), value = parts[i].substr(eq + 1);
-    if (key == "materials") {
+    if (key == "material") {
+      s.materials = {value};
+    } else if (key == "materials") {
       s.materials = split(value, '+');
       if (s.materials.empty() || s.materials.size() > 64)
         throw std::invalid_argument("sim: materials= needs 1 to 64 names joined by +");

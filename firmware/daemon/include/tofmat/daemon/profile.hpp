@@ -32,7 +32,7 @@ struct ProfileConfig {
   int burst = 8;                        // sorting: frames per trigger
   double min_valid_fraction = 0.5;      // handheld/sorting: a target fills the ROI
   double jump_mm = 150.0;               // handheld: a depth jump between frames is a new target
-  int smooth = 5;                       // segmentation: box filter side for the features, median for labels
+  int smooth = 9;                       // segmentation: box filter side for the features, median for labels
 };
 
 // Throws std::invalid_argument naming what is wrong (unknown profile,

@@ -8,7 +8,7 @@
 //   static   one target of the first material at `depth` mm
 //   regions  up to six materials side by side at depths from `near` to
 //            `far` (a scene for the segmentation profile)
-// Keys: materials=a+b+c, frames=N, gap=N, near=MM, far=MM, depth=MM, yaw=DEG,
+// Keys: materials=a+b+c (or material=a), frames=N, gap=N, near=MM, far=MM, depth=MM, yaw=DEG,
 // size=PIXELS, realtime=0|1 (30 frames/s, default 1), seed=N,
 // device=NAME, library=NAME, unplug_at=FRAME, replug_ms=MS (the simulated
 // device is unplugged in the middle of that frame and plugged back after MS).

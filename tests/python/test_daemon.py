@@ -1,0 +1,467 @@
+"""tofmatd end to end: the daemon on the simulated camera, the Python client over its socket.
+
+Every test starts its own tofmatd (the binary shipped in the SDK) on a fresh socket and stops it
+with SIGTERM, asserting a clean exit. Sources run with realtime=0 (frames as fast as the simulator
+renders them), so nothing here waits on a 30 frames/s clock; timeouts are generous and only bound
+a hung test.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import struct
+import subprocess
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+
+import tofmat
+from tofmat.client import DeviceEvent, Label, LabelMap, daemon_binary, sim_data_dir
+from tofmat.sim import Renderer, load_device, load_library
+from tofmat.sim.table import database_bins, simulated_table
+
+MATERIALS = ["cork", "paper", "acryl", "pvc", "wood", "plaster", "mdf", "polystyrene"]
+
+
+@pytest.fixture(scope="session")
+def sim_table(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The simulated camera's own table of a few materials (tofmat sim table)."""
+    r = Renderer(load_device(), load_library(), 1)
+    t = simulated_table(r, MATERIALS, database_bins())
+    path = tmp_path_factory.mktemp("simtable") / "sim.tmx"
+    t.save(str(path))
+    return path
+
+
+class Daemon:
+    def __init__(self, proc: subprocess.Popen[bytes], socket_path: Path, log: Path) -> None:
+        self.proc, self.socket, self.log = proc, socket_path, log
+
+    def client(self, **kw: Any) -> tofmat.Client:
+        deadline = time.monotonic() + 30.0
+        while True:
+            assert self.proc.poll() is None, f"tofmatd exited: {self.log.read_text()}"
+            try:
+                return tofmat.Client(self.socket, **kw)
+            except tofmat.DaemonUnavailableError:
+                assert time.monotonic() < deadline, "tofmatd did not listen within 30 s"
+                time.sleep(0.05)
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            self.proc.wait(20)
+        return self.proc.returncode
+
+
+@pytest.fixture
+def start(tmp_path: Path, sim_table: Path) -> Iterator[Callable[..., Daemon]]:
+    started: list[Daemon] = []
+
+    def _start(source: str, *args: str, table: Path | None = None, name: str = "d") -> Daemon:
+        sock, log = tmp_path / f"{name}.sock", tmp_path / f"{name}.log"
+        cmd = [str(daemon_binary()), "--source", source, "--table", str(table or sim_table), "--socket", str(sock),
+               "--sim-data", str(sim_data_dir()), *args]  # fmt: skip
+        d = Daemon(subprocess.Popen(cmd, stdout=log.open("wb"), stderr=subprocess.STDOUT), sock, log)
+        started.append(d)
+        return d
+
+    yield _start
+    for d in started:
+        assert d.stop() == 0, f"tofmatd did not stop cleanly:\n{d.log.read_text()}"
+
+
+def sweep(materials: list[str], frames: int = 30, gap: int = 6, extra: str = "") -> str:
+    return f"sim:sweep,materials={'+'.join(materials)},frames={frames},gap={gap},realtime=0{extra}"
+
+
+def final_labels(client: tofmat.Client, sweeps: int, timeout: float = 60.0) -> list[Label]:
+    """The last tracking label of each of the next `sweeps` complete sweeps."""
+    out: list[Label] = []
+    last: Label | None = None
+    started = False
+    for label in client.labels(timeout=timeout):
+        if label.state == "no_target":
+            if started and last is not None:
+                out.append(last)
+                if len(out) == sweeps:
+                    return out
+            started, last = True, None  # sweeps counted from the first gap: whole sweeps only
+        elif label.state == "tracking":
+            last = label
+    raise AssertionError("unreachable")
+
+
+# --- the main job --------------------------------------------------------------------------
+
+
+def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["cork", "paper", "acryl", "pvc"]))
+    with d.client() as c:
+        labels = final_labels(c, 4)
+        for label in labels:
+            assert label.truth is not None and label.material == label.truth.material, label
+            assert label.profile == "handheld" and label.bins_covered > 100
+            distances = [r.distance for r in label.ranking]
+            assert distances == sorted(distances) and len(label.ranking) == 5
+            assert label.ranking[0].material == label.material and label.distance == distances[0]
+            assert label.latency_ms >= 0.0
+        assert sorted(label.material for label in labels) == ["acryl", "cork", "paper", "pvc"]
+        s = c.status()
+        assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["device"]["state"] == "streaming"
+        assert s["frames_processed"] > 0 and s["processing_errors"] == 0
+
+
+def test_float_backend_agrees(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["paper", "wood"]), "--backend", "float")
+    with d.client() as c:
+        assert c.status()["backend"] == "float"
+        for label in final_labels(c, 2):
+            assert label.truth is not None and label.material == label.truth.material
+
+
+def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:
+    d = start("sim:static,material=cork,depth=900,realtime=0")
+    with d.client() as c:
+        img = c.depth("combined", timeout=30)
+        assert img.depth_mm.shape == (48, 48) and (img.x0, img.y0) == (232, 188)
+        # The camera's depth of cork is distorted by its subsurface scattering, by tens of mm at most.
+        assert abs(float(np.nanmedian(img.depth_mm)) - 900.0) < 60.0
+        img80 = c.depth("80", timeout=30)
+        assert img80.kind == "80" and np.isfinite(img80.depth_mm).mean() > 0.9
+
+
+# --- many clients, bad clients ---------------------------------------------------------------
+
+
+def test_eight_clients_at_once(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["cork", "paper"], frames=40, gap=4))
+    clients = [d.client() for _ in range(8)]
+    frames: list[set[int]] = [set() for _ in clients]
+    for c in clients:
+        c.subscribe("labels")
+
+    def collect(i: int) -> None:
+        for label in clients[i].labels(timeout=30):
+            frames[i].add(label.frame)
+            if len(frames[i]) >= 15:
+                return
+
+    threads = [threading.Thread(target=collect, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert all(len(f) >= 15 for f in frames)
+    assert set.intersection(*frames), "the clients should see the same frames"
+    s = clients[0].status()
+    assert s["clients"]["clients"] == 8
+    for c in clients:
+        c.close()
+
+
+def raw_connect(path: Path) -> socket.socket:
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    s.settimeout(10)
+    s.connect(str(path))
+    return s
+
+
+def read_until_closed(s: socket.socket) -> bytes:
+    data = b""
+    while True:
+        chunk = s.recv(65536)
+        if not chunk:
+            return data
+        data += chunk
+
+
+def test_garbage_closes_only_that_connection(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["cork"], frames=30, gap=4))
+    with d.client() as good:
+        good.subscribe("labels")
+        bad = raw_connect(d.socket)
+        bad.sendall(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
+        data = read_until_closed(bad)  # the daemon closes it (after its hello)
+        assert data[:4] == b"TMAT"
+        bad.close()
+        assert next(good.labels(timeout=30)).frame >= 0
+        assert good.status()["clients"]["protocol_errors"] >= 1
+
+
+def test_oversized_length_is_refused_without_waiting_for_it(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["cork"]))
+    with d.client() as good:
+        bad = raw_connect(d.socket)
+        bad.sendall(b"TMAT" + struct.pack("<HBBI", 1, 2, 0, 0xFFFFFFF0))  # a 4 GB request
+        read_until_closed(bad)
+        assert good.status()["clients"]["protocol_errors"] >= 1
+
+
+def test_client_killed_mid_message(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    d = start(sweep(["paper"], frames=30, gap=4))
+    with d.client() as good:
+        good.subscribe("labels")
+        # Half a request, then the connection dies.
+        half = raw_connect(d.socket)
+        meta = json.dumps({"id": 1, "cmd": "hello", "args": {"protocol": 1}}).encode()
+        msg = b"TMAT" + struct.pack("<HBBI", 1, 2, 0, 4 + len(meta)) + struct.pack("<I", len(meta)) + meta
+        half.sendall(msg[: len(msg) // 2])
+        half.close()
+        # A subscribed client process killed while the daemon writes to it.
+        script = (
+            "import tofmat,sys\n"
+            f"c = tofmat.Client({str(d.socket)!r}); c.subscribe('labels', 'depth:combined')\n"
+            "print('ready', flush=True)\n"
+            "import time; time.sleep(60)\n"
+        )
+        p = subprocess.Popen(["python3", "-c", script], stdout=subprocess.PIPE)
+        assert p.stdout is not None and p.stdout.readline().strip() == b"ready"
+        time.sleep(0.3)
+        p.kill()
+        p.wait()
+        seen = [label.frame for _, label in zip(range(10), good.labels(timeout=30))]
+        assert len(seen) == 10
+        assert good.status()["clients"]["clients"] == 1
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def test_tcp_needs_the_token(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    token = "s3cret-token-0123456789"
+    (tmp_path / "token").write_text(token + "\n")
+    port = free_port()
+    d = start(sweep(["cork"]), "--tcp", f"127.0.0.1:{port}", "--token-file", str(tmp_path / "token"))
+    with d.client() as local:  # the Unix socket needs none
+        assert local.hello["auth_required"] is False
+    address = f"127.0.0.1:{port}"
+    with pytest.raises(tofmat.AuthenticationError):
+        tofmat.Client(address)
+    with pytest.raises(tofmat.AuthenticationError):
+        tofmat.Client(address, token="wrong-token-0123456789")
+    with tofmat.Client(address, token=token) as c:
+        assert c.hello["auth_required"] is True
+        assert c.status()["clients"]["auth_failures"] == 2
+
+
+def test_tcp_without_a_token_file_is_refused_at_start(tmp_path: Path, sim_table: Path) -> None:
+    p = subprocess.run([str(daemon_binary()), "--table", str(sim_table), "--socket", str(tmp_path / "s"),
+                        "--tcp", "127.0.0.1:7020"], capture_output=True, text=True, timeout=30)  # fmt: skip
+    assert p.returncode != 0 and "token" in p.stderr
+
+
+def test_unplug_and_replug(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["cork"], frames=30, gap=0, extra=",unplug_at=15,replug_ms=300"))
+    with d.client() as c:
+        c.subscribe("device", "labels")
+        states: list[str] = []
+        after: list[int] = []
+        for e in c.events(timeout=30):
+            if isinstance(e, DeviceEvent):
+                states.append(e.state)
+            elif isinstance(e, Label) and "disconnected" in states and states[-1] == "streaming":
+                after.append(e.frame)
+                if len(after) >= 5:
+                    break
+        assert "disconnected" in states and states[-1] == "streaming"
+        s = c.status()
+        assert s["source_counters"]["disconnects"] == 1 and s["source_counters"]["opens"] == 2
+
+
+def test_sighup_with_a_corrupt_table_keeps_the_old_one(start: Callable[..., Daemon], sim_table: Path,
+                                                       tmp_path: Path) -> None:  # fmt: skip
+    table = tmp_path / "live.tmx"
+    table.write_bytes(sim_table.read_bytes())
+    d = start(sweep(["paper", "cork"]), table=table)
+    with d.client() as c:
+        before = c.status()["table"]["materials"]
+        table.write_bytes(b"TMX1 this is not a table" * 10)
+        d.proc.send_signal(signal.SIGHUP)
+        deadline = time.monotonic() + 10
+        while (c.status()["last_reload"] or {}).get("ok") is not False:
+            assert time.monotonic() < deadline, "the reload was not reported"
+            time.sleep(0.05)
+        s = c.status()
+        assert s["table"]["materials"] == before and "not" not in s["last_error"]
+        assert next(c.labels(timeout=30)).state in ("tracking", "no_target")
+        # A good table is taken on the next SIGHUP.
+        t = tofmat.ExemplarTable.load(sim_table)
+        keep = [t.index_of(m) for m in ("cork", "paper")]
+        tofmat.ExemplarTable(["cork", "paper"], t.features[keep], t.bins, t.rows).save(str(table))
+        d.proc.send_signal(signal.SIGHUP)
+        while (c.status()["last_reload"] or {}).get("ok") is not True:
+            assert time.monotonic() < deadline + 10
+            time.sleep(0.05)
+        assert c.status()["table"]["materials"] == ["cork", "paper"]
+
+
+# --- commands and profiles --------------------------------------------------------------------
+
+
+def test_commands_refuse_bad_input_and_keep_serving(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    d = start(sweep(["cork"]))
+    with d.client() as c:
+        with pytest.raises(tofmat.CommandError) as e:
+            c.set_roi(500, 0, 600, 10)
+        assert e.value.code == "invalid_argument" and "x1" in str(e.value)
+        with pytest.raises(tofmat.CommandError) as e:
+            c.set_roi(300, 0, 200, 10)
+        assert "empty or outside" in str(e.value)
+        with pytest.raises(tofmat.CommandError):
+            c.set_profile("juggling")
+        with pytest.raises(tofmat.CommandError):
+            c.set_candidates(["unobtainium"])
+        with pytest.raises(tofmat.CommandError) as e:
+            c.trigger()
+        assert "sorting" in str(e.value)
+        with pytest.raises(tofmat.CommandError) as e:
+            c._call("dance")
+        assert e.value.code == "unknown_command"
+        (tmp_path / "junk.tmx").write_bytes(b"\0" * 100)
+        with pytest.raises(tofmat.CommandError) as e:
+            c.load_table(tmp_path / "junk.tmx")
+        assert e.value.code == "failed"
+        with pytest.raises(ValueError):
+            c.subscribe("everything")
+        s = c.status()
+        assert s["profile"] == "handheld" and s["roi"] == [232, 188, 280, 236] and s["candidates"] == []
+        c.set_candidates(["cork", "paper"])
+        c.set_roi(200, 160, 312, 264)
+        c.reset()
+        s = c.status()
+        assert s["candidates"] == ["cork", "paper"] and s["roi"] == [200, 160, 312, 264]
+        label = next(lb for lb in c.labels(timeout=30) if lb.state == "tracking")
+        assert {r.material for r in label.ranking} <= {"cork", "paper"}
+
+
+def test_sorting_profile_labels_a_burst_per_trigger(start: Callable[..., Daemon]) -> None:
+    # One depth, a few frames: m = 1 in effect, so a material whose curve no other one shares there.
+    d = start("sim:static,material=acryl,depth=850,realtime=0", "--profile", "sorting", "--burst", "6")
+    with d.client() as c:
+        c.subscribe("labels")
+        n = c.trigger()
+        label = next(c.labels(timeout=30))
+        assert label.trigger == n and label.state == "final" and label.material == "acryl"
+        assert label.truth is not None and label.truth.material == "acryl"
+        m = c.trigger(burst=3)
+        assert m == n + 1
+        assert next(c.labels(timeout=30)).trigger == m
+
+
+def test_segmentation_label_map(start: Callable[..., Daemon]) -> None:
+    # Three targets side by side at 700, 850 and 1000 mm (the regions scene's 3 x 1 grid).
+    d = start("sim:regions,materials=acryl+cork+paper,near=700,far=1000,realtime=0", "--profile", "segmentation",
+              "--candidates", "cork,paper,acryl")  # fmt: skip
+    with d.client() as c:
+        m = c.label_map(timeout=60)
+        assert isinstance(m, LabelMap) and m.labels.shape == (424, 512) and m.labels.dtype == np.uint8
+        assert sorted(m.materials) == ["acryl", "cork", "paper"]  # the candidates, in table order
+        assert set(np.unique(m.labels)) <= {0, 1, 2, LabelMap.NO_LABEL}
+        # One position per pixel (m = 1) is the weakest feature (the paper's 57 %): most pixels, not all.
+        assert m.truth_accuracy is not None and m.truth_accuracy > 0.7
+        for material, (x0, x1) in zip(("acryl", "cork", "paper"), ((16, 168), (180, 332), (344, 496))):
+            region = m.labels[32:204, x0:x1]
+            labelled = region[region != LabelMap.NO_LABEL]
+            assert np.bincount(labelled).argmax() == m.materials.index(material)
+        assert (m.labels[:20] == LabelMap.NO_LABEL).all()  # nothing there: no label
+
+
+def test_config_file_has_the_flags_keys(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    cfg = tmp_path / "tofmatd.toml"
+    cfg.write_text('profile = "sorting"\nburst = 4\ncandidates = ["cork", "paper"]\nlog-level = "warn"\n')
+    d = start("sim:static,material=cork,realtime=0", "--config", str(cfg))
+    with d.client() as c:
+        s = c.status()
+        assert s["profile"] == "sorting" and s["candidates"] == ["cork", "paper"]
+
+
+def test_bad_flags_are_refused(tmp_path: Path, sim_table: Path) -> None:
+    base = [str(daemon_binary()), "--table", str(sim_table), "--socket", str(tmp_path / "s")]
+    for args, word in ((["--profile", "nope"], "profile"), (["--source", "usb"], "source"),
+                       (["--roi", "1,2,3"], "roi"), (["--candidates", "unobtainium"], "unobtainium"),
+                       (["--source", "sim:sweep,materials=unobtainium"], "unobtainium")):  # fmt: skip
+        p = subprocess.run(base + args, capture_output=True, text=True, timeout=30)
+        assert p.returncode != 0 and word in (p.stderr + p.stdout).lower(), (args, p.stderr)
+    p = subprocess.run([str(daemon_binary()), "--table", str(tmp_path / "missing.tmx"), "--socket",
+                        str(tmp_path / "s")], capture_output=True, text=True, timeout=30)  # fmt: skip
+    assert p.returncode != 0 and "missing.tmx" in p.stderr
+
+
+# --- the client's errors and reconnection -----------------------------------------------------
+
+
+def test_client_errors(tmp_path: Path) -> None:
+    with pytest.raises(tofmat.DaemonUnavailableError):
+        tofmat.Client(tmp_path / "nobody.sock")
+    # A peer that accepts and never speaks; one that speaks another protocol version.
+    silent = socket.socket(socket.AF_UNIX)
+    silent.bind(str(tmp_path / "silent.sock"))
+    silent.listen()
+    with pytest.raises(tofmat.DaemonTimeoutError):
+        tofmat.Client(tmp_path / "silent.sock", timeout=0.3)
+    future = socket.socket(socket.AF_UNIX)
+    future.bind(str(tmp_path / "future.sock"))
+    future.listen()
+
+    def serve() -> None:
+        conn, _ = future.accept()
+        meta = b'{"protocol":2}'
+        conn.sendall(b"TMAT" + struct.pack("<HBBI", 2, 1, 0, 4 + len(meta)) + struct.pack("<I", len(meta)) + meta)
+        time.sleep(1)
+        conn.close()
+
+    t = threading.Thread(target=serve)
+    t.start()
+    with pytest.raises(tofmat.ProtocolVersionError):
+        tofmat.Client(tmp_path / "future.sock", timeout=5)
+    t.join()
+    assert issubclass(tofmat.DaemonUnavailableError, ConnectionRefusedError)
+    assert issubclass(tofmat.AuthenticationError, tofmat.ClientError)
+
+
+def test_client_reconnects_after_the_daemon_restarts(start: Callable[..., Daemon]) -> None:
+    d1 = start(sweep(["cork"]), name="same")
+    c = d1.client(reconnect_timeout=30.0)
+    it = c.labels(timeout=30)
+    first = next(it)
+    assert d1.stop() == 0
+    d2 = start(sweep(["paper"], frames=30, gap=0), name="same")
+    later = next(lb for lb in it if lb.truth is not None and lb.truth.material == "paper")
+    assert c.reconnects == 1 and later.frame >= 0 and first.frame >= 0
+    c.close()
+    assert d2.proc.poll() is None
+
+
+# --- recordings -------------------------------------------------------------------------------
+
+
+def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_table: Path) -> None:
+    rec = tmp_path / "acryl.tmrec"
+    p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", "sim:static,material=acryl,depth=800,realtime=0",
+                        "-o", str(rec), "--frames", "4"], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    header = 8 + 12 + 3 * 512 * 424 * 4
+    assert rec.stat().st_size == header + 4 * (20 + 9 * 512 * 424 * 2)
+    d = start(f"replay:{rec},loop=1")
+    with d.client() as c:
+        label = next(lb for lb in c.labels(timeout=30) if lb.state == "tracking")
+        assert label.material == "acryl" and label.truth is None  # a replay knows no truth
+        assert c.status()["source_counters"]["frames"] >= 1
+    # A recording cut short in its header is refused with the reason.
+    (tmp_path / "cut.tmrec").write_bytes(rec.read_bytes()[:1000])
+    p = subprocess.run([str(daemon_binary()), "--source", f"replay:{tmp_path / 'cut.tmrec'}", "--table",
+                        str(sim_table), "--socket", str(tmp_path / "s")], capture_output=True, text=True,
+                       timeout=30)  # fmt: skip
+    assert p.returncode != 0 and "shorter than its header" in p.stderr
