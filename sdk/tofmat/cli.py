@@ -207,6 +207,24 @@ def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None
         raise click.ClickException(str(e)) from e
 
 
+@main.command("bench-daemon")
+@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@click.option("--profiles", default="handheld,segmentation,sorting", show_default=True)
+@click.option("--clients", default="1,8", show_default=True, help="Numbers of subscribed clients to try.")
+@click.option("--seconds", default=20.0, show_default=True, help="Per profile and client count.")
+@user_errors
+def bench_daemon_cmd(table_path: Path | None, profiles: str, clients: str, seconds: float) -> None:
+    """Latency, frame rate and accuracy of each tofmatd profile on the simulated camera (30 frames/s)."""
+    from .tools.daemon_bench import bench_daemon, format_markdown
+    from .tools.live_demo import ensure_sim_table
+
+    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
+    counts = [int(c) for c in csv_list(clients) or []]
+    runs = bench_daemon(table, csv_list(profiles) or [], counts, seconds, lambda line: click.echo(line, err=True))
+    click.echo(format_markdown(runs))
+
+
 def _client_options(fn: F) -> F:
     fn = click.option("--token-file", type=click.Path(exists=True, dir_okay=False, path_type=Path),
                       help="File holding the daemon's TCP token.")(fn)  # fmt: skip

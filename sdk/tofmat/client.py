@@ -79,11 +79,16 @@ class Label:
 class LabelMap:
     frame: int
     timestamp_ns: int
+    received_ns: int
     labels: npt.NDArray[np.uint8]  # (height, width); 255 = no label
     materials: list[str]
-    truth_accuracy: float | None
+    truth_accuracy: float | None  # simulated source: fraction of target pixels labelled right
 
     NO_LABEL = 255
+
+    @property
+    def latency_ms(self) -> float:
+        return (self.received_ns - self.timestamp_ns) * 1e-6
 
 
 @dataclass(frozen=True)
@@ -128,7 +133,9 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event:
         )
     if name == "label_map":
         labels = np.frombuffer(blob, np.uint8).reshape(meta["height"], meta["width"])
-        return LabelMap(meta["frame"], meta["timestamp_ns"], labels, list(meta["materials"]), meta.get("truth_accuracy"))
+        return LabelMap(
+            meta["frame"], meta["timestamp_ns"], now, labels, list(meta["materials"]), meta.get("truth_accuracy")
+        )
     if name == "depth":
         depth = np.frombuffer(blob, "<f4").reshape(meta["height"], meta["width"])
         return DepthImage(meta["frame"], meta["timestamp_ns"], meta["kind"], meta["x0"], meta["y0"], depth)

@@ -465,3 +465,11 @@ def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_tab
                         str(sim_table), "--socket", str(tmp_path / "s")], capture_output=True, text=True,
                        timeout=30)  # fmt: skip
     assert p.returncode != 0 and "shorter than its header" in p.stderr
+
+
+def test_the_shipped_example_config_parses(start: Callable[..., Daemon]) -> None:
+    example = Path(__file__).resolve().parents[2] / "firmware" / "daemon" / "tofmatd.toml"
+    d = start("sim:static,material=cork,realtime=0", "--config", str(example))  # flags win over the file
+    with d.client() as c:
+        s = c.status()
+        assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["source"].startswith("simulated")
