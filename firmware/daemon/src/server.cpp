@@ -43,6 +43,7 @@ struct Server::Connection {
   std::uint64_t accepted_ns = 0;
   protocol::MessageReader reader{protocol::kMaxRequestPayloadBytes};
   std::deque<Bytes> out;
+  std::deque<bool> out_event;  // out[i] is an event (droppable), not a hello or reply
   std::size_t out_offset = 0, out_bytes = 0;
   std::set<std::string> streams;
   std::uint64_t dropped = 0;
@@ -121,7 +122,7 @@ void Server::accept_from(int listener, bool tcp) {
     h.server = options_.server_name;
     h.capabilities = options_.capabilities;
     h.auth_required = tcp;
-    enqueue(*c, encoded(protocol::encode_hello(h)));
+    enqueue(*c, encoded(protocol::encode_hello(h)), false);
     ++accepted_;
     spdlog::info("client {} connected ({})", c->id, tcp ? "tcp" : "unix");
     connections_.emplace(c->id, std::move(c));
@@ -129,21 +130,48 @@ void Server::accept_from(int listener, bool tcp) {
   clients_ = connections_.size();
 }
 
-void Server::enqueue(Connection& c, Bytes bytes) {
-  // Drop the oldest whole messages (never the one half written) until this fits.
+void Server::enqueue(Connection& c, Bytes bytes, bool event) {
+  // Over budget: drop the oldest events (never the message half written, never
+  // a hello or reply: a client waits for those). A client whose queue is full
+  // of replies does not read what it asked for: it is closed.
   while (!c.out.empty() && (c.out_bytes + bytes->size() > options_.max_queue_bytes || c.out.size() >= kMaxQueuedMessages)) {
-    const std::size_t victim = c.out_offset > 0 ? 1 : 0;
-    if (victim >= c.out.size()) break;
+    std::size_t victim = c.out_offset > 0 ? 1 : 0;
+    while (victim < c.out.size() && !c.out_event[victim]) ++victim;
+    if (victim >= c.out.size()) {
+      if (event) {  // nothing older to drop: this one goes
+        ++c.dropped;
+        ++dropped_events_;
+        return;
+      }
+      spdlog::warn("client {}: does not read its replies; closing it", c.id);
+      c.dead = true;
+      return;
+    }
     c.out_bytes -= c.out[victim]->size();
     c.out.erase(c.out.begin() + static_cast<std::ptrdiff_t>(victim));
+    c.out_event.erase(c.out_event.begin() + static_cast<std::ptrdiff_t>(victim));
     ++c.dropped;
     ++dropped_events_;
   }
   c.out_bytes += bytes->size();
   c.out.push_back(std::move(bytes));
+  c.out_event.push_back(event);
 }
 
-void Server::reply(Connection& c, const protocol::Reply& r) { enqueue(c, encoded(protocol::encode_reply(r))); }
+void Server::reply(Connection& c, const protocol::Reply& r) {
+  // A client refuses an error text over kMaxTextBytes (and drops the
+  // connection): cut a long one (load_table quoting a long path, twice) at a
+  // UTF-8 character boundary.
+  if (r.error.size() > protocol::kMaxTextBytes) {
+    protocol::Reply cut = r;
+    std::size_t n = protocol::kMaxTextBytes - 3;
+    while (n > 0 && (static_cast<unsigned char>(cut.error[n]) & 0xC0) == 0x80) --n;
+    cut.error.resize(n);
+    cut.error += "...";
+    return enqueue(c, encoded(protocol::encode_reply(cut)), false);
+  }
+  enqueue(c, encoded(protocol::encode_reply(r)), false);
+}
 
 void Server::handle(Connection& c, const protocol::Message& m) {
   const protocol::Request req = protocol::decode_request(m);  // ProtocolError closes the connection
@@ -251,6 +279,7 @@ void Server::write_to(Connection& c) {
     if (c.out_offset == front.size()) {
       c.out_bytes -= front.size();
       c.out.pop_front();
+      c.out_event.pop_front();
       c.out_offset = 0;
     }
   }
@@ -269,7 +298,7 @@ void Server::run(const std::atomic<bool>& stop) {
     }
     for (auto& [stream, bytes] : batch)
       for (auto& [id, c] : connections_)
-        if (c->ready && !c->closing && c->streams.count(stream)) enqueue(*c, bytes);
+        if (c->ready && !c->closing && !c->dead && c->streams.count(stream)) enqueue(*c, bytes, true);
 
     fds.clear();
     ids.clear();

@@ -63,6 +63,10 @@ Json parse_meta(const std::uint8_t* data, std::size_t size) {
       throw ProtocolError("message metadata nests deeper than " + std::to_string(kMaxJsonDepth));
     return true;
   };
+  // nlohmann's lexer takes a NUL byte for the end of the input, so
+  // "{...}\0junk" would parse; valid JSON text never holds a raw NUL.
+  if (std::memchr(data, 0, size) != nullptr)
+    throw ProtocolError("message metadata is not valid JSON: it holds a NUL byte");
   Json meta;
   try {
     meta = Json::parse(data, data + size, limit_depth, /*allow_exceptions=*/true, /*ignore_comments=*/false);

@@ -3,8 +3,9 @@
 // It does the hello handshake (protocol version; the token on TCP), keeps
 // each client's subscriptions, passes commands to the daemon's handler, and
 // fans published events out to the subscribers. Every client has a bounded
-// send queue: a client that does not read loses its oldest events (counted),
-// and never slows the pipeline or the other clients. A malformed message, a
+// send queue: a client that does not read loses its oldest events (counted;
+// replies are never dropped, a client that lets them pile up is closed), and
+// never slows the pipeline or the other clients. A malformed message, a
 // failed handshake or a hello that does not come in time closes that
 // connection only.
 #pragma once
@@ -61,7 +62,7 @@ class Server {
   void read_from(Connection& c);
   void handle(Connection& c, const protocol::Message& m);
   void reply(Connection& c, const protocol::Reply& r);
-  void enqueue(Connection& c, std::shared_ptr<const std::vector<std::uint8_t>> bytes);
+  void enqueue(Connection& c, std::shared_ptr<const std::vector<std::uint8_t>> bytes, bool event);
   void write_to(Connection& c);
   void refresh_subscriptions();
 

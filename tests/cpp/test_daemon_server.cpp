@@ -1,0 +1,619 @@
+// tofmatd's socket server (firmware/daemon/server.hpp) over real sockets: a
+// Server on a temporary Unix socket and on TCP 127.0.0.1 (any free port) with
+// a token, run on its own thread, answering every command with ok. Clients are
+// the protocol's C++ Client and raw sockets that misbehave. Nothing here
+// depends on speed beyond generous timeouts (5 s for anything to happen).
+#include <gtest/gtest.h>
+#include <stdlib.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "test_util.hpp"
+#include "tofmat/daemon/server.hpp"
+#include "tofmat/protocol/client.hpp"
+#include "tofmat/protocol/messages.hpp"
+#include "tofmat/protocol/socket.hpp"
+
+namespace {
+
+using namespace tofmat::protocol;
+using tofmat::daemon::Server;
+using tofmat::daemon::ServerOptions;
+using tofmat_test::Bytes;
+using Clock = std::chrono::steady_clock;
+
+constexpr int kPatienceMs = 5000;  // how long anything may take before it counts as not happening
+const std::string kToken = "0123456789abcdef-secret";
+
+// A raw connection that speaks the framing by hand (or does not).
+class Raw {
+ public:
+  explicit Raw(const std::string& address) : fd_(connect_to(parse_address(address), kPatienceMs)) {}
+
+  void send_bytes(const Bytes& b) { write_all(fd_.get(), b.data(), b.size(), kPatienceMs); }
+  void send(const Message& m) { send_bytes(encode(m)); }
+  void request(std::uint32_t id, const std::string& cmd, const Json& args = Json::object()) {
+    Request r;
+    r.id = id;
+    r.cmd = cmd;
+    r.args = args;
+    send(encode_request(r));
+  }
+
+  // The next message within timeout_ms; nothing on a timeout or once the server closed.
+  std::optional<Message> read(int timeout_ms = kPatienceMs) {
+    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+    for (;;) {
+      if (auto m = reader_.next()) return m;
+      if (closed_) return std::nullopt;
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+      if (left <= 0 || !wait_readable(fd_.get(), static_cast<int>(left))) return std::nullopt;
+      std::uint8_t buf[65536];
+      const ssize_t n = ::recv(fd_.get(), buf, sizeof buf, 0);
+      if (n > 0) {
+        reader_.feed(buf, static_cast<std::size_t>(n));
+      } else if (n == 0 || (errno != EAGAIN && errno != EINTR)) {
+        closed_ = true;
+      }
+    }
+  }
+
+  Reply read_reply() {
+    auto m = read();
+    EXPECT_TRUE(m) << "no reply";
+    if (!m) return Reply{};
+    return decode_reply(*m);
+  }
+
+  // Reads and drops whatever comes until the server closes the connection;
+  // false if it is still open after timeout_ms.
+  bool closed_within(int timeout_ms = kPatienceMs) {
+    const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (!closed_) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+      if (left <= 0 || !wait_readable(fd_.get(), static_cast<int>(left))) return false;
+      std::uint8_t buf[65536];
+      const ssize_t n = ::recv(fd_.get(), buf, sizeof buf, 0);
+      if (n == 0 || (n < 0 && errno != EAGAIN && errno != EINTR)) closed_ = true;
+    }
+    return true;
+  }
+
+  // Reads the server's hello and does the client's side of the handshake.
+  void handshake(const std::string& token = "") {
+    auto hello = read();
+    ASSERT_TRUE(hello);
+    ASSERT_EQ(hello->type, MessageType::kHello);
+    Json args = {{"protocol", kProtocolVersion}};
+    if (!token.empty()) args["token"] = token;
+    request(1, "hello", args);
+    const Reply r = read_reply();
+    ASSERT_TRUE(r.ok) << r.code << ": " << r.error;
+  }
+
+  void close() { fd_.reset(); }
+  int fd() const { return fd_.get(); }
+
+ private:
+  Fd fd_;
+  MessageReader reader_;
+  bool closed_ = false;
+};
+
+Reply answer(const Request& r) {
+  Reply rep;
+  rep.id = r.id;
+  if (r.cmd == "fail") {
+    rep.ok = false;
+    rep.code = codes::kFailed;
+    rep.error = r.args.value("error", std::string("it failed"));
+    return rep;
+  }
+  rep.result = {{"cmd", r.cmd}, {"args", r.args}};
+  return rep;
+}
+
+bool wait_for(const std::function<bool()>& condition, int timeout_ms = kPatienceMs) {
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (!condition()) {
+    if (Clock::now() > deadline) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+
+ClientErrorKind client_error_kind(const std::function<void()>& f, std::string* code = nullptr) {
+  try {
+    f();
+  } catch (const ClientError& e) {
+    if (code) *code = e.code();
+    return e.kind();
+  }
+  ADD_FAILURE() << "no ClientError";
+  return ClientErrorKind::kProtocol;
+}
+
+LabelMapEvent label_map(std::uint64_t frame) {
+  LabelMapEvent e;
+  e.frame = frame;
+  e.timestamp_ns = monotonic_ns();
+  e.width = 512;
+  e.height = 424;
+  e.materials = {"cork", "paper"};
+  e.labels.assign(512u * 424u, static_cast<std::uint8_t>(frame % 2));
+  return e;
+}
+
+class ServerTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    spdlog::set_level(spdlog::level::err);
+    char tmpl[] = "/tmp/tofmat-server-XXXXXX";
+    ASSERT_NE(::mkdtemp(tmpl), nullptr);
+    dir_ = tmpl;
+  }
+
+  void TearDown() override {
+    stop_server();
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
+
+  ServerOptions options() const {
+    ServerOptions o;
+    o.socket_path = socket_path();
+    o.tcp = "127.0.0.1:0";
+    o.token = kToken;
+    o.server_name = "test-server";
+    o.capabilities = {"labels", "status"};
+    return o;
+  }
+
+  void start(ServerOptions o = {}, bool defaults = true) {
+    if (defaults) {
+      const ServerOptions d = options();
+      if (o.socket_path.empty()) o.socket_path = d.socket_path;
+      if (o.tcp.empty()) o.tcp = d.tcp;
+      if (o.token.empty()) o.token = d.token;
+      o.server_name = d.server_name;
+      o.capabilities = d.capabilities;
+    }
+    server_ = std::make_unique<Server>(o, answer);
+    thread_ = std::thread([this] { server_->run(stop_); });
+  }
+
+  void stop_server() {
+    if (thread_.joinable()) {
+      stop_ = true;
+      server_->wake();
+      thread_.join();
+    }
+    server_.reset();
+  }
+
+  std::string socket_path() const { return dir_ + "/tofmatd.sock"; }
+  std::string tcp_address() const { return "127.0.0.1:" + std::to_string(server_->tcp_port()); }
+  std::uint64_t counter(const char* name) const { return server_->status()[name].get<std::uint64_t>(); }
+
+  std::string dir_;
+  std::unique_ptr<Server> server_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+TEST_F(ServerTest, UnixClientCompletesTheHandshake) {
+  start();
+  struct stat st {};
+  ASSERT_EQ(::stat(socket_path().c_str(), &st), 0);
+  EXPECT_TRUE(S_ISSOCK(st.st_mode));
+  EXPECT_EQ(st.st_mode & 0777, 0660u);
+  EXPECT_NE(server_->tcp_port(), 0);  // port 0 asked: the one bound
+
+  Client c(socket_path());
+  EXPECT_EQ(c.hello().protocol, kProtocolVersion);
+  EXPECT_EQ(c.hello().server, "test-server");
+  EXPECT_EQ(c.hello().capabilities, (std::vector<std::string>{"labels", "status"}));
+  EXPECT_FALSE(c.hello().auth_required);
+  const Json r = c.request("echo", {{"x", 1}});
+  EXPECT_EQ(r["cmd"], "echo");
+  EXPECT_EQ(r["args"]["x"], 1);
+  const Json s = c.request("server_status");  // answered by the server itself
+  EXPECT_EQ(s["clients"], 1);
+  EXPECT_EQ(s["accepted"], 1);
+  EXPECT_EQ(s["protocol_errors"], 0);
+  // A second hello is refused; the connection stays.
+  std::string code;
+  EXPECT_EQ(client_error_kind([&] { c.request("hello", {{"protocol", 1}}); }, &code), ClientErrorKind::kCommand);
+  EXPECT_EQ(code, codes::kInvalidArgument);
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+  // An error reply reaches the client with its code.
+  EXPECT_EQ(client_error_kind([&] { c.request("fail"); }, &code), ClientErrorKind::kCommand);
+  EXPECT_EQ(code, codes::kFailed);
+}
+
+TEST_F(ServerTest, TcpNeedsTheToken) {
+  start();
+  Client good(tcp_address(), ClientOptions{kToken, kPatienceMs});
+  EXPECT_TRUE(good.hello().auth_required);
+  EXPECT_EQ(good.request("echo")["cmd"], "echo");
+  const std::vector<std::string> wrong = {"", "0123456789abcdef-secreT", "0123456789abcdef-secre",
+                                          kToken + "x", std::string(kToken.size(), '\0') + "a"};
+  for (const auto& token : wrong) {
+    SCOPED_TRACE(token);
+    std::string code;
+    EXPECT_EQ(client_error_kind([&] { Client c(tcp_address(), ClientOptions{token, kPatienceMs}); }, &code),
+              ClientErrorKind::kAuth);
+    EXPECT_EQ(code, codes::kAuth);
+  }
+  EXPECT_TRUE(wait_for([&] { return counter("auth_failures") == wrong.size(); }));
+  // The refused connections are closed by the server; the good one is untouched.
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
+  EXPECT_EQ(good.request("echo")["cmd"], "echo");
+  // A raw TCP client that sends the wrong token gets the refusal, then the close.
+  Raw raw(tcp_address());
+  auto hello = raw.read();
+  ASSERT_TRUE(hello);
+  EXPECT_TRUE(decode_hello(*hello).auth_required);
+  raw.request(7, "hello", {{"protocol", 1}, {"token", 12345}});
+  const Reply r = raw.read_reply();
+  EXPECT_EQ(r.id, 7u);
+  EXPECT_FALSE(r.ok);
+  EXPECT_EQ(r.code, codes::kAuth);
+  EXPECT_TRUE(raw.closed_within());
+  // The token is not asked for on the Unix socket.
+  Client local(socket_path());
+  EXPECT_FALSE(local.hello().auth_required);
+}
+
+TEST_F(ServerTest, RequestBeforeHelloIsRefusedAndClosed) {
+  start();
+  Raw raw(socket_path());
+  auto hello = raw.read();
+  ASSERT_TRUE(hello);
+  const Hello h = decode_hello(*hello);
+  EXPECT_EQ(h.server, "test-server");
+  EXPECT_FALSE(h.auth_required);
+  raw.request(5, "server_status");
+  const Reply r = raw.read_reply();
+  EXPECT_EQ(r.id, 5u);
+  EXPECT_FALSE(r.ok);
+  EXPECT_EQ(r.code, codes::kHelloFirst);
+  EXPECT_TRUE(raw.closed_within());
+}
+
+TEST_F(ServerTest, OtherProtocolVersionIsRefused) {
+  start();
+  for (const Json& protocol : {Json(2), Json(0), Json("1"), Json(1.0), Json(nullptr)}) {
+    SCOPED_TRACE(protocol.dump());
+    Raw raw(socket_path());
+    ASSERT_TRUE(raw.read());
+    raw.request(3, "hello", {{"protocol", protocol}});
+    const Reply r = raw.read_reply();
+    EXPECT_FALSE(r.ok);
+    EXPECT_EQ(r.code, codes::kVersion);
+    EXPECT_TRUE(raw.closed_within());
+  }
+  {
+    Raw raw(socket_path());  // no protocol at all
+    ASSERT_TRUE(raw.read());
+    raw.request(3, "hello");
+    EXPECT_EQ(raw.read_reply().code, codes::kVersion);
+    EXPECT_TRUE(raw.closed_within());
+  }
+  // Framed with another version: closed without an answer.
+  Raw raw(socket_path());
+  ASSERT_TRUE(raw.read());
+  Bytes b = encode(encode_request(Request{1, "hello", {{"protocol", 2}}}));
+  b[4] = 2;
+  raw.send_bytes(b);
+  EXPECT_FALSE(raw.read());
+  EXPECT_TRUE(raw.closed_within());
+}
+
+TEST_F(ServerTest, GarbageClosesOnlyThatConnection) {
+  start();
+  Client good(socket_path());
+  Client good_tcp(tcp_address(), ClientOptions{kToken, kPatienceMs});
+  const std::string http = "GET / HTTP/1.1\r\nHost: localhost\r\n\r\n";
+  for (const std::string& address : {socket_path(), tcp_address()}) {
+    SCOPED_TRACE(address);
+    Raw garbage(address);
+    garbage.send_bytes(Bytes(http.begin(), http.end()));
+    EXPECT_TRUE(garbage.closed_within());
+  }
+  // After the handshake: a message type a client may not send, a request
+  // larger than the server accepts, a request without an id.
+  std::vector<Bytes> bad;
+  bad.push_back(encode(encode_reply(Reply{})));
+  {
+    Bytes b = encode(encode_request(Request{2, "x", {}}));
+    const std::uint32_t huge = 1u << 20;
+    for (int i = 0; i < 4; ++i) b[8 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(huge >> (8 * i));
+    bad.push_back(b);
+  }
+  {
+    Message m;
+    m.type = MessageType::kRequest;
+    m.meta = {{"cmd", "status"}};
+    bad.push_back(encode(m));
+  }
+  for (const Bytes& b : bad) {
+    Raw raw(socket_path());
+    raw.handshake();
+    raw.send_bytes(b);
+    EXPECT_FALSE(raw.read());
+    EXPECT_TRUE(raw.closed_within());
+  }
+  EXPECT_GE(counter("protocol_errors"), 5u);
+  EXPECT_EQ(good.request("server_status")["clients"].get<std::uint64_t>() >= 2, true);
+  EXPECT_EQ(good_tcp.request("echo")["cmd"], "echo");
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 2; }));
+}
+
+TEST_F(ServerTest, HalfAMessageThenCloseDisturbsNobody) {
+  start();
+  Client good(socket_path());
+  ASSERT_EQ(good.request("subscribe", {{"streams", {"labels"}}})["streams"], Json({"labels"}));
+  for (bool after_hello : {false, true}) {
+    Raw raw(socket_path());
+    if (after_hello) raw.handshake();
+    const Bytes b = encode(encode_request(Request{9, "server_status", {}}));
+    raw.send_bytes(Bytes(b.begin(), b.begin() + static_cast<std::ptrdiff_t>(b.size() / 2)));
+    raw.close();
+  }
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
+  EXPECT_EQ(good.request("server_status")["protocol_errors"], 0);
+  LabelEvent e;
+  e.frame = 77;
+  e.state = "no_target";
+  server_->publish("labels", encode_label(e));
+  auto m = good.next_event(kPatienceMs);
+  ASSERT_TRUE(m);
+  EXPECT_EQ(decode_label(*m).frame, 77u);
+  Client again(socket_path());
+  EXPECT_EQ(again.request("echo")["cmd"], "echo");
+}
+
+TEST_F(ServerTest, ClientWithoutHelloIsClosedAfterTheTimeout) {
+  ServerOptions o;
+  o.hello_timeout_ms = 200;
+  start(o);
+  const auto t0 = Clock::now();
+  Raw silent(socket_path());
+  ASSERT_TRUE(silent.read());  // the server's hello
+  Raw partial(tcp_address());
+  ASSERT_TRUE(partial.read());
+  const Bytes b = encode(encode_request(Request{1, "hello", {{"protocol", 1}, {"token", kToken}}}));
+  partial.send_bytes(Bytes(b.begin(), b.begin() + 20));
+  EXPECT_TRUE(silent.closed_within());
+  EXPECT_TRUE(partial.closed_within());
+  EXPECT_GE(std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - t0).count(), 200);
+  // A client that said hello is not subject to it.
+  Client c(socket_path());
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+  EXPECT_EQ(counter("clients"), 1u);
+}
+
+TEST_F(ServerTest, SubscribeAndPublish) {
+  start();
+  Client c(socket_path());
+  EXPECT_FALSE(server_->has_subscribers("labels"));
+  EXPECT_EQ(c.request("subscribe", {{"streams", {"labels", "depth:80"}}})["streams"], Json({"depth:80", "labels"}));
+  EXPECT_TRUE(server_->has_subscribers("labels"));
+  EXPECT_TRUE(server_->has_subscribers("depth:80"));
+  EXPECT_FALSE(server_->has_subscribers("label_map"));
+  // Not subscribed: label_map and depth:16 are not sent; what is comes in order.
+  server_->publish("label_map", encode_label_map(label_map(1)));
+  DepthEvent d16;
+  d16.kind = "16";
+  server_->publish("depth:16", encode_depth(d16));
+  LabelEvent e;
+  e.frame = 5;
+  e.profile = "handheld";
+  e.state = "tracking";
+  e.material = "cork";
+  e.index = 3;
+  e.distance = 12.5;
+  e.ranking = {{"cork", 12.5}, {"paper", 40.0}};
+  server_->publish("labels", encode_label(e));
+  DepthEvent d80;
+  d80.frame = 6;
+  d80.kind = "80";
+  d80.width = 2;
+  d80.height = 1;
+  d80.depth_mm = {1000.0f, 1001.0f};
+  server_->publish("depth:80", encode_depth(d80));
+  auto m1 = c.next_event(kPatienceMs);
+  ASSERT_TRUE(m1);
+  const LabelEvent got = decode_label(*m1);
+  EXPECT_EQ(got.frame, 5u);
+  EXPECT_EQ(got.material, "cork");
+  EXPECT_EQ(got.ranking.size(), 2u);
+  auto m2 = c.next_event(kPatienceMs);
+  ASSERT_TRUE(m2);
+  EXPECT_EQ(decode_depth(*m2).depth_mm, d80.depth_mm);
+  // Unknown streams and malformed lists are refused; nothing changes.
+  const std::vector<Json> bad = {{{"streams", {"labels", "nope"}}},
+                                 {{"streams", "labels"}},
+                                 {{"streams", {1}}},
+                                 {{"streams", std::vector<std::string>(17, "labels")}},
+                                 {{"streams", {"depth"}}}};
+  for (const Json& args : bad) {
+    SCOPED_TRACE(args.dump());
+    std::string code;
+    EXPECT_EQ(client_error_kind([&] { c.request("subscribe", args); }, &code), ClientErrorKind::kCommand);
+    EXPECT_EQ(code, codes::kInvalidArgument);
+  }
+  EXPECT_EQ(c.request("subscribe")["streams"], Json({"depth:80", "labels"}));
+  // Unsubscribe one, then all.
+  EXPECT_EQ(c.request("unsubscribe", {{"streams", {"depth:80"}}})["streams"], Json({"labels"}));
+  EXPECT_FALSE(server_->has_subscribers("depth:80"));
+  EXPECT_EQ(c.request("unsubscribe")["streams"], Json::array());
+  EXPECT_FALSE(server_->has_subscribers("labels"));
+  // A subscriber that goes away takes its subscriptions with it.
+  {
+    Client gone(socket_path());
+    gone.request("subscribe", {{"streams", {"device"}}});
+    EXPECT_TRUE(server_->has_subscribers("device"));
+  }
+  EXPECT_TRUE(wait_for([&] { return !server_->has_subscribers("device"); }));
+  // Nothing was published to c after it unsubscribed.
+  server_->publish("labels", encode_label(e));
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+  EXPECT_EQ(c.pending_events(), 0u);
+}
+
+TEST_F(ServerTest, SlowSubscriberLosesOldestEventsOthersGetTheNewest) {
+  ServerOptions o;
+  o.max_queue_bytes = 64 * 1024;  // less than one label map (212 KiB)
+  start(o);
+  Raw slow(socket_path());
+  slow.handshake();
+  slow.request(2, "subscribe", {{"streams", {"label_map"}}});
+  ASSERT_TRUE(slow.read_reply().ok);
+  Client fast(socket_path());
+  fast.request("subscribe", {{"streams", {"label_map"}}});
+  // Each map is published once the fast client has the one before, so the
+  // server's inbox never overflows: every drop is the slow client's queue.
+  constexpr int kMaps = 40;
+  for (int i = 0; i < kMaps; ++i) {
+    server_->publish("label_map", encode_label_map(label_map(static_cast<std::uint64_t>(i))));
+    auto m = fast.next_event(kPatienceMs);
+    ASSERT_TRUE(m) << "map " << i << " did not reach the fast client";
+    const LabelMapEvent e = decode_label_map(*m);
+    ASSERT_EQ(e.frame, static_cast<std::uint64_t>(i));
+    ASSERT_EQ(e.labels.size(), 512u * 424u);
+  }
+  const Json s = fast.request("server_status");
+  EXPECT_GT(s["dropped_events"].get<std::uint64_t>(), 0u);
+  EXPECT_EQ(s["clients"], 2);  // the slow one is not closed
+  // The slow client now reads: some maps in order, none twice, ending with the newest.
+  std::vector<std::uint64_t> frames;
+  while (frames.empty() || frames.back() != kMaps - 1) {
+    auto m = slow.read();
+    ASSERT_TRUE(m) << "the slow client stopped after " << frames.size() << " maps";
+    frames.push_back(decode_label_map(*m).frame);
+    if (frames.size() >= 2) {
+      ASSERT_LT(frames[frames.size() - 2], frames.back());
+    }
+  }
+  EXPECT_LT(frames.size(), static_cast<std::size_t>(kMaps));
+  // Every map was either sent to the slow client or dropped for it.
+  EXPECT_EQ(counter("dropped_events"), static_cast<std::uint64_t>(kMaps) - frames.size());
+}
+
+TEST_F(ServerTest, RepliesAreNeverDroppedAClientThatPilesThemUpIsClosed) {
+  ServerOptions o;
+  o.max_queue_bytes = 64 * 1024;
+  start(o);
+  Raw slow(socket_path());
+  slow.handshake();
+  slow.request(2, "subscribe", {{"streams", {"label_map"}}});
+  ASSERT_TRUE(slow.read_reply().ok);
+  // Label maps beyond the budget are events: dropped. The reply after them is not.
+  for (std::uint64_t f = 1; f <= 3; ++f) server_->publish("label_map", encode_label_map(label_map(f)));
+  ASSERT_TRUE(wait_for([&] { return counter("dropped_events") >= 1; }));
+  slow.request(3, "server_status");
+  std::optional<Message> m;
+  while ((m = slow.read()) && m->type == MessageType::kEvent) {
+  }
+  ASSERT_TRUE(m);
+  const Reply r = decode_reply(*m);
+  EXPECT_TRUE(r.ok);
+  EXPECT_EQ(r.id, 3u);
+  // Commands sent without reading a reply: the queue fills with replies and
+  // the server closes the connection rather than drop one.
+  Client other(socket_path());
+  try {
+    for (std::uint32_t id = 10; id < 10 + 4000 && counter("clients") == 2; ++id) slow.request(id, "server_status");
+  } catch (const SocketError&) {
+    // the server closed it while we were still sending: what we wait for
+  }
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
+  EXPECT_TRUE(other.request("server_status").contains("clients"));  // the other one is served
+}
+
+TEST_F(ServerTest, LongErrorFromTheHandlerStillReachesTheClient) {
+  // A handler's error text over kMaxTextBytes (the daemon's load_table quotes
+  // the path, up to kMaxTextBytes itself) is cut, at a UTF-8 boundary, so the
+  // client can read the reply instead of dropping the connection.
+  start();
+  Client c(socket_path());
+  std::string code;
+  EXPECT_EQ(client_error_kind([&] { c.request("fail", {{"error", std::string(3000, 'e')}}); }, &code),
+            ClientErrorKind::kCommand);
+  EXPECT_EQ(code, codes::kFailed);
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+  Raw raw(socket_path());
+  raw.handshake();
+  // A 2-byte character just before, across and just after the cut.
+  for (std::size_t pad = 0; pad < 3; ++pad) {
+    const std::string text = std::string(kMaxTextBytes - 5 + pad, 'x') + "\xc3\xa9" + std::string(100, 'z');
+    raw.request(10, "fail", {{"error", text}});
+    const Reply r = raw.read_reply();
+    EXPECT_FALSE(r.ok);
+    EXPECT_EQ(r.code, codes::kFailed);
+    EXPECT_LE(r.error.size(), kMaxTextBytes);
+    EXPECT_GE(r.error.size(), kMaxTextBytes - 1);
+    EXPECT_EQ(r.error.find("\xef\xbf\xbd"), std::string::npos) << "a character was cut in two";
+    EXPECT_EQ(r.error.substr(0, kMaxTextBytes - 5), std::string(kMaxTextBytes - 5, 'x'));
+    EXPECT_EQ(r.error.substr(r.error.size() - 3), "...");
+  }
+  // One at the bound goes through whole.
+  raw.request(11, "fail", {{"error", std::string(kMaxTextBytes, 'y')}});
+  EXPECT_EQ(raw.read_reply().error, std::string(kMaxTextBytes, 'y'));
+}
+
+TEST_F(ServerTest, MaxClientsRefusesTheNextConnection) {
+  ServerOptions o;
+  o.max_clients = 2;
+  start(o);
+  Client a(socket_path());
+  Client b(socket_path());
+  EXPECT_EQ(client_error_kind([&] { Client c(socket_path()); }), ClientErrorKind::kClosed);
+  EXPECT_EQ(counter("rejected"), 1u);
+  EXPECT_EQ(a.request("echo")["cmd"], "echo");
+  b.close();
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
+  Client c(socket_path());
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+}
+
+TEST_F(ServerTest, OptionsThatCannotWork) {
+  const auto make = [&](ServerOptions o) { Server s(std::move(o), answer); };
+  ServerOptions o = options();
+  o.token.clear();
+  EXPECT_THROW(make(o), std::invalid_argument);  // TCP without a token
+  o = options();
+  o.tcp = "not-an-address";
+  EXPECT_THROW(make(o), std::invalid_argument);
+  o = ServerOptions{};
+  EXPECT_THROW(make(o), std::invalid_argument);  // nothing to listen on
+  // A live daemon's socket is not replaced; a stale one is.
+  start();
+  o = options();
+  o.tcp.clear();
+  EXPECT_THROW(make(o), SocketError);
+  stop_server();
+  {
+    // Leave a socket file nobody listens on.
+    Fd listener = listen_unix(socket_path());
+  }
+  EXPECT_NO_THROW(make(o));
+}
+
+}  // namespace
