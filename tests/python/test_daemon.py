@@ -473,3 +473,20 @@ def test_the_shipped_example_config_parses(start: Callable[..., Daemon]) -> None
     with d.client() as c:
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["source"].startswith("simulated")
+
+
+def test_watch_and_status_on_the_command_line(start: Callable[..., Daemon]) -> None:
+    d = start(sweep(["paper"], frames=30, gap=4))
+    d.client().close()  # listening
+    p = subprocess.run(["python3", "-m", "tofmat", "watch", "--address", str(d.socket), "--count", "8"],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("frame")]
+    assert len(lines) == 8 and any("[truth paper]" in ln for ln in lines)
+    assert "mm^2" in p.stdout or "(no target)" in p.stdout
+    p = subprocess.run(["python3", "-m", "tofmat", "status", "--address", str(d.socket)], capture_output=True,
+                       text=True, timeout=60)  # fmt: skip
+    assert p.returncode == 0 and json.loads(p.stdout)["profile"] == "handheld"
+    p = subprocess.run(["python3", "-m", "tofmat", "watch", "--address", str(d.socket) + ".nobody"],
+                       capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert p.returncode == 1 and "cannot connect" in p.stderr
