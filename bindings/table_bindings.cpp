@@ -82,7 +82,7 @@ void register_table(pyb::module_& m) {
           [](const std::filesystem::path& dir, double start, double stop) {
             return std::make_shared<ExemplarTable>(ExemplarTable::from_npy_dir(dir, start, stop));
           },
-          pyb::arg("path"), pyb::arg("bin_start_mm") = 600.0, pyb::arg("bin_stop_mm") = 1200.0,
+          pyb::arg("path"), pyb::arg("bin_start_mm") = kDatabaseBinStartMm, pyb::arg("bin_stop_mm") = kDatabaseBinStopMm,
           "Import a folder of <material>.npy curves (the real database's layout). Bins are "
           "numpy.linspace(bin_start_mm, bin_stop_mm, n_bins), as the authors built them.")
       .def_static(

@@ -490,3 +490,13 @@ def test_watch_and_status_on_the_command_line(start: Callable[..., Daemon]) -> N
     p = subprocess.run(["python3", "-m", "tofmat", "watch", "--address", str(d.socket) + ".nobody"],
                        capture_output=True, text=True, timeout=60)  # fmt: skip
     assert p.returncode == 1 and "cannot connect" in p.stderr
+
+
+def test_a_folder_of_npy_curves_is_a_table_with_the_databases_bins(start: Callable[..., Daemon], db_dir: Path) -> None:
+    d = start("sim:static,material=cork,realtime=0", table=db_dir)
+    expected = tofmat.ExemplarTable.from_npy_dir(db_dir)
+    with d.client() as c:
+        t = c.status()["table"]
+        assert t["materials"] == expected.materials and t["bins"] == expected.bins.count
+        assert t["bin_start_mm"] == expected.bins.start_mm
+        assert abs(t["bin_width_mm"] - expected.bins.width_mm) < 1e-12

@@ -24,7 +24,8 @@ protocol::Reply failure(std::uint32_t id, const char* code, const std::string& w
 
 std::shared_ptr<const ExemplarTable> load_table_file(const std::string& path) {
   if (std::filesystem::is_directory(path))
-    return std::make_shared<const ExemplarTable>(ExemplarTable::from_npy_dir(path, 600.0, 1250.0));  // the database's bins
+    return std::make_shared<const ExemplarTable>(
+        ExemplarTable::from_npy_dir(path, kDatabaseBinStartMm, kDatabaseBinStopMm));
   return std::make_shared<const ExemplarTable>(load_table(path));
 }
 

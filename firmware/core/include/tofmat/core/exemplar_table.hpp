@@ -25,6 +25,11 @@ struct RowSpec {
   bool operator==(const RowSpec& o) const { return freq_mhz == o.freq_mhz && ref_freq_mhz == o.ref_freq_mhz; }
 };
 
+// The real database's binning (its README): numpy.linspace(600, 1200, n_bins)
+// bin edges, the defaults wherever a folder of .npy curves is imported.
+inline constexpr double kDatabaseBinStartMm = 600.0;
+inline constexpr double kDatabaseBinStopMm = 1200.0;
+
 class ExemplarTable {
  public:
   // values: n_materials x n_rows x n_bins, C order, NaN = missing, everything
