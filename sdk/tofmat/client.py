@@ -260,8 +260,12 @@ class Client:
         self._streams.update(streams)
 
     def unsubscribe(self, *streams: str) -> None:
+        """Stop the given streams (none given: all of them)."""
         self._call("unsubscribe", {"streams": list(streams)})
-        self._streams.difference_update(streams) if streams else self._streams.clear()
+        if streams:
+            self._streams.difference_update(streams)
+        else:
+            self._streams.clear()
 
     def events(self, timeout: float | None = None) -> Iterator[Event]:
         """Events of the subscribed streams, in order. Raises DaemonTimeoutError when none comes

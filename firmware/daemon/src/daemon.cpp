@@ -156,11 +156,9 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
     } else {
       return failure(req.id, codes::kUnknownCommand, "unknown command \"" + req.cmd + "\"");
     }
-  } catch (const protocol::ProtocolError& e) {
+  } catch (const protocol::ProtocolError& e) {  // a bad argument
     return failure(req.id, codes::kInvalidArgument, e.what());
-  } catch (const std::invalid_argument& e) {
-    return failure(req.id, codes::kInvalidArgument, e.what());
-  } catch (const std::logic_error& e) {
+  } catch (const std::logic_error& e) {  // refused by the pipeline (invalid_argument), or a trigger outside sorting
     return failure(req.id, codes::kInvalidArgument, e.what());
   }
   return r;

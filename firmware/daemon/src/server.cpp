@@ -320,34 +320,31 @@ void Server::run(const std::atomic<bool>& stop) {
     if (unix_ && (fds[k++].revents & POLLIN)) accept_from(unix_.get(), false);
     if (tcp_ && (fds[k++].revents & POLLIN)) accept_from(tcp_.get(), true);
     const std::uint64_t now = protocol::monotonic_ns();
-    bool changed = false;
     for (std::size_t i = first_client; i < fds.size(); ++i) {
       auto it = connections_.find(ids[i - first_client]);
       if (it == connections_.end()) continue;
       Connection& c = *it->second;
       if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) read_from(c);
-      if (!c.dead && (fds[i].revents & POLLOUT)) write_to(c);
-      if (!c.dead && c.out.empty() && c.closing) c.dead = true;
       if (!c.ready && now - c.accepted_ns > static_cast<std::uint64_t>(options_.hello_timeout_ms) * 1'000'000ull) {
         spdlog::warn("client {}: no hello within {} ms; closing it", c.id, options_.hello_timeout_ms);
         c.dead = true;
       }
-      if (c.dead) {
-        spdlog::info("client {} disconnected ({} events dropped for it)", c.id, c.dropped);
-        connections_.erase(it);
-        changed = true;
-      }
     }
-    // Replies queued while reading go out without waiting for the next poll.
+    // Every queue with something in it is written now (replies queued while
+    // reading go out without waiting for the next poll); then the dead go.
     for (auto& [id, c] : connections_)
-      if (!c->out.empty()) write_to(*c);
+      if (!c->dead && !c->out.empty()) write_to(*c);
+    bool changed = false;
     for (auto it = connections_.begin(); it != connections_.end();) {
-      if (it->second->dead) {
-        it = connections_.erase(it);
-        changed = true;
-      } else {
+      Connection& c = *it->second;
+      if (c.closing && c.out.empty()) c.dead = true;  // a refused hello's reply is out
+      if (!c.dead) {
         ++it;
+        continue;
       }
+      spdlog::info("client {} disconnected ({} events dropped for it)", c.id, c.dropped);
+      it = connections_.erase(it);
+      changed = true;
     }
     if (changed) refresh_subscriptions();
     clients_ = connections_.size();

@@ -8,7 +8,6 @@ frame-to-client latency and the daemon's own figures, and stops the daemon.
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import tempfile
@@ -81,13 +80,10 @@ def run_live_demo(
     frames: int,
     gap: int,
     echo: Callable[[str], None],
-    workdir: Path | None = None,
 ) -> DemoResult:
     result = DemoResult()
     with tempfile.TemporaryDirectory(prefix="tofmat-demo-") as tmp:
-        work = Path(workdir or tmp)
-        work.mkdir(parents=True, exist_ok=True)
-        socket, log = work / "tofmatd.sock", work / "tofmatd.log"
+        socket, log = Path(tmp) / "tofmatd.sock", Path(tmp) / "tofmatd.log"
         source = f"sim:sweep,materials={'+'.join(materials)},frames={frames},gap={gap}"
         echo(f"starting tofmatd --source {source} --table {table}")
         daemon = start_daemon(table, socket, source, log)
@@ -153,6 +149,3 @@ def ensure_sim_table(path: Path, echo: Callable[[str], None]) -> Path:
 
 
 __all__ = ["DemoResult", "connect", "ensure_sim_table", "run_live_demo", "start_daemon", "stop_daemon"]
-
-if os.name != "posix":  # pragma: no cover
-    raise ImportError("tofmat demo needs a POSIX system (Unix sockets, signals)")
