@@ -36,19 +36,22 @@ TEST(FixedDecode, MatchesTheFloatDecodeWithinTheErrorBudget) {
   const DecodedFrame f = decode_frame(s.raw.data(), s.n, s.p0);
   const FixedDecodeTables t(s.p0, s.n);
   const FixedDecodedFrame x = decode_frame_fixed(s.raw.data(), t, {}, FixedKernel::kScalar);
-  double worst_phase = 0.0, worst_depth[3] = {0, 0, 0}, worst_combined = 0.0, worst_feature = 0.0, worst_amp = 0.0;
+  double worst_phase[3] = {0, 0, 0}, worst_depth[3] = {0, 0, 0}, worst_combined = 0.0, worst_feature = 0.0, worst_amp = 0.0;
   std::size_t both_valid = 0, flag_differs = 0;
   for (std::size_t i = 0; i < s.n; ++i) {
     for (std::size_t g = 0; g < 3; ++g) {
       const double ph = x.phase_turns[g][i] * (kTwoPi / 4294967296.0);
-      worst_phase = std::max(worst_phase, std::fabs(wrapped_diff(ph, f.phase_rad[g][i], kTwoPi)));
+      worst_phase[g] = std::max(worst_phase[g], std::fabs(wrapped_diff(ph, f.phase_rad[g][i], kTwoPi)));
       const double a = x.amplitude_q8[g][i] / 256.0;
       // Relative error beyond the Q8 step (1/256 count, truncated).
       worst_amp = std::max(worst_amp, (std::fabs(a - f.amplitude[g][i]) - 1.0 / 256.0) / f.amplitude[g][i]);
     }
     if (x.flags[i] != f.flags[i]) {
       // Only on a threshold's edge: an amplitude rule within 0.01 counts, or
-      // an unwrap gap within 0.01 mm, of its limit (DecodeOptions defaults).
+      // an unwrap gap within 0.01 mm (two depths' budget), of its limit
+      // (DecodeOptions defaults); or at the 16 MHz wrap point (0 = 9375 mm,
+      // within the depth budget), where 0 unwraps consistently and 9375 mm
+      // does not (9375 is no multiple of 1250): either side is a right answer.
       ++flag_differs;
       const double a0 = f.amplitude[0][i], a1 = f.amplitude[1][i], a2 = f.amplitude[2][i];
       std::array<double, 3> wrapped{};
@@ -56,9 +59,10 @@ TEST(FixedDecode, MatchesTheFloatDecodeWithinTheErrorBudget) {
       const UnwrappedDepth u = unwrap_depths(wrapped);
       const double gap1 = std::fabs(u.depth_mm[kGroup80] - u.depth_mm[kGroup16]);
       const double gap2 = std::fabs(u.depth_mm[kGroup120] - u.depth_mm[kGroup80]);
-      const auto near = [](double v, double edge) { return std::fabs(v - edge) < 0.01; };
-      EXPECT_TRUE(near(a0, 3) || near(a1, 3) || near(a2, 3) || near(a0 + a1 + a2, 30) || near(a1, 12) ||
-                  near(gap1, 400) || near(gap2, 300))
+      const auto near = [](double v, double edge, double tol) { return std::fabs(v - edge) < tol; };
+      const bool wrap16 = std::min(wrapped[kGroup16], kRange[kGroup16] - wrapped[kGroup16]) < 0.002;
+      EXPECT_TRUE(near(a0, 3, 0.01) || near(a1, 3, 0.01) || near(a2, 3, 0.01) || near(a0 + a1 + a2, 30, 0.01) ||
+                  near(a1, 12, 0.01) || near(gap1, 400, 0.01) || near(gap2, 300, 0.01) || wrap16)
           << "pixel " << i << ": flags " << int(f.flags[i]) << " (float) vs " << int(x.flags[i]) << " (fixed); amplitudes "
           << a0 << " " << a1 << " " << a2 << ", gaps " << gap1 << " " << gap2;
       continue;
@@ -81,15 +85,21 @@ TEST(FixedDecode, MatchesTheFloatDecodeWithinTheErrorBudget) {
       worst_feature = std::max(worst_feature, std::fabs(std::remainder(fx - ff, 625.0)));
     }
   }
-  std::cout << "[ measured ] fixed vs float over " << s.n << " pixels: phase " << worst_phase << " rad, depth "
+  std::cout << "[ measured ] fixed vs float over " << s.n << " pixels: phase " << worst_phase[0] << " / "
+            << worst_phase[1] << " / " << worst_phase[2] << " rad, depth "
             << worst_depth[0] << " / " << worst_depth[1] << " / " << worst_depth[2] << " mm (80/16/120 MHz), combined "
             << worst_combined << " mm, features " << worst_feature << " mm, amplitude " << worst_amp
             << " (relative); flags differ at " << flag_differs << " pixels, both valid " << both_valid << "\n";
-  // The budget (docs/numerics.md): 1e-6 rad of phase, 0.002 mm of per-frequency
-  // depth (far below the real curves' 0.3 mm roughness), the combined depth's
-  // Q8 step (0.004 mm) plus that, amplitude 1e-4 relative beyond its Q8 step.
-  EXPECT_LT(worst_phase, 1e-6);
-  for (double w : worst_depth) EXPECT_LT(w, 0.002);
+  // The budget (docs/numerics.md): 1e-6 rad of phase (the residual's cubic
+  // term 1.6e-7, the float reference's own half ulp at 2 pi 2.4e-7), 0.002 mm
+  // of per-frequency depth (far below the real curves' 0.3 mm roughness), the
+  // combined depth's Q8 step (0.004 mm) plus that, features two depths'
+  // worth, amplitude 1e-4 relative beyond its Q8 step (the residual angle's
+  // cosine: 3.1e-5 at most).
+  for (std::size_t g = 0; g < 3; ++g) {
+    EXPECT_LT(worst_phase[g], 1e-6) << g;
+    EXPECT_LT(worst_depth[g], 0.002) << g;
+  }
   EXPECT_LT(worst_combined, 0.004 + 0.002);
   EXPECT_LT(worst_feature, 0.004);
   EXPECT_LT(worst_amp, 1e-4);
@@ -156,37 +166,78 @@ TEST(FixedDecode, RegionEqualsTheFramesPixels) {
   EXPECT_THROW(FixedDecodeTables(std::vector<float>(5), 4), std::invalid_argument);
 }
 
-#if defined(__aarch64__)
-TEST(FixedDecode, NeonKernelIsBitExactWithScalar) {
+// The build's vector kernel (NEON on aarch64, AVX2 on x86-64 CPUs that have
+// it) against the scalar definition, bit for bit.
+TEST(FixedDecode, VectorKernelIsBitExactWithScalar) {
+#if defined(__x86_64__)
+  if (!cpu_has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: kBest is the scalar kernel";
+  const auto vector_kernel = phase_amplitude_avx2;
+#elif defined(__aarch64__)
+  const auto vector_kernel = phase_amplitude_neon;
+#else
+  GTEST_SKIP() << "no vector kernel on this architecture";
+  const auto vector_kernel = phase_amplitude_scalar;
+#endif
   // Random pixels over the whole range, exact wrap points, extremes, and
   // lengths that leave a scalar tail.
-  for (std::size_t n : {1u, 3u, 4u, 7u, 1000u, 65537u}) {
-    const Synthetic s = random_frame(n, static_cast<std::uint32_t>(n), true);
-    const FixedDecodeTables t(s.p0, s.n);
-    const FixedDecodedFrame a = decode_frame_fixed(s.raw.data(), t, {}, FixedKernel::kScalar);
-    const FixedDecodedFrame b = decode_frame_fixed(s.raw.data(), t, {}, FixedKernel::kBest);
-    for (std::size_t g = 0; g < 3; ++g) {
-      ASSERT_EQ(a.phase_turns[g], b.phase_turns[g]) << n;
-      ASSERT_EQ(a.amplitude_q8[g], b.amplitude_q8[g]) << n;
-      ASSERT_EQ(a.depth_q16[g], b.depth_q16[g]) << n;
+  // The finishing stage too, under every kind of threshold: defaults, none,
+  // ones that flag a good share (amplitude and gaps), NaN gaps (every gap fails).
+  DecodeOptions none, strict, nan_gaps;
+  none.min_amplitude = none.min_mean_amplitude = none.min_unwrap_amplitude = 0.0;
+  none.max_gap_16_80_mm = none.max_gap_80_120_mm = 1e30;
+  strict.min_amplitude = 200.0;
+  strict.min_mean_amplitude = 900.0;
+  strict.min_unwrap_amplitude = 500.0;
+  strict.max_gap_16_80_mm = 0.05;
+  strict.max_gap_80_120_mm = 0.02;
+  nan_gaps.max_gap_16_80_mm = std::nan("");
+  for (const DecodeOptions& o : {DecodeOptions{}, none, strict, nan_gaps}) {
+    for (std::size_t n : {1u, 3u, 4u, 7u, 8u, 9u, 17u, 1000u, 65537u}) {
+      const Synthetic s = random_frame(n, static_cast<std::uint32_t>(n), true);
+      const FixedDecodeTables t(s.p0, s.n);
+      const FixedDecodedFrame a = decode_frame_fixed(s.raw.data(), t, o, FixedKernel::kScalar);
+      FixedDecodedFrame b = decode_frame_fixed(s.raw.data(), t, o, FixedKernel::kBest);
+      for (int pass = 0; pass < 2; ++pass) {  // the second time into the same (reused) frame
+        for (std::size_t g = 0; g < 3; ++g) {
+          ASSERT_EQ(a.phase_turns[g], b.phase_turns[g]) << n;
+          ASSERT_EQ(a.amplitude_q8[g], b.amplitude_q8[g]) << n;
+          ASSERT_EQ(a.depth_q16[g], b.depth_q16[g]) << n;
+        }
+        ASSERT_EQ(a.flags, b.flags) << n;
+        ASSERT_EQ(a.combined_q8, b.combined_q8) << n;
+        ASSERT_EQ(a.features_q16[0], b.features_q16[0]) << n;
+        ASSERT_EQ(a.features_q16[1], b.features_q16[1]) << n;
+        decode_frame_fixed(s.raw.data(), t, b, o, FixedKernel::kBest);
+      }
     }
-    ASSERT_EQ(a.flags, b.flags) << n;
-    ASSERT_EQ(a.combined_q8, b.combined_q8) << n;
   }
   std::mt19937 rng(9);  // raw samples uniformly over every code value, saturation included
   std::uniform_int_distribution<int> any(-16320, 16320);
   std::vector<std::int16_t> m(3 * 4096);
   for (auto& v : m) v = static_cast<std::int16_t>(rng() % 50 == 0 ? kRawSaturated : any(rng));
   m[0] = m[4096] = m[8192] = 0;  // a zero phasor
-  std::vector<std::uint32_t> p0(4096), pa(4096), pb(4096), aa(4096), ab(4096);
+  // Every extreme combination (as ExtremeSamplesNeitherOverflowNorDisagree).
+  const std::int16_t ext[] = {-16320, -16319, -1, 0, 1, 16319, 16320, kRawSaturated};
+  std::size_t k = 1;
+  for (auto a : ext) {
+    for (auto b : ext) {
+      for (auto c : ext) {
+        m[k] = a;
+        m[4096 + k] = b;
+        m[8192 + k] = c;
+        ++k;
+      }
+    }
+  }
+  std::vector<std::uint32_t> p0(4096);
   for (auto& v : p0) v = static_cast<std::uint32_t>(rng());
+  std::vector<std::uint32_t> pa(4096), pb(4096), aa(4096), ab(4096);
   std::vector<std::uint8_t> fa(4096, 0), fb(4096, 0);
   phase_amplitude_scalar(m.data(), m.data() + 4096, m.data() + 8192, p0.data(), 4096, pa.data(), aa.data(), fa.data());
-  phase_amplitude_neon(m.data(), m.data() + 4096, m.data() + 8192, p0.data(), 4096, pb.data(), ab.data(), fb.data());
+  vector_kernel(m.data(), m.data() + 4096, m.data() + 8192, p0.data(), 4096, pb.data(), ab.data(), fb.data());
   EXPECT_EQ(pa, pb);
   EXPECT_EQ(aa, ab);
   EXPECT_EQ(fa, fb);
 }
-#endif
 
 }  // namespace

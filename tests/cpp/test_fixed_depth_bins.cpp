@@ -96,13 +96,19 @@ TEST(FixedDepthBins, FullBinsRefuseFurtherObservations) {
   EXPECT_THROW(wide.count(2, 0), std::out_of_range);
 }
 
-#if defined(__aarch64__)
-TEST(FixedDepthBins, NeonBinKernelIsBitExactWithScalar) {
+// The build's vector kernel (NEON on aarch64, AVX2 on x86-64 CPUs that have
+// it) against the scalar definition.
+TEST(FixedDepthBins, VectorBinKernelIsBitExactWithScalar) {
+#if defined(__x86_64__)
+  if (!cpu_has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: kBest is the scalar kernel";
+#elif !defined(__aarch64__)
+  GTEST_SKIP() << "no vector kernel on this architecture";
+#endif
   std::mt19937 rng(4);
   std::uniform_int_distribution<std::int32_t> any(INT32_MIN, INT32_MAX), near(500 * 256, 1300 * 256);
   for (const BinSpec& b : {kDatabaseBins, BinSpec{-4000.0, 1.0 / 64.0, 65535}, BinSpec{0.0, 4000.0, 3}}) {
     const FixedBinning fb = FixedBinning::from(b);
-    for (std::size_t n : {1u, 4u, 7u, 5003u}) {
+    for (std::size_t n : {1u, 4u, 7u, 8u, 9u, 5003u}) {
       std::vector<std::int32_t> d(n), a(n), c(n);
       std::vector<std::uint8_t> flags(n);
       for (std::size_t i = 0; i < n; ++i) {
@@ -112,11 +118,10 @@ TEST(FixedDepthBins, NeonBinKernelIsBitExactWithScalar) {
         flags[i] = static_cast<std::uint8_t>(i % 17 == 0 ? kDecodeUnwrap : 0);
       }
       bin_indices_scalar(d.data(), flags.data(), n, fb, a.data());
-      bin_indices_neon(d.data(), flags.data(), n, fb, c.data());
+      bin_indices(FixedKernel::kBest, d.data(), flags.data(), n, fb, c.data());
       ASSERT_EQ(a, c) << n;
     }
   }
 }
-#endif
 
 }  // namespace

@@ -10,8 +10,8 @@
 namespace tofmat {
 
 namespace fixed_decode_detail {
-// round(2^25 * 256 / (3 K)), K = prod sqrt(1 + 2^-2i) over the 28 iterations = 1.6467602581...
-const std::uint32_t kAmpScale = 1738754331u;
+// round(2^25 * 256 / (3 K)), K = prod sqrt(1 + 2^-2i), i = 0..7, = 1.6467435066...
+const std::uint32_t kAmpScale = 1738772018u;
 }  // namespace fixed_decode_detail
 
 namespace {
@@ -54,17 +54,24 @@ void phase_amplitude_scalar(const std::int16_t* m0, const std::int16_t* m1, cons
       y = -y;
       angle = 0x80000000u;
     }
-    // y > 0: x += y >> k, y -= x >> k, angle += atan(2^-k); else the
+    // y >= 0: x += y >> k, y -= x >> k, angle += atan(2^-k); else the
     // opposite. Branch-free (the direction is a coin flip per step): m is -1
-    // for "else", and (v ^ m) - m is v or -v.
-    for (int k = 0; k < kCordicIterations; ++k) {
+    // for "else", and (v ^ m) - m is v or -v. (y = 0 could turn either way;
+    // ">= 0" is what AVX2's sign instruction does with y | 1 in one step.)
+    for (int k = 0; k < kCordicSteps; ++k) {
       const std::int32_t xs = x >> k, ys = y >> k;  // arithmetic shifts (as NEON's)
-      const std::int32_t m = -static_cast<std::int32_t>(y <= 0);
+      const std::int32_t m = -static_cast<std::int32_t>(y < 0);
       x += (ys ^ m) - m;
       y -= (xs ^ m) - m;
       const auto um = static_cast<std::uint32_t>(m);
       angle += (kAtanTurns[static_cast<std::size_t>(k)] ^ um) - um;
     }
+    // The residual angle, |y / x| <= tan(atan(2^-7)) (x > 0 after the first
+    // step; |y| < 2^23 is exact in binary32): one correctly rounded division,
+    // a product rounded once, a conversion rounding to nearest even, as
+    // _mm256_cvtps_epi32 and vcvtnq_s32_f32 do.
+    const float t = static_cast<float>(y) / static_cast<float>(x);
+    angle += static_cast<std::uint32_t>(static_cast<std::int32_t>(std::nearbyint(t * kTurnsPerRadF)));
     phase[i] = angle - p0[i];  // mod 2^32: the wrap into [0, 2 pi)
     amp_q8[i] = static_cast<std::uint32_t>((static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * kAmpScale) >>
                                            (kAmpScaleBits + sh));
@@ -87,24 +94,20 @@ FixedDecodeTables::FixedDecodeTables(const std::vector<float>& p0_rad, std::size
 
 namespace {
 
-FixedDecodedFrame allocate_fixed(std::size_t pixels) {
-  FixedDecodedFrame out;
+// Sizes every plane for `pixels` (keeping the buffers of a reused frame) and
+// clears the flags (the kernels OR saturation into them); every other plane
+// is written whole by the kernels and the finishing stage.
+void size_fixed(FixedDecodedFrame& out, std::size_t pixels) {
   out.pixels = pixels;
   for (std::size_t g = 0; g < 3; ++g) {
-    out.phase_turns[g].assign(pixels, 0u);
-    out.amplitude_q8[g].assign(pixels, 0u);
-    out.depth_q16[g].assign(pixels, kFixedInvalid);
+    out.phase_turns[g].resize(pixels);
+    out.amplitude_q8[g].resize(pixels);
+    out.depth_q16[g].resize(pixels);
   }
-  out.combined_q8.assign(pixels, kFixedInvalid);
-  for (auto& f : out.features_q16) f.assign(pixels, kFixedInvalid);
+  out.combined_q8.resize(pixels);
+  for (auto& f : out.features_q16) f.resize(pixels);
   out.flags.assign(pixels, 0);
-  return out;
 }
-
-struct Thresholds {
-  std::uint32_t amp, mean_sum, unwrap_amp;  // Q8 counts
-  std::int64_t gap_16_80, gap_80_120;       // Q16 mm
-};
 
 std::uint32_t q8_counts(double v) {
   if (!(v > 0.0)) return 0;
@@ -115,45 +118,74 @@ std::int64_t q16_mm(double v) {
   return static_cast<std::int64_t>(std::min(std::floor(v * 65536.0), 9.0e18));
 }
 
-Thresholds thresholds(const DecodeOptions& o) {
+FixedPlanes planes(FixedDecodedFrame& f, std::size_t at) {
+  FixedPlanes p;
+  for (std::size_t g = 0; g < 3; ++g) {
+    p.phase[g] = f.phase_turns[g].data() + at;
+    p.amp[g] = f.amplitude_q8[g].data() + at;
+    p.depth[g] = f.depth_q16[g].data() + at;
+  }
+  p.flags = f.flags.data() + at;
+  p.combined = f.combined_q8.data() + at;
+  p.features[0] = f.features_q16[0].data() + at;
+  p.features[1] = f.features_q16[1].data() + at;
+  return p;
+}
+
+}  // namespace
+
+FixedThresholds fixed_thresholds(const DecodeOptions& o) {
   return {q8_counts(o.min_amplitude), q8_counts(3.0 * o.min_mean_amplitude), q8_counts(o.min_unwrap_amplitude),
           q16_mm(o.max_gap_16_80_mm), q16_mm(o.max_gap_80_120_mm)};
 }
 
-// Depths, unwrapping, flags and features of slot k (phase and amplitude done).
-void finish_pixel(FixedDecodedFrame& out, std::size_t k, const Thresholds& th) {
-  std::int32_t d[3];
-  std::uint64_t amp_sum = 0;
-  bool dark = false;
-  for (std::size_t g = 0; g < 3; ++g) {
-    d[g] = static_cast<std::int32_t>((static_cast<std::uint64_t>(out.phase_turns[g][k]) * static_cast<std::uint64_t>(kRangeMm[g])) >> 16);
-    dark = dark || out.amplitude_q8[g][k] < th.amp;
-    amp_sum += out.amplitude_q8[g][k];
+void finish_pixels_scalar(const FixedPlanes& p, std::size_t n, const FixedThresholds& th) {
+  for (std::size_t k = 0; k < n; ++k) {
+    for (std::size_t g = 0; g < 3; ++g) p.depth[g][k] = kFixedInvalid;
+    p.combined[k] = p.features[0][k] = p.features[1][k] = kFixedInvalid;
+    std::int32_t d[3];
+    std::uint64_t amp_sum = 0;
+    bool dark = false;
+    for (std::size_t g = 0; g < 3; ++g) {
+      d[g] = static_cast<std::int32_t>((static_cast<std::uint64_t>(p.phase[g][k]) * static_cast<std::uint64_t>(kRangeMm[g])) >> 16);
+      dark = dark || p.amp[g][k] < th.amp;
+      amp_sum += p.amp[g][k];
+    }
+    if (dark || amp_sum < th.mean_sum) p.flags[k] |= kDecodeDark;
+    if (p.flags[k]) continue;
+    // Hierarchical unwrap as unwrap_depths: D80 = d80 + k R80 nearest to D16,
+    // D120 = d120 + k' R120 nearest to D80 (halves round up), offsets keep the
+    // dividends positive.
+    const std::int32_t D16 = d[kGroup16];
+    const std::int32_t k80 = (D16 - d[kGroup80] + kRangeQ16[kGroup80] / 2 + kRangeQ16[kGroup80]) / kRangeQ16[kGroup80] - 1;
+    const std::int32_t D80 = d[kGroup80] + k80 * kRangeQ16[kGroup80];
+    const std::int32_t k120 =
+        (D80 - d[kGroup120] + kRangeQ16[kGroup120] / 2 + 2 * kRangeQ16[kGroup120]) / kRangeQ16[kGroup120] - 2;
+    const std::int32_t D120 = d[kGroup120] + k120 * kRangeQ16[kGroup120];
+    const std::int64_t gap1 = std::abs(static_cast<std::int64_t>(D80) - D16);
+    const std::int64_t gap2 = std::abs(static_cast<std::int64_t>(D120) - D80);
+    if (p.amp[kGroup16][k] < th.unwrap_amp || gap1 > th.gap_16_80 || gap2 > th.gap_80_120) {
+      p.flags[k] = kDecodeUnwrap;
+      continue;
+    }
+    for (std::size_t g = 0; g < 3; ++g) p.depth[g][k] = d[g];
+    // (80 D80 + 16 D16 + 120 D120) / 216 = (10 D80 + 2 D16 + 15 D120) / 27, in Q8.
+    const std::int64_t num8 = (10 * static_cast<std::int64_t>(D80) + 2 * static_cast<std::int64_t>(D16) +
+                               15 * static_cast<std::int64_t>(D120)) >> (kDepthFracBits - kCombinedFracBits);
+    p.combined[k] = static_cast<std::int32_t>((num8 * kInv27) >> 32);
+    p.features[0][k] = d[kGroup16] - d[kGroup120];
+    p.features[1][k] = d[kGroup80] - d[kGroup120];
   }
-  if (dark || amp_sum < th.mean_sum) out.flags[k] |= kDecodeDark;
-  if (out.flags[k]) return;
-  // Hierarchical unwrap as unwrap_depths: D80 = d80 + k R80 nearest to D16,
-  // D120 = d120 + k' R120 nearest to D80 (halves round up), offsets keep the
-  // dividends positive.
-  const std::int32_t D16 = d[kGroup16];
-  const std::int32_t k80 = (D16 - d[kGroup80] + kRangeQ16[kGroup80] / 2 + kRangeQ16[kGroup80]) / kRangeQ16[kGroup80] - 1;
-  const std::int32_t D80 = d[kGroup80] + k80 * kRangeQ16[kGroup80];
-  const std::int32_t k120 =
-      (D80 - d[kGroup120] + kRangeQ16[kGroup120] / 2 + 2 * kRangeQ16[kGroup120]) / kRangeQ16[kGroup120] - 2;
-  const std::int32_t D120 = d[kGroup120] + k120 * kRangeQ16[kGroup120];
-  const std::int64_t gap1 = std::abs(static_cast<std::int64_t>(D80) - D16);
-  const std::int64_t gap2 = std::abs(static_cast<std::int64_t>(D120) - D80);
-  if (out.amplitude_q8[kGroup16][k] < th.unwrap_amp || gap1 > th.gap_16_80 || gap2 > th.gap_80_120) {
-    out.flags[k] = kDecodeUnwrap;
-    return;
-  }
-  for (std::size_t g = 0; g < 3; ++g) out.depth_q16[g][k] = d[g];
-  // (80 D80 + 16 D16 + 120 D120) / 216 = (10 D80 + 2 D16 + 15 D120) / 27, in Q8.
-  const std::int64_t num8 = (10 * static_cast<std::int64_t>(D80) + 2 * static_cast<std::int64_t>(D16) +
-                             15 * static_cast<std::int64_t>(D120)) >> (kDepthFracBits - kCombinedFracBits);
-  out.combined_q8[k] = static_cast<std::int32_t>((num8 * kInv27) >> 32);
-  out.features_q16[0][k] = d[kGroup16] - d[kGroup120];
-  out.features_q16[1][k] = d[kGroup80] - d[kGroup120];
+}
+
+namespace {
+
+void finish_pixels(FixedKernel kernel, const FixedPlanes& p, std::size_t n, const FixedThresholds& th) {
+#if defined(__x86_64__)
+  if (kernel == FixedKernel::kBest && cpu_has_avx2()) return finish_pixels_avx2(p, n, th);
+#endif
+  (void)kernel;
+  finish_pixels_scalar(p, n, th);
 }
 
 void phase_amplitude(FixedKernel kernel, const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
@@ -161,6 +193,8 @@ void phase_amplitude(FixedKernel kernel, const std::int16_t* m0, const std::int1
                      std::uint8_t* flags) {
 #if defined(__aarch64__)
   if (kernel == FixedKernel::kBest) return phase_amplitude_neon(m0, m1, m2, p0, n, phase, amp, flags);
+#elif defined(__x86_64__)
+  if (kernel == FixedKernel::kBest && cpu_has_avx2()) return phase_amplitude_avx2(m0, m1, m2, p0, n, phase, amp, flags);
 #endif
   (void)kernel;
   phase_amplitude_scalar(m0, m1, m2, p0, n, phase, amp, flags);
@@ -168,17 +202,34 @@ void phase_amplitude(FixedKernel kernel, const std::int16_t* m0, const std::int1
 
 }  // namespace
 
-FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, const DecodeOptions& options,
-                                     FixedKernel kernel) {
+void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& t, std::size_t first, std::size_t n,
+                         const FixedThresholds& th, const FixedPlanes& out, FixedKernel kernel) {
+  if (first > t.pixels || n > t.pixels - first) throw std::invalid_argument("pixels beyond the frame");
+  const std::size_t N = t.pixels;
+  std::fill(out.flags, out.flags + n, std::uint8_t{0});
+  for (std::size_t g = 0; g < 3; ++g) {
+    const std::int16_t* m = raw + 3 * g * N + first;
+    phase_amplitude(kernel, m, m + N, m + 2 * N, t.p0_turns[g].data() + first, n, out.phase[g], out.amp[g], out.flags);
+  }
+  finish_pixels(kernel, out, n, th);
+}
+
+void decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, FixedDecodedFrame& out,
+                        const DecodeOptions& options, FixedKernel kernel) {
   const std::size_t n = t.pixels;
-  FixedDecodedFrame out = allocate_fixed(n);
+  size_fixed(out, n);
   for (std::size_t g = 0; g < 3; ++g) {
     const std::int16_t* m = raw + 3 * g * n;
     phase_amplitude(kernel, m, m + n, m + 2 * n, t.p0_turns[g].data(), n, out.phase_turns[g].data(),
                     out.amplitude_q8[g].data(), out.flags.data());
   }
-  const Thresholds th = thresholds(options);
-  for (std::size_t i = 0; i < n; ++i) finish_pixel(out, i, th);
+  finish_pixels(kernel, planes(out, 0), n, fixed_thresholds(options));
+}
+
+FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, const DecodeOptions& options,
+                                     FixedKernel kernel) {
+  FixedDecodedFrame out;
+  decode_frame_fixed(raw, t, out, options, kernel);
   return out;
 }
 
@@ -191,7 +242,8 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
   const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   if (t.pixels != n) throw std::invalid_argument("decode tables are for a frame of another size");
   const std::size_t rw = static_cast<std::size_t>(r.x1 - r.x0);
-  FixedDecodedFrame out = allocate_fixed(rw * static_cast<std::size_t>(r.y1 - r.y0));
+  FixedDecodedFrame out;
+  size_fixed(out, rw * static_cast<std::size_t>(r.y1 - r.y0));
   for (int y = r.y0; y < r.y1; ++y) {  // a row of the region is contiguous in every plane
     const std::size_t src = static_cast<std::size_t>(y) * static_cast<std::size_t>(width) + static_cast<std::size_t>(r.x0);
     const std::size_t dst = static_cast<std::size_t>(y - r.y0) * rw;
@@ -201,8 +253,7 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
                       out.amplitude_q8[g].data() + dst, out.flags.data() + dst);
     }
   }
-  const Thresholds th = thresholds(options);
-  for (std::size_t i = 0; i < out.pixels; ++i) finish_pixel(out, i, th);
+  finish_pixels(kernel, planes(out, 0), out.pixels, fixed_thresholds(options));
   return out;
 }
 

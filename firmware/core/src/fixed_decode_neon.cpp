@@ -13,7 +13,7 @@
 namespace tofmat {
 namespace {
 
-// One CORDIC step with the shift as an immediate: the 28 steps are unrolled
+// One CORDIC step with the shift as an immediate: the steps are unrolled
 // (no loop counter, no shift or angle registers to rebuild each step).
 template <int K>
 inline void cordic_step(int32x4_t& x, int32x4_t& y, uint32x4_t& angle) {
@@ -22,7 +22,7 @@ inline void cordic_step(int32x4_t& x, int32x4_t& y, uint32x4_t& angle) {
     xs = vshrq_n_s32(x, K);
     ys = vshrq_n_s32(y, K);
   }
-  const uint32x4_t up = vcgtzq_s32(y);
+  const uint32x4_t up = vcgezq_s32(y);
   const uint32x4_t turn = vdupq_n_u32(fixed_decode_detail::kAtanTurns[K]);
   x = vaddq_s32(x, vbslq_s32(up, ys, vnegq_s32(ys)));
   y = vaddq_s32(y, vbslq_s32(up, vnegq_s32(xs), xs));
@@ -66,7 +66,11 @@ void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const 
     x = vbslq_s32(left, vnegq_s32(x), x);
     y = vbslq_s32(left, vnegq_s32(y), y);
     uint32x4_t angle = vandq_u32(left, vdupq_n_u32(0x80000000u));
-    cordic(x, y, angle, std::make_integer_sequence<int, kCordicIterations>{});
+    cordic(x, y, angle, std::make_integer_sequence<int, kCordicSteps>{});
+    // The residual angle y / x as the scalar kernel: FDIV is correctly
+    // rounded, FCVTNS rounds to nearest even.
+    const float32x4_t t = vdivq_f32(vcvtq_f32_s32(y), vcvtq_f32_s32(x));
+    angle = vaddq_u32(angle, vreinterpretq_u32_s32(vcvtnq_s32_f32(vmulq_n_f32(t, kTurnsPerRadF))));
     const uint32x4_t ph = vsubq_u32(angle, vld1q_u32(p0 + i));
     vst1q_u32(phase + i, vbicq_u32(ph, none));
     // amplitude_q8 = x * kAmpScale >> (25 + sh), in 64-bit lanes.

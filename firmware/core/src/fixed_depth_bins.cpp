@@ -31,6 +31,17 @@ void bin_indices_scalar(const std::int32_t* depth_q8, const std::uint8_t* flags,
   }
 }
 
+void bin_indices(FixedKernel kernel, const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n,
+                 const FixedBinning& b, std::int32_t* bin) {
+#if defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) return bin_indices_neon(depth_q8, flags, n, b, bin);
+#elif defined(__x86_64__)
+  if (kernel == FixedKernel::kBest && cpu_has_avx2()) return bin_indices_avx2(depth_q8, flags, n, b, bin);
+#endif
+  (void)kernel;
+  bin_indices_scalar(depth_q8, flags, n, b, bin);
+}
+
 FixedDepthBinAccumulator::FixedDepthBinAccumulator(BinSpec bins, std::uint32_t n_rows, std::uint64_t max_count)
     : bins_(bins), fixed_(FixedBinning::from(bins)), n_rows_(n_rows), max_count_(max_count) {
   if (n_rows < 1 || n_rows > 2) throw std::invalid_argument("the decode has two feature rows: n_rows must be 1 or 2");
@@ -45,16 +56,7 @@ std::size_t FixedDepthBinAccumulator::add_frame(const FixedDecodedFrame& f, Fixe
     throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
   }
   bin_.resize(n);
-#if defined(__aarch64__)
-  if (kernel == FixedKernel::kBest) {
-    bin_indices_neon(f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
-  } else {
-    bin_indices_scalar(f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
-  }
-#else
-  (void)kernel;
-  bin_indices_scalar(f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
-#endif
+  bin_indices(kernel, f.combined_q8.data(), f.flags.data(), n, fixed_, bin_.data());
   std::size_t added = 0;
   for (std::size_t i = 0; i < n; ++i) {
     const std::int32_t j = bin_[i];

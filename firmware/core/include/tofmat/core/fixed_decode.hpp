@@ -2,9 +2,10 @@
 // decode_frame (frame_decode.hpp), in integers. Per pixel and group the phase
 // comes from a CORDIC in Q32 turns (wrapping arithmetic does the mod 2 pi)
 // and the amplitude from the CORDIC's magnitude; depths are Q16 mm, the
-// combined depth Q8 mm. The phase/amplitude stage has a scalar and a NEON
-// kernel (aarch64) that give the same integers bit for bit; unwrapping and
-// flags run after it in shared scalar code.
+// combined depth Q8 mm. The phase/amplitude stage has a scalar, a NEON
+// (aarch64) and an AVX2 (x86-64) kernel, the finishing stage (unwrapping,
+// flags, features) a scalar and an AVX2 kernel: all give the same integers
+// bit for bit.
 #pragma once
 
 #include <array>
@@ -22,7 +23,12 @@ inline constexpr int kDepthFracBits = 16;  // per-frequency depths and features:
 inline constexpr int kCombinedFracBits = 8;  // combined depth: int32 Q8 mm
 inline constexpr int kAmplitudeFracBits = 8;  // amplitude: uint32 Q8 counts
 inline constexpr std::int32_t kFixedInvalid = INT32_MIN;  // depth, combined, feature of an invalid pixel
-inline constexpr int kCordicIterations = 28;
+// The phase estimator (docs/numerics.md): kCordicSteps CORDIC steps rotate
+// the phasor to within atan(2^-7) = 0.45 degrees of the x axis, in integers;
+// the residual angle is then y / x (atan t = t - t^3 / 3 ...: the cubic term
+// is below 1.6e-7 rad), one IEEE-754 binary32 division, which is correctly
+// rounded on every target, so scalar, NEON and AVX2 agree bit for bit.
+inline constexpr int kCordicSteps = 8;
 
 // p0 per pixel and group in Q32 turns (round(p0 / 2 pi * 2^32) mod 2^32).
 struct FixedDecodeTables {
@@ -44,6 +50,10 @@ struct FixedDecodedFrame {
 
 FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& tables,
                                      const DecodeOptions& options = {}, FixedKernel kernel = FixedKernel::kBest);
+// The same into `out`, whose buffers are reused (no allocation once sized:
+// what a stream of frames wants).
+void decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& tables, FixedDecodedFrame& out,
+                        const DecodeOptions& options = {}, FixedKernel kernel = FixedKernel::kBest);
 // Only the pixels of `region` (raw and tables are the full frame's).
 FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& tables,
                                       const PixelRegion& region, const DecodeOptions& options = {},
@@ -61,17 +71,52 @@ void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const 
                           const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
                           std::uint8_t* flags);
 #endif
+#if defined(__x86_64__)
+// Only on a CPU with AVX2 (cpu_has_avx2()).
+void phase_amplitude_avx2(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
+                          const std::uint32_t* p0, std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
+                          std::uint8_t* flags);
+#endif
+
+// The finishing stage (per-frequency depths, unwrapping, flags, combined
+// depth, features) of n pixels whose phase and amplitude are done, over
+// plane pointers; every output is written (kFixedInvalid where flagged).
+// Thresholds are DecodeOptions in the decode's units: amplitudes Q8 counts
+// (rounded up), gaps Q16 mm (rounded down; -1: every gap fails).
+struct FixedThresholds {
+  std::uint32_t amp, mean_sum, unwrap_amp;
+  std::int64_t gap_16_80, gap_80_120;
+};
+FixedThresholds fixed_thresholds(const DecodeOptions& options);
+struct FixedPlanes {
+  std::uint32_t* phase[3];
+  std::uint32_t* amp[3];
+  std::uint8_t* flags;  // in: saturation; out: every flag
+  std::int32_t* depth[3];
+  std::int32_t* combined;
+  std::int32_t* features[2];
+};
+void finish_pixels_scalar(const FixedPlanes& planes, std::size_t n, const FixedThresholds& th);
+
+// Pixels [first, first + n) of a full frame (raw and tables are the whole
+// frame's) decoded into caller-owned planes of n values each: the pieces a
+// tiled consumer (PixelClassifier::classify_frame) keeps in cache.
+void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& tables, std::size_t first, std::size_t n,
+                         const FixedThresholds& th, const FixedPlanes& out, FixedKernel kernel = FixedKernel::kBest);
+#if defined(__x86_64__)
+void finish_pixels_avx2(const FixedPlanes& planes, std::size_t n, const FixedThresholds& th);  // AVX2 CPUs only
+#endif
 
 // The CORDIC's constants, shared by both kernels.
 namespace fixed_decode_detail {
-// round(atan(2^-i) / (2 pi) * 2^32), i = 0..27 (computed at 50 digits).
-inline constexpr std::array<std::uint32_t, kCordicIterations> kAtanTurns = {
-    536870912u, 316933406u, 167458907u, 85004756u, 42667331u, 21354465u, 10679838u, 5340245u, 2670163u, 1335087u,
-    667544u,    333772u,    166886u,    83443u,    41722u,    20861u,    10430u,   5215u,    2608u,    1304u,
-    652u,       326u,       163u,       81u,       41u,       20u,       10u,      5u};
+// round(atan(2^-i) / (2 pi) * 2^32), i = 0..7 (computed at 50 digits).
+inline constexpr std::array<std::uint32_t, kCordicSteps> kAtanTurns = {
+    536870912u, 316933406u, 167458907u, 85004756u, 42667331u, 21354465u, 10679838u, 5340245u};
+// 2^32 / (2 pi) as a float (683565248, 4e-8 relative off): the residual's radians to Q32 turns.
+inline constexpr float kTurnsPerRadF = static_cast<float>(4294967296.0 / 6.283185307179586476925);
 // sqrt(3) / 2 in Q31 (the imaginary part's factor; vqrdmulh's operand).
 inline constexpr std::int32_t kHalfSqrt3Q31 = 1859775393;
-// 256 / (3 K) in Q25, K the CORDIC gain: amplitude_q8 = x * kAmpScale >> (25 + shift).
+// 256 / (3 K) in Q25, K the gain of the 8 CORDIC steps: amplitude_q8 = x * kAmpScale >> (25 + shift).
 inline constexpr int kAmpScaleBits = 25;
 extern const std::uint32_t kAmpScale;
 // round(2 a b / 2^32): vqrdmulhq_s32 on one lane (no saturation: b > -2^31).

@@ -1,8 +1,8 @@
 // Depth-bin accumulation in fixed point (docs/numerics.md): the valid pixels
 // of a fixed-point decoded frame (or region) add their Eq. (10) features, Q16
 // mm, to the bin of their combined depth, Q8 mm, in integer sums. The bin
-// index of every pixel comes from a kernel with a scalar and a NEON version
-// (bit for bit the same); the sums are shared scalar code. The result is the
+// index of every pixel comes from a kernel with a scalar, a NEON and an AVX2
+// version (bit for bit the same); the sums are shared scalar code. The result is the
 // partial query the classifier matches as a hand-held sweep grows.
 #pragma once
 
@@ -33,6 +33,13 @@ void bin_indices_scalar(const std::int32_t* depth_q8, const std::uint8_t* flags,
 void bin_indices_neon(const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n, const FixedBinning& b,
                       std::int32_t* bin);
 #endif
+#if defined(__x86_64__)
+void bin_indices_avx2(const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n, const FixedBinning& b,
+                      std::int32_t* bin);  // AVX2 CPUs only
+#endif
+// The build's best kernel for this CPU, or the scalar one.
+void bin_indices(FixedKernel kernel, const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n,
+                 const FixedBinning& b, std::int32_t* bin);
 
 class FixedDepthBinAccumulator {
  public:

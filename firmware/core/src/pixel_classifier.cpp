@@ -1,0 +1,193 @@
+#include "tofmat/core/pixel_classifier.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace tofmat {
+
+namespace {
+
+bool valid_at(const CompactTable& c, std::size_t k, std::size_t e) {
+  const std::uint8_t* m = c.validity(k);
+  return m == nullptr || ((m[e / 8] >> (e % 8)) & 1) != 0;
+}
+
+// Packs two int16 into the low and high halves of an int32 (as madd_epi16 reads them).
+std::int32_t pack(std::int32_t lo, std::int32_t hi) {
+  return static_cast<std::int32_t>((static_cast<std::uint32_t>(lo) & 0xFFFFu) | (static_cast<std::uint32_t>(hi) << 16));
+}
+std::int32_t low16(std::int32_t v) { return static_cast<std::int16_t>(static_cast<std::uint32_t>(v) & 0xFFFFu); }
+std::int32_t high16(std::int32_t v) { return static_cast<std::int16_t>(static_cast<std::uint32_t>(v) >> 16); }
+
+}  // namespace
+
+PixelClassifier::PixelClassifier(const CompactTable& c, const BinSpec& bins)
+    : n_candidates_(c.n_candidates()), binning_(FixedBinning::from(bins)) {
+  if (c.n_rows() != 2) throw std::invalid_argument("per-pixel classification needs the two-row Kinect v2 table");
+  if (c.n_candidates() == 0 || c.n_candidates() > 254) {
+    throw std::invalid_argument("per-pixel classification takes 1 to 254 candidates");
+  }
+  if (bins.count != c.n_bins()) throw std::invalid_argument("bins do not match the table's");
+  int exp2 = 0;
+  if (std::frexp(c.step_mm(), &exp2) != 0.5) throw std::invalid_argument("table step is not a power of two");
+  Layout& t = layout_;
+  t.shift = kDepthFracBits + (exp2 - 1);  // Q16 mm -> steps: >> (16 + log2 step)
+  if (t.shift < 1 || t.shift > 30) throw std::invalid_argument("table step out of range");
+  t.bins = c.n_bins();
+  t.slots = (n_candidates_ + kSlotBlock - 1) / kSlotBlock * kSlotBlock;
+  const std::size_t n = t.slots * t.bins;
+  t.pairs.assign(n, 0);
+  t.elem_mask.assign(n, 0);
+  t.doubled.assign(n, 0);
+  t.absent.assign(n, 0x7FFFFFFF);
+  for (std::uint32_t b = 0; b < t.bins; ++b) {
+    for (std::size_t k = 0; k < n_candidates_; ++k) {
+      const std::size_t e0 = b, e1 = c.padded_bins() + b, s = b * t.slots + k;
+      const bool v0 = valid_at(c, k, e0), v1 = valid_at(c, k, e1);
+      t.pairs[s] = pack(c.values(k)[e0], c.values(k)[e1]);
+      t.elem_mask[s] = pack(v0 ? 0xFFFF : 0, v1 ? 0xFFFF : 0);
+      t.doubled[s] = v0 != v1 ? 1 : 0;
+      t.absent[s] = v0 || v1 ? 0 : 0x7FFFFFFF;
+      t.one_valid = t.one_valid || v0 != v1;
+    }
+    // A slot without values (padding, or a candidate missing at this bin)
+    // takes a copy of the lowest candidate that has them, if that one has a
+    // lower index: a tie with it always goes to it, so the copy never wins,
+    // and the kernel needs no absent mask at this bin.
+    const std::size_t row = b * t.slots;
+    std::size_t first = 0;
+    while (first < n_candidates_ && t.absent[row + first] != 0) ++first;
+    t.needs_absent.push_back(0);
+    for (std::size_t k = 0; k < t.slots; ++k) {
+      if (t.absent[row + k] == 0) continue;
+      if (first < n_candidates_ && first < k) {
+        t.pairs[row + k] = t.pairs[row + first];
+        t.elem_mask[row + k] = t.elem_mask[row + first];
+        t.doubled[row + k] = t.doubled[row + first];
+        t.absent[row + k] = 0;
+      } else {
+        t.needs_absent.back() = 1;
+      }
+    }
+  }
+}
+
+void quantise_features_scalar(const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift,
+                              std::int32_t* q) {
+  const std::int32_t half = std::int32_t{1} << (shift - 1);
+  const auto steps = [&](std::int32_t f) {
+    const std::int32_t c = std::clamp(f, -(std::int32_t{1} << 30), std::int32_t{1} << 30);  // + half < 2^31
+    return std::clamp((c + half) >> shift, -32767, 32767);
+  };
+  for (std::size_t i = 0; i < n; ++i) q[i] = pack(steps(f0[i]), steps(f1[i]));
+}
+
+std::size_t classify_pixels_scalar(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
+                                   std::size_t n, std::uint8_t* labels) {
+  std::size_t classified = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    labels[i] = PixelClassifier::kUnclassified;
+    if (bin[i] < 0) continue;
+    const std::int32_t q0 = low16(q[i]), q1 = high16(q[i]);
+    const std::size_t base = static_cast<std::size_t>(bin[i]) * t.slots;
+    std::int32_t best = 0x7FFFFFFF;
+    for (std::size_t k = 0; k < t.slots; ++k) {
+      const std::size_t s = base + k;
+      if (t.absent[s] != 0) continue;
+      const std::int32_t m = t.elem_mask[s];
+      const std::int32_t d0 = low16(m) ? std::clamp(q0 - low16(t.pairs[s]), -32767, 32767) : 0;
+      const std::int32_t d1 = high16(m) ? std::clamp(q1 - high16(t.pairs[s]), -32767, 32767) : 0;
+      const std::int32_t sum = (d0 * d0 + d1 * d1) << t.doubled[s];  // <= 2 * 32767^2 < 2^31
+      if (sum < best) {
+        best = sum;
+        labels[i] = static_cast<std::uint8_t>(k);
+      }
+    }
+    classified += labels[i] != PixelClassifier::kUnclassified;
+  }
+  return classified;
+}
+
+namespace {
+
+constexpr std::size_t kChunk = 1024;  // pixels per pass: the scratch stays in L1
+
+void quantise(FixedKernel kernel, const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift,
+              std::int32_t* q) {
+#if defined(__x86_64__)
+  if (kernel == FixedKernel::kBest && cpu_has_avx2()) return quantise_features_avx2(f0, f1, n, shift, q);
+#endif
+  (void)kernel;
+  quantise_features_scalar(f0, f1, n, shift, q);
+}
+
+std::size_t run_kernel(FixedKernel kernel, const PixelClassifier::Layout& t, const std::int32_t* bin,
+                       const std::int32_t* q, std::size_t n, std::uint8_t* labels) {
+#if defined(__x86_64__)
+  if (kernel == FixedKernel::kBest && cpu_has_avx2()) return classify_pixels_avx2(t, bin, q, n, labels);
+#endif
+  (void)kernel;
+  return classify_pixels_scalar(t, bin, q, n, labels);
+}
+
+}  // namespace
+
+std::size_t PixelClassifier::classify(const std::int32_t* bin, const std::int32_t* f0, const std::int32_t* f1,
+                                      std::size_t n, std::uint8_t* labels, FixedKernel kernel) const {
+  std::int32_t q[kChunk];
+  std::size_t classified = 0;
+  for (std::size_t at = 0; at < n; at += kChunk) {
+    const std::size_t m = std::min(kChunk, n - at);
+    quantise(kernel, f0 + at, f1 + at, m, layout_.shift, q);
+    classified += run_kernel(kernel, layout_, bin + at, q, m, labels + at);
+  }
+  return classified;
+}
+
+std::size_t PixelClassifier::classify(const FixedDecodedFrame& f, std::uint8_t* labels, FixedKernel kernel) const {
+  if (f.combined_q8.size() != f.pixels || f.flags.size() != f.pixels || f.features_q16[0].size() != f.pixels ||
+      f.features_q16[1].size() != f.pixels) {
+    throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
+  }
+  std::int32_t bin[kChunk], q[kChunk];
+  std::size_t classified = 0;
+  for (std::size_t at = 0; at < f.pixels; at += kChunk) {
+    const std::size_t m = std::min(kChunk, f.pixels - at);
+    bin_indices(kernel, f.combined_q8.data() + at, f.flags.data() + at, m, binning_, bin);
+    quantise(kernel, f.features_q16[0].data() + at, f.features_q16[1].data() + at, m, layout_.shift, q);
+    classified += run_kernel(kernel, layout_, bin, q, m, labels + at);
+  }
+  return classified;
+}
+
+std::size_t PixelClassifier::classify_frame(const std::int16_t* raw, const FixedDecodeTables& tables,
+                                            std::uint8_t* labels, const DecodeOptions& options,
+                                            FixedKernel kernel) const {
+  constexpr std::size_t kTile = 512;  // 12 planes of 512 values: 24 KiB, in L1 with the labels
+  std::uint32_t phase[3][kTile], amp[3][kTile];
+  std::int32_t depth[3][kTile], combined[kTile], features[2][kTile], bin[kTile], q[kTile];
+  std::uint8_t flags[kTile];
+  FixedPlanes p;
+  for (std::size_t g = 0; g < 3; ++g) {
+    p.phase[g] = phase[g];
+    p.amp[g] = amp[g];
+    p.depth[g] = depth[g];
+  }
+  p.flags = flags;
+  p.combined = combined;
+  p.features[0] = features[0];
+  p.features[1] = features[1];
+  const FixedThresholds th = fixed_thresholds(options);
+  std::size_t classified = 0;
+  for (std::size_t at = 0; at < tables.pixels; at += kTile) {
+    const std::size_t m = std::min(kTile, tables.pixels - at);
+    decode_pixels_fixed(raw, tables, at, m, th, p, kernel);
+    bin_indices(kernel, combined, flags, m, binning_, bin);
+    quantise(kernel, features[0], features[1], m, layout_.shift, q);
+    classified += run_kernel(kernel, layout_, bin, q, m, labels + at);
+  }
+  return classified;
+}
+
+}  // namespace tofmat
