@@ -166,6 +166,13 @@ TEST(FixedDecode, RegionEqualsTheFramesPixels) {
   EXPECT_THROW(FixedDecodeTables(std::vector<float>(5), 4), std::invalid_argument);
 }
 
+TEST(FixedDecode, UnwrapDivisionMagicIsExact) {
+  // The AVX2 finishing stage's divisions: every dividend it can see (< 2^14).
+  for (const auto& d : {fixed_decode_detail::kDiv80, fixed_decode_detail::kDiv120}) {
+    for (std::int32_t m = 0; m < (1 << 14); ++m) ASSERT_EQ((m * d.magic) >> d.shift, m / d.range_mm) << m;
+  }
+}
+
 // The build's vector kernel (NEON on aarch64, AVX2 on x86-64 CPUs that have
 // it) against the scalar definition, bit for bit.
 TEST(FixedDecode, VectorKernelIsBitExactWithScalar) {

@@ -151,11 +151,10 @@ TEST(PixelClassifier, AgreesWithTheFloatClassifierUpToTheQuantisation) {
 }
 
 TEST(PixelClassifier, VectorKernelIsBitExactWithScalar) {
-#if defined(__x86_64__)
-  if (!cpu_has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: kBest is the scalar kernel";
+#if !defined(__x86_64__)
+  GTEST_SKIP() << "the per-pixel kernel has no vector version on this architecture (kBest is the scalar one)";
 #else
-  GTEST_SKIP() << "the per-pixel kernel has no vector version on this architecture";
-#endif
+  if (!cpu_has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: kBest is the scalar kernel";
   std::mt19937 rng(5);
   std::uniform_int_distribution<int> any16(-32768, 32767);
   for (std::size_t K : {1u, 7u, 8u, 9u, 16u, 24u, 29u, 32u, 33u, 64u, 200u, 254u}) {
@@ -193,6 +192,7 @@ TEST(PixelClassifier, VectorKernelIsBitExactWithScalar) {
       EXPECT_GT(na, n / 2);
     }
   }
+#endif
 }
 
 TEST(PixelClassifier, RealDatabaseValuesAreLabelledAsTheirMaterial) {

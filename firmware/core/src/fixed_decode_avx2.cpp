@@ -133,11 +133,11 @@ __attribute__((target("avx2"))) void phase_amplitude_avx2(const std::int16_t* m0
 
 namespace {
 
-// floor(m / 1875) = (m * 2237) >> 22 and floor(m / 1250) = (m * 6711) >> 23
-// for 0 <= m < 2^14 (checked for every m), and n / (R << 16) = (n >> 16) / R
-// for n >= 0: the unwrap's divisions without a divide.
-TOFMAT_AVX2 __m256i div_range_q16(__m256i n, std::int32_t magic, int shift) {
-  return _mm256_srl_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(n, 16), _mm256_set1_epi32(magic)), _mm_cvtsi32_si128(shift));
+// n / (R << 16) = (n >> 16) / R for n >= 0, and (n >> 16) < 2^14 here
+// (kDiv80, kDiv120): the unwrap's divisions without a divide.
+TOFMAT_AVX2 __m256i div_range_q16(__m256i n, DivisionMagic d) {
+  return _mm256_srl_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(n, 16), _mm256_set1_epi32(d.magic)),
+                          _mm_cvtsi32_si128(d.shift));
 }
 
 // a >= b for unsigned 32-bit lanes.
@@ -194,10 +194,10 @@ __attribute__((target("avx2"))) void finish_pixels_avx2(const FixedPlanes& p, st
     // Unwrap (as the scalar code; k80 + 1 and k120 + 2 are the quotients).
     const __m256i D16 = d[kGroup16];
     const __m256i n1 = _mm256_add_epi32(_mm256_sub_epi32(D16, d[kGroup80]), _mm256_set1_epi32((1875 << 16) / 2 + (1875 << 16)));
-    const __m256i k80 = _mm256_sub_epi32(div_range_q16(n1, 2237, 22), _mm256_set1_epi32(1));
+    const __m256i k80 = _mm256_sub_epi32(div_range_q16(n1, kDiv80), _mm256_set1_epi32(1));
     const __m256i D80 = _mm256_add_epi32(d[kGroup80], _mm256_mullo_epi32(k80, R80));
     const __m256i n2 = _mm256_add_epi32(_mm256_sub_epi32(D80, d[kGroup120]), _mm256_set1_epi32((1250 << 16) / 2 + 2 * (1250 << 16)));
-    const __m256i k120 = _mm256_sub_epi32(div_range_q16(n2, 6711, 23), _mm256_set1_epi32(2));
+    const __m256i k120 = _mm256_sub_epi32(div_range_q16(n2, kDiv120), _mm256_set1_epi32(2));
     const __m256i D120 = _mm256_add_epi32(d[kGroup120], _mm256_mullo_epi32(k120, R120));
     const __m256i gap1 = _mm256_abs_epi32(_mm256_sub_epi32(D80, D16));
     const __m256i gap2 = _mm256_abs_epi32(_mm256_sub_epi32(D120, D80));

@@ -41,9 +41,19 @@ PixelClassifier::PixelClassifier(const CompactTable& c, const BinSpec& bins)
   t.elem_mask.assign(n, 0);
   t.doubled.assign(n, 0);
   t.absent.assign(n, 0x7FFFFFFF);
+  // Slot of each rank (rank = candidate index; ranks >= candidates pad).
+  // With four blocks the AVX2 kernel packs its four compare masks to bytes
+  // (packs_epi32, packs_epi16: per 128-bit half) and reads them with one
+  // movemask: bit j comes from block (j / 4) % 4, lane j % 4 + 4 (j / 16).
+  // Storing rank j there makes the mask's lowest set bit the rank itself.
+  t.slot_of.resize(t.slots);
+  for (std::size_t j = 0; j < t.slots; ++j) {
+    t.slot_of[j] = static_cast<std::uint8_t>(t.slots == 4 * kSlotBlock ? 8 * ((j / 4) % 4) + j % 4 + 4 * (j / 16) : j);
+  }
   for (std::uint32_t b = 0; b < t.bins; ++b) {
+    const std::size_t row = b * t.slots;
     for (std::size_t k = 0; k < n_candidates_; ++k) {
-      const std::size_t e0 = b, e1 = c.padded_bins() + b, s = b * t.slots + k;
+      const std::size_t e0 = b, e1 = c.padded_bins() + b, s = row + t.slot_of[k];
       const bool v0 = valid_at(c, k, e0), v1 = valid_at(c, k, e1);
       t.pairs[s] = pack(c.values(k)[e0], c.values(k)[e1]);
       t.elem_mask[s] = pack(v0 ? 0xFFFF : 0, v1 ? 0xFFFF : 0);
@@ -52,20 +62,21 @@ PixelClassifier::PixelClassifier(const CompactTable& c, const BinSpec& bins)
       t.one_valid = t.one_valid || v0 != v1;
     }
     // A slot without values (padding, or a candidate missing at this bin)
-    // takes a copy of the lowest candidate that has them, if that one has a
-    // lower index: a tie with it always goes to it, so the copy never wins,
+    // takes a copy of the lowest-ranked candidate that has them, if that one
+    // ranks lower: a tie with it always goes to it, so the copy never wins,
     // and the kernel needs no absent mask at this bin.
-    const std::size_t row = b * t.slots;
     std::size_t first = 0;
-    while (first < n_candidates_ && t.absent[row + first] != 0) ++first;
+    while (first < n_candidates_ && t.absent[row + t.slot_of[first]] != 0) ++first;
     t.needs_absent.push_back(0);
     for (std::size_t k = 0; k < t.slots; ++k) {
-      if (t.absent[row + k] == 0) continue;
+      const std::size_t s = row + t.slot_of[k];
+      if (t.absent[s] == 0) continue;
       if (first < n_candidates_ && first < k) {
-        t.pairs[row + k] = t.pairs[row + first];
-        t.elem_mask[row + k] = t.elem_mask[row + first];
-        t.doubled[row + k] = t.doubled[row + first];
-        t.absent[row + k] = 0;
+        const std::size_t from = row + t.slot_of[first];
+        t.pairs[s] = t.pairs[from];
+        t.elem_mask[s] = t.elem_mask[from];
+        t.doubled[s] = t.doubled[from];
+        t.absent[s] = 0;
       } else {
         t.needs_absent.back() = 1;
       }
@@ -92,8 +103,8 @@ std::size_t classify_pixels_scalar(const PixelClassifier::Layout& t, const std::
     const std::int32_t q0 = low16(q[i]), q1 = high16(q[i]);
     const std::size_t base = static_cast<std::size_t>(bin[i]) * t.slots;
     std::int32_t best = 0x7FFFFFFF;
-    for (std::size_t k = 0; k < t.slots; ++k) {
-      const std::size_t s = base + k;
+    for (std::size_t k = 0; k < t.slots; ++k) {  // in rank order: ties go to the lower rank
+      const std::size_t s = base + t.slot_of[k];
       if (t.absent[s] != 0) continue;
       const std::int32_t m = t.elem_mask[s];
       const std::int32_t d0 = low16(m) ? std::clamp(q0 - low16(t.pairs[s]), -32767, 32767) : 0;

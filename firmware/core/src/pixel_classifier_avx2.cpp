@@ -63,7 +63,14 @@ TOFMAT_AVX2 std::uint8_t label_of(const Arrays& t, std::size_t base, std::size_t
   if constexpr (Absent) {
     if (_mm256_cvtsi256_si32(least) == 0x7FFFFFFF) return PixelClassifier::kUnclassified;
   }
-  if constexpr (Blocks > 0 && Blocks <= 4) {  // one mask of the lanes holding the least: its lowest bit
+  if constexpr (Blocks == 4) {
+    // The four masks packed to bytes: bit j of the movemask is rank j (the
+    // layout's slot_of), so the lowest set bit is the label.
+    const __m256i p01 = _mm256_packs_epi32(_mm256_cmpeq_epi32(s[0], least), _mm256_cmpeq_epi32(s[1], least));
+    const __m256i p23 = _mm256_packs_epi32(_mm256_cmpeq_epi32(s[2], least), _mm256_cmpeq_epi32(s[3], least));
+    const auto hits = static_cast<std::uint32_t>(_mm256_movemask_epi8(_mm256_packs_epi16(p01, p23)));
+    return static_cast<std::uint8_t>(__builtin_ctz(hits));
+  } else if constexpr (Blocks > 0 && Blocks < 4) {  // one mask of the lanes holding the least: its lowest bit
     std::uint32_t hits = 0;
     for (std::size_t b = 0; b < static_cast<std::size_t>(Blocks); ++b) {
       hits |= static_cast<std::uint32_t>(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(s[b], least))))

@@ -119,6 +119,13 @@ inline constexpr std::int32_t kHalfSqrt3Q31 = 1859775393;
 // 256 / (3 K) in Q25, K the gain of the 8 CORDIC steps: amplitude_q8 = x * kAmpScale >> (25 + shift).
 inline constexpr int kAmpScaleBits = 25;
 extern const std::uint32_t kAmpScale;
+// The unwrap's divisions without a divide (AVX2 has none): floor(m / R) =
+// (m * magic) >> shift for every 0 <= m < 2^14 (FixedDecode.UnwrapDivisionMagicIsExact).
+struct DivisionMagic {
+  std::int32_t range_mm, magic;
+  int shift;
+};
+inline constexpr DivisionMagic kDiv80{1875, 2237, 22}, kDiv120{1250, 6711, 23};
 // round(2 a b / 2^32): vqrdmulhq_s32 on one lane (no saturation: b > -2^31).
 inline std::int32_t rounding_doubling_mul_high(std::int32_t a, std::int32_t b) {
   return static_cast<std::int32_t>((2 * static_cast<std::int64_t>(a) * b + (std::int64_t{1} << 31)) >> 32);

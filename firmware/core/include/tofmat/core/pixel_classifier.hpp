@@ -57,12 +57,13 @@ class PixelClassifier {
   std::size_t n_candidates() const { return n_candidates_; }
   const FixedBinning& binning() const { return binning_; }
 
-  // The rearranged table, for the kernels: per bin, slots() entries.
+  // The rearranged table, for the kernels: per bin, `slots` entries.
   struct Layout {
     std::size_t slots = 0;          // candidates rounded up to kSlotBlock
     std::uint32_t bins = 0;
     int shift = 0;                  // Q16 mm -> table steps
     bool one_valid = false;         // some slot has exactly one valid element
+    std::vector<std::uint8_t> slot_of;    // candidate (rank) -> slot within a bin (a permutation)
     std::vector<std::int32_t> pairs;      // e0 | e1 << 16 (int16 each)
     std::vector<std::int32_t> elem_mask;  // 0xFFFF per valid element (low: row 0, high: row 1)
     std::vector<std::int32_t> doubled;    // 1 where exactly one element is valid (s = 2 d^2)
