@@ -151,10 +151,17 @@ TEST(PixelClassifier, AgreesWithTheFloatClassifierUpToTheQuantisation) {
 }
 
 TEST(PixelClassifier, VectorKernelIsBitExactWithScalar) {
-#if !defined(__x86_64__)
-  GTEST_SKIP() << "the per-pixel kernel has no vector version on this architecture (kBest is the scalar one)";
-#else
+#if defined(__x86_64__)
   if (!cpu_has_avx2()) GTEST_SKIP() << "this CPU has no AVX2: kBest is the scalar kernel";
+  const auto vector_quantise = quantise_features_avx2;
+  const auto vector_classify = classify_pixels_avx2;
+#elif defined(__aarch64__)
+  const auto vector_quantise = quantise_features_neon;
+  const auto vector_classify = classify_pixels_neon;
+#endif
+#if !defined(__x86_64__) && !defined(__aarch64__)
+  GTEST_SKIP() << "no vector kernel on this architecture (kBest is the scalar one)";
+#else
   std::mt19937 rng(5);
   std::uniform_int_distribution<int> any16(-32768, 32767);
   for (std::size_t K : {1u, 7u, 8u, 9u, 16u, 24u, 29u, 32u, 33u, 64u, 200u, 254u}) {
@@ -182,11 +189,11 @@ TEST(PixelClassifier, VectorKernelIsBitExactWithScalar) {
       }
       std::vector<std::int32_t> qa(n), qb(n);
       quantise_features_scalar(f0.data(), f1.data(), n, pc.layout().shift, qa.data());
-      quantise_features_avx2(f0.data(), f1.data(), n, pc.layout().shift, qb.data());
+      vector_quantise(f0.data(), f1.data(), n, pc.layout().shift, qb.data());
       ASSERT_EQ(qa, qb) << K;
       std::vector<std::uint8_t> la(n), lb(n);
       const std::size_t na = classify_pixels_scalar(pc.layout(), bin.data(), qa.data(), n, la.data());
-      const std::size_t nb = classify_pixels_avx2(pc.layout(), bin.data(), qa.data(), n, lb.data());
+      const std::size_t nb = vector_classify(pc.layout(), bin.data(), qa.data(), n, lb.data());
       ASSERT_EQ(la, lb) << K << (gaps ? " with gaps" : "");
       ASSERT_EQ(na, nb);
       EXPECT_GT(na, n / 2);

@@ -10,8 +10,8 @@
 namespace tofmat {
 
 namespace fixed_decode_detail {
-// round(2^25 * 256 / (3 K)), K = prod sqrt(1 + 2^-2i), i = 0..7, = 1.6467435066...
-const std::uint32_t kAmpScale = 1738772018u;
+// round(2^25 * 256 / (3 K)), K = prod sqrt(1 + 2^-2i), i = 0..5, = 1.6464922787...
+const std::uint32_t kAmpScale = 1739037327u;
 }  // namespace fixed_decode_detail
 
 namespace {
@@ -66,12 +66,17 @@ void phase_amplitude_scalar(const std::int16_t* m0, const std::int16_t* m1, cons
       const auto um = static_cast<std::uint32_t>(m);
       angle += (kAtanTurns[static_cast<std::size_t>(k)] ^ um) - um;
     }
-    // The residual angle, |y / x| <= tan(atan(2^-7)) (x > 0 after the first
-    // step; |y| < 2^23 is exact in binary32): one correctly rounded division,
-    // a product rounded once, a conversion rounding to nearest even, as
-    // _mm256_cvtps_epi32 and vcvtnq_s32_f32 do.
-    const float t = static_cast<float>(y) / static_cast<float>(x);
-    angle += static_cast<std::uint32_t>(static_cast<std::int32_t>(std::nearbyint(t * kTurnsPerRadF)));
+    // The residual angle, |t| = |y / x| <= tan(atan(2^-5)) (x > 0 after the
+    // first step): one correctly rounded division, then atan t = t - t^3 / 3
+    // and the magnitude x (1 + t^2 / 2) in binary32, each product rounded
+    // once, conversions rounding to nearest even as _mm256_cvtps_epi32 and
+    // vcvtnq_s32_f32 do.
+    const float xf = static_cast<float>(x);
+    const float t = static_cast<float>(y) / xf;
+    const float t2 = t * t;
+    const float r = t - (t * t2) * kThirdF;
+    angle += static_cast<std::uint32_t>(static_cast<std::int32_t>(std::nearbyint(r * kTurnsPerRadF)));
+    x += static_cast<std::int32_t>(std::nearbyint((xf * t2) * 0.5f));  // < 2^30 (1 + 4.9e-4)
     phase[i] = angle - p0[i];  // mod 2^32: the wrap into [0, 2 pi)
     amp_q8[i] = static_cast<std::uint32_t>((static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * kAmpScale) >>
                                            (kAmpScaleBits + sh));

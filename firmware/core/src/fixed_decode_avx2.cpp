@@ -114,16 +114,21 @@ __attribute__((target("avx2"))) void phase_amplitude_avx2(const std::int16_t* m0
                                                           const std::int16_t* m2, const std::uint32_t* p0,
                                                           std::size_t n, std::uint32_t* phase, std::uint32_t* amp_q8,
                                                           std::uint8_t* flags) {
-  const __m256 turns_per_rad = _mm256_set1_ps(kTurnsPerRadF);
+  const __m256 turns_per_rad = _mm256_set1_ps(kTurnsPerRadF), third = _mm256_set1_ps(kThirdF),
+               half = _mm256_set1_ps(0.5f);
   std::size_t i = 0;
   for (; i + 16 <= n; i += 16) {
     const Prepared a = prepare(m0 + i, m1 + i, m2 + i, flags + i);
     const Prepared b = prepare(m0 + i + 8, m1 + i + 8, m2 + i + 8, flags + i + 8);
     __m256i x[2] = {a.x, b.x}, y[2] = {a.y, b.y}, angle[2] = {a.angle, b.angle};
     cordic(x, y, angle, std::make_integer_sequence<int, kCordicSteps>{});
-    for (int v = 0; v < 2; ++v) {  // the residual angle y / x, as the scalar kernel
-      const __m256 t = _mm256_div_ps(_mm256_cvtepi32_ps(y[v]), _mm256_cvtepi32_ps(x[v]));
-      angle[v] = _mm256_add_epi32(angle[v], _mm256_cvtps_epi32(_mm256_mul_ps(t, turns_per_rad)));
+    for (int v = 0; v < 2; ++v) {  // the residual angle and the magnitude, as the scalar kernel
+      const __m256 xf = _mm256_cvtepi32_ps(x[v]);
+      const __m256 t = _mm256_div_ps(_mm256_cvtepi32_ps(y[v]), xf);
+      const __m256 t2 = _mm256_mul_ps(t, t);
+      const __m256 r = _mm256_sub_ps(t, _mm256_mul_ps(_mm256_mul_ps(t, t2), third));
+      angle[v] = _mm256_add_epi32(angle[v], _mm256_cvtps_epi32(_mm256_mul_ps(r, turns_per_rad)));
+      x[v] = _mm256_add_epi32(x[v], _mm256_cvtps_epi32(_mm256_mul_ps(_mm256_mul_ps(xf, t2), half)));
     }
     finish(a, x[0], angle[0], p0 + i, phase + i, amp_q8 + i);
     finish(b, x[1], angle[1], p0 + i + 8, phase + i + 8, amp_q8 + i + 8);

@@ -67,10 +67,15 @@ void phase_amplitude_neon(const std::int16_t* m0, const std::int16_t* m1, const 
     y = vbslq_s32(left, vnegq_s32(y), y);
     uint32x4_t angle = vandq_u32(left, vdupq_n_u32(0x80000000u));
     cordic(x, y, angle, std::make_integer_sequence<int, kCordicSteps>{});
-    // The residual angle y / x as the scalar kernel: FDIV is correctly
-    // rounded, FCVTNS rounds to nearest even.
-    const float32x4_t t = vdivq_f32(vcvtq_f32_s32(y), vcvtq_f32_s32(x));
-    angle = vaddq_u32(angle, vreinterpretq_u32_s32(vcvtnq_s32_f32(vmulq_n_f32(t, kTurnsPerRadF))));
+    // The residual angle and the magnitude as the scalar kernel: FDIV is
+    // correctly rounded, FCVTNS rounds to nearest even, and this file builds
+    // with -ffp-contract=off (no FMLS in place of the product and difference).
+    const float32x4_t xf = vcvtq_f32_s32(x);
+    const float32x4_t t = vdivq_f32(vcvtq_f32_s32(y), xf);
+    const float32x4_t t2 = vmulq_f32(t, t);
+    const float32x4_t r = vsubq_f32(t, vmulq_n_f32(vmulq_f32(t, t2), kThirdF));
+    angle = vaddq_u32(angle, vreinterpretq_u32_s32(vcvtnq_s32_f32(vmulq_n_f32(r, kTurnsPerRadF))));
+    x = vaddq_s32(x, vcvtnq_s32_f32(vmulq_n_f32(vmulq_f32(xf, t2), 0.5f)));
     const uint32x4_t ph = vsubq_u32(angle, vld1q_u32(p0 + i));
     vst1q_u32(phase + i, vbicq_u32(ph, none));
     // amplitude_q8 = x * kAmpScale >> (25 + sh), in 64-bit lanes.

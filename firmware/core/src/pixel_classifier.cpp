@@ -126,7 +126,9 @@ constexpr std::size_t kChunk = 1024;  // pixels per pass: the scratch stays in L
 
 void quantise(FixedKernel kernel, const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift,
               std::int32_t* q) {
-#if defined(__x86_64__)
+#if defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) return quantise_features_neon(f0, f1, n, shift, q);
+#elif defined(__x86_64__)
   if (kernel == FixedKernel::kBest && cpu_has_avx2()) return quantise_features_avx2(f0, f1, n, shift, q);
 #endif
   (void)kernel;
@@ -135,7 +137,9 @@ void quantise(FixedKernel kernel, const std::int32_t* f0, const std::int32_t* f1
 
 std::size_t run_kernel(FixedKernel kernel, const PixelClassifier::Layout& t, const std::int32_t* bin,
                        const std::int32_t* q, std::size_t n, std::uint8_t* labels) {
-#if defined(__x86_64__)
+#if defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) return classify_pixels_neon(t, bin, q, n, labels);
+#elif defined(__x86_64__)
   if (kernel == FixedKernel::kBest && cpu_has_avx2()) return classify_pixels_avx2(t, bin, q, n, labels);
 #endif
   (void)kernel;

@@ -92,7 +92,6 @@ __attribute__((target("avx2,bmi"))) std::size_t classify_pixels_avx2_t(const Pix
   const Arrays t{layout.pairs.data(), layout.elem_mask.data(), layout.doubled.data(), layout.absent.data()};
   const std::uint8_t* needs_absent = layout.needs_absent.data();
   const std::size_t slots = layout.slots, blocks = slots / PixelClassifier::kSlotBlock;
-  std::size_t classified = 0;
   for (std::size_t i = 0; i < n; ++i) {
     std::uint8_t label = PixelClassifier::kUnclassified;
     if (bin[i] >= 0) {
@@ -102,8 +101,11 @@ __attribute__((target("avx2,bmi"))) std::size_t classify_pixels_avx2_t(const Pix
                               : label_of<Blocks, OneValid, false>(t, b * slots, blocks, qv);
     }
     labels[i] = label;
-    classified += label != PixelClassifier::kUnclassified;
   }
+  // Counted afterwards: a counter in the loop above ends up in memory (the
+  // loop keeps every vector register busy), a dependency from pixel to pixel.
+  std::size_t classified = 0;
+  for (std::size_t i = 0; i < n; ++i) classified += labels[i] != PixelClassifier::kUnclassified;
   return classified;
 }
 

@@ -24,11 +24,13 @@ inline constexpr int kCombinedFracBits = 8;  // combined depth: int32 Q8 mm
 inline constexpr int kAmplitudeFracBits = 8;  // amplitude: uint32 Q8 counts
 inline constexpr std::int32_t kFixedInvalid = INT32_MIN;  // depth, combined, feature of an invalid pixel
 // The phase estimator (docs/numerics.md): kCordicSteps CORDIC steps rotate
-// the phasor to within atan(2^-7) = 0.45 degrees of the x axis, in integers;
-// the residual angle is then y / x (atan t = t - t^3 / 3 ...: the cubic term
-// is below 1.6e-7 rad), one IEEE-754 binary32 division, which is correctly
-// rounded on every target, so scalar, NEON and AVX2 agree bit for bit.
-inline constexpr int kCordicSteps = 8;
+// the phasor to within atan(2^-5) = 1.8 degrees of the x axis, in integers;
+// the residual angle is then atan(t) = t - t^3 / 3 (t^5 / 5 < 6e-9 rad
+// dropped), t = y / x, and the magnitude x sqrt(1 + t^2) = x + x t^2 / 2, in
+// IEEE-754 binary32: one correctly rounded division and a fixed sequence of
+// products and a difference (never fused: the files that compute them build
+// with -ffp-contract=off), so scalar, NEON and AVX2 agree bit for bit.
+inline constexpr int kCordicSteps = 6;
 
 // p0 per pixel and group in Q32 turns (round(p0 / 2 pi * 2^32) mod 2^32).
 struct FixedDecodeTables {
@@ -109,14 +111,16 @@ void finish_pixels_avx2(const FixedPlanes& planes, std::size_t n, const FixedThr
 
 // The CORDIC's constants, shared by both kernels.
 namespace fixed_decode_detail {
-// round(atan(2^-i) / (2 pi) * 2^32), i = 0..7 (computed at 50 digits).
-inline constexpr std::array<std::uint32_t, kCordicSteps> kAtanTurns = {
-    536870912u, 316933406u, 167458907u, 85004756u, 42667331u, 21354465u, 10679838u, 5340245u};
+// round(atan(2^-i) / (2 pi) * 2^32), i = 0..5 (computed at 50 digits).
+inline constexpr std::array<std::uint32_t, kCordicSteps> kAtanTurns = {536870912u, 316933406u, 167458907u,
+                                                                       85004756u,  42667331u,  21354465u};
+inline constexpr float kThirdF = 1.0f / 3.0f;
 // 2^32 / (2 pi) as a float (683565248, 4e-8 relative off): the residual's radians to Q32 turns.
 inline constexpr float kTurnsPerRadF = static_cast<float>(4294967296.0 / 6.283185307179586476925);
 // sqrt(3) / 2 in Q31 (the imaginary part's factor; vqrdmulh's operand).
 inline constexpr std::int32_t kHalfSqrt3Q31 = 1859775393;
-// 256 / (3 K) in Q25, K the gain of the 8 CORDIC steps: amplitude_q8 = x * kAmpScale >> (25 + shift).
+// 256 / (3 K) in Q25, K the gain of the 6 CORDIC steps: amplitude_q8 = x' * kAmpScale >> (25 + shift),
+// x' the magnitude corrected for the residual angle.
 inline constexpr int kAmpScaleBits = 25;
 extern const std::uint32_t kAmpScale;
 // The unwrap's divisions without a divide (AVX2 has none): floor(m / R) =

@@ -4,7 +4,8 @@
 // table is rearranged bin-major at construction (each bin's candidates side
 // by side, value pairs packed in 32 bits) so that a vector kernel takes eight
 // candidates an instruction; the scalar kernel is the definition and the AVX2
-// kernel (x86-64 CPUs that have it) gives the same labels bit for bit.
+// (x86-64 CPUs that have it) and NEON (aarch64) kernels give the same labels
+// bit for bit.
 //
 // The definition (docs/numerics.md): q_r = clamp((clamp(feature_r, +-2^30) +
 // half a step) >> shift, -32767, 32767) in table steps (the inner clamp,
@@ -82,6 +83,9 @@ class PixelClassifier {
 // The features (Q16 mm) in table steps, packed q0 | q1 << 16.
 void quantise_features_scalar(const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift,
                               std::int32_t* q);
+#if defined(__aarch64__)
+void quantise_features_neon(const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift, std::int32_t* q);
+#endif
 #if defined(__x86_64__)
 void quantise_features_avx2(const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift,
                             std::int32_t* q);  // AVX2 CPUs only
@@ -91,6 +95,10 @@ void quantise_features_avx2(const std::int32_t* f0, const std::int32_t* f1, std:
 // << 16), bin its bin (-1: none). Exposed for the bit-exactness tests.
 std::size_t classify_pixels_scalar(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
                                    std::size_t n, std::uint8_t* labels);
+#if defined(__aarch64__)
+std::size_t classify_pixels_neon(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
+                                 std::size_t n, std::uint8_t* labels);
+#endif
 #if defined(__x86_64__)
 // Only on a CPU with AVX2 (cpu_has_avx2()).
 std::size_t classify_pixels_avx2(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
