@@ -313,11 +313,15 @@ int run_single(const Options& o) {
         for (long r = 0; r < reps; ++r) {
           for (const auto& q : qs) g_sink = g_sink + fx.classify(q.v.data(), q.v.size()).best().index;
         }
-      } else {  // the squared sums of prepared queries: the distance kernel's calls only
+      } else {  // the squared sums of prepared queries: the distance kernel's calls only (into one buffer)
         std::vector<FixedClassifier::Prepared> prepared;
         for (const auto& q : qs) prepared.push_back(fx.prepare(q.v.data(), q.v.size()));
+        std::vector<SquaredSum> sums(fx.compact().n_candidates());
         for (long r = 0; r < reps; ++r) {
-          for (const auto& pq : prepared) g_sink = g_sink + static_cast<std::int64_t>(fx.squared_sums(pq)[0].sum);
+          for (const auto& pq : prepared) {
+            fx.squared_sums(pq, sums.data());
+            g_sink = g_sink + static_cast<std::int64_t>(sums[0].sum);
+          }
         }
       }
     }

@@ -68,15 +68,20 @@ FixedClassifier::Prepared FixedClassifier::prepare(const float* query, std::size
   return p;
 }
 
-std::vector<SquaredSum> FixedClassifier::squared_sums(const Prepared& p) const {
-  std::vector<SquaredSum> sums(compact_.n_candidates());
+void FixedClassifier::squared_sums(const Prepared& p, SquaredSum* out) const {
+  std::fill(out, out + compact_.n_candidates(), SquaredSum{});
   const std::size_t row_blocks = compact_.padded_bins() / kCompactBlock;
   for (std::uint32_t r = 0; r < compact_.n_rows(); ++r) {
     if (p.first[r] >= p.last[r]) continue;
     const std::size_t block0 = r * row_blocks + p.first[r];
     tofmat::squared_sums(kernel_, compact_, block0, p.last[r] - p.first[r], p.q.data() + block0 * kCompactBlock,
-                         p.mask.data() + block0, sums.data());
+                         p.mask.data() + block0, out);
   }
+}
+
+std::vector<SquaredSum> FixedClassifier::squared_sums(const Prepared& p) const {
+  std::vector<SquaredSum> sums(compact_.n_candidates());
+  squared_sums(p, sums.data());
   return sums;
 }
 

@@ -77,16 +77,33 @@ SquaredSum squared_sum_neon(const std::int16_t* q, const std::uint8_t* qmask, co
   return squared_sum_body(q, qmask, e, emask, blocks, vld1q_u16(kLaneBits));
 }
 
+namespace {
+
+// One block of a gapless candidate against the prepared query: |q - e| in
+// uint16 (SABD keeps the low 16 bits, and |q - e| <= 65534), the query's
+// lane mask on the differences, widening squares (< 2^32), pairwise into
+// the uint64 accumulator.
+inline uint64x2_t add_block(uint64x2_t sum, int16x8_t q, uint16x8_t mask, const std::int16_t* e) {
+  const uint16x8_t d = vandq_u16(vreinterpretq_u16_s16(vabdq_s16(q, vld1q_s16(e))), mask);
+  sum = vpadalq_u32(sum, vmull_u16(vget_low_u16(d), vget_low_u16(d)));
+  return vpadalq_u32(sum, vmull_high_u16(d, d));
+}
+
+}  // namespace
+
 void squared_sums_neon(const CompactTable& table, std::size_t block0, std::size_t blocks, const std::int16_t* q,
                        const std::uint8_t* qmask, SquaredSum* acc) {
   const uint16x8_t lane_bits = vld1q_u16(kLaneBits);
   // The query's side once for all candidates, a chunk of blocks at a time:
-  // its values and its lane masks (widened to the squares' 32-bit lanes), and
-  // its count. A candidate without gaps then costs a load, two absolute
-  // differences, two squares, two masks and two accumulations per block.
+  // its values, its lane masks and its count. A candidate without gaps then
+  // costs a load, an absolute difference, a mask, two squares and two
+  // accumulations per block; one- and two-block queries (the short ones of
+  // a hand-held sweep's start) run unrolled with the candidates' pointers
+  // stepped, not recomputed.
   constexpr std::size_t kChunk = 32;
   int16x8_t qv[kChunk];
-  uint32x4_t mlo[kChunk], mhi[kChunk];
+  uint16x8_t mv[kChunk];
+  const std::size_t stride = table.padded_elements(), K = table.n_candidates();
   for (std::size_t c0 = 0; c0 < blocks; c0 += kChunk) {
     const std::size_t n = blocks - c0 < kChunk ? blocks - c0 : kChunk;
     std::uint32_t qcount = 0;
@@ -94,28 +111,21 @@ void squared_sums_neon(const CompactTable& table, std::size_t block0, std::size_
       const unsigned m = qmask[c0 + b];
       qcount += static_cast<std::uint32_t>(__builtin_popcount(m));
       qv[b] = vld1q_s16(q + (c0 + b) * 8);
-      const uint16x8_t lanes = vtstq_u16(vdupq_n_u16(static_cast<std::uint16_t>(m)), lane_bits);
-      mlo[b] = vreinterpretq_u32_s32(vmovl_s16(vreinterpret_s16_u16(vget_low_u16(lanes))));
-      mhi[b] = vreinterpretq_u32_s32(vmovl_high_s16(vreinterpretq_s16_u16(lanes)));
+      mv[b] = vtstq_u16(vdupq_n_u16(static_cast<std::uint16_t>(m)), lane_bits);
     }
-    for (std::size_t k = 0; k < table.n_candidates(); ++k) {
-      const std::uint8_t* em = table.validity(k);
-      const std::int16_t* e = table.values(k) + (block0 + c0) * kCompactBlock;
-      if (em) {  // gaps in this candidate: the general kernel
+    const std::int16_t* e = table.values(0) + (block0 + c0) * kCompactBlock;
+    for (std::size_t k = 0; k < K; ++k, e += stride) {
+      if (const std::uint8_t* em = table.validity(k)) {  // gaps in this candidate: the general kernel
         const SquaredSum s = squared_sum_body(q + c0 * 8, qmask + c0, e, em + block0 + c0, n, lane_bits);
         acc[k].sum += s.sum;
         acc[k].count += s.count;
         continue;
       }
-      uint64x2_t sum = vdupq_n_u64(0);
-      for (std::size_t b = 0; b < n; ++b) {
-        const int16x8_t ev = vld1q_s16(e + b * 8);
-        uint32x4_t lo = vreinterpretq_u32_s32(vabdl_s16(vget_low_s16(qv[b]), vget_low_s16(ev)));
-        uint32x4_t hi = vreinterpretq_u32_s32(vabdl_high_s16(qv[b], ev));
-        lo = vandq_u32(vmulq_u32(lo, lo), mlo[b]);
-        hi = vandq_u32(vmulq_u32(hi, hi), mhi[b]);
-        sum = vpadalq_u32(sum, lo);
-        sum = vpadalq_u32(sum, hi);
+      uint64x2_t sum = add_block(vdupq_n_u64(0), qv[0], mv[0], e);
+      if (n == 2) {
+        sum = add_block(sum, qv[1], mv[1], e + 8);
+      } else if (n > 2) {
+        for (std::size_t b = 1; b < n; ++b) sum = add_block(sum, qv[b], mv[b], e + b * 8);
       }
       acc[k].sum += vaddvq_u64(sum);
       acc[k].count += qcount;

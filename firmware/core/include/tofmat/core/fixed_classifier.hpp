@@ -37,6 +37,8 @@ class FixedClassifier {
   Prepared prepare(const float* query, std::size_t n) const;
   // Squared sums of every candidate (in candidates() order) for a prepared query.
   std::vector<SquaredSum> squared_sums(const Prepared& p) const;
+  // The same into out[0 .. n_candidates) (zeroed first): no allocation.
+  void squared_sums(const Prepared& p, SquaredSum* out) const;
 
   // query: n_rows x n_bins, C order, NaN = missing. Throws
   // std::invalid_argument as FloatClassifier does. A value beyond +-32767
