@@ -341,3 +341,80 @@ TEST(FixedKernel, BatchOverCandidatesEqualsSingleCalls) {
 }
 
 }  // namespace
+
+namespace {
+
+// Random tables of 1 to 64 candidates (values over the whole int16 range,
+// some candidates with missing elements), random partial queries.
+std::shared_ptr<const ExemplarTable> random_table(std::size_t K, std::uint32_t bins, std::mt19937& rng) {
+  std::uniform_real_distribution<float> value(-2000.0f, 2000.0f);
+  std::vector<std::string> names;
+  std::vector<float> v;
+  for (std::size_t k = 0; k < K; ++k) {
+    names.push_back("m" + std::to_string(k));
+    const bool gaps = rng() % 3 == 0;
+    for (std::uint32_t e = 0; e < 2 * bins; ++e) v.push_back(gaps && rng() % 5 == 0 ? kNaN : value(rng));
+  }
+  return std::make_shared<const ExemplarTable>(names, kinect2_database_rows(), BinSpec{600.0, 3.0, bins}, v, 0.0625);
+}
+
+// The element-major copy holds the compact table's values and validity
+// (checked on every build; its NEON kernel runs on aarch64).
+TEST(ElementMajorTable, HoldsTheCompactTablesValuesAndValidity) {
+  std::mt19937 rng(21);
+  for (std::size_t K : {1u, 9u, 33u}) {
+    const auto t = random_table(K, 37, rng);
+    const CompactTable c(*t);
+    const ElementMajorTable em(c);
+    ASSERT_EQ(em.slots % 8, 0u);
+    ASSERT_GE(em.slots, K);
+    for (std::size_t e = 0; e < c.padded_elements(); ++e) {
+      for (std::size_t k = 0; k < K; ++k) {
+        ASSERT_EQ(em.values[e * em.slots + k], c.values(k)[e]);
+        const std::uint8_t* m = c.validity(k);
+        const bool valid = m == nullptr || ((m[e / 8] >> (e % 8)) & 1) != 0;
+        if (em.gap_row[e] < 0) {
+          ASSERT_TRUE(valid) << "element " << e << " has no validity lanes but candidate " << k << " misses it";
+        } else {
+          ASSERT_EQ(em.gap_lanes[static_cast<std::size_t>(em.gap_row[e]) * em.slots + k], valid ? 0xFFFF : 0);
+        }
+      }
+    }
+    for (std::size_t k : em.gapped) ASSERT_NE(c.validity(k), nullptr);
+  }
+}
+
+// The best kernel's sums (on aarch64 the element-major NEON kernel) equal the
+// scalar kernel's for every candidate, with gaps, candidate subsets, and
+// queries from one element to every element.
+TEST(FixedKernel, BestSquaredSumsEqualScalarOnRandomTables) {
+  std::mt19937 rng(22);
+  std::uniform_real_distribution<float> value(-2100.0f, 2100.0f);  // beyond the int16 range: saturation too
+  for (std::size_t K : {1u, 5u, 8u, 9u, 29u, 33u, 64u}) {
+    const std::uint32_t bins = 37;
+    const auto t = random_table(K, bins, rng);
+    std::vector<std::uint32_t> subset;
+    for (std::uint32_t k = 0; k < K; k += 2) subset.push_back(k);
+    for (const auto& cands : {std::vector<std::uint32_t>{}, subset}) {
+      const FixedClassifier best(t, cands, FixedKernel::kBest), scalar(t, cands, FixedKernel::kScalar);
+      for (int trial = 0; trial < 60; ++trial) {
+        std::vector<float> q(t->elements_per_material(), kNaN);
+        const std::uint32_t len = 1 + static_cast<std::uint32_t>(rng() % (trial % 3 == 0 ? bins : 4));
+        const std::uint32_t s = static_cast<std::uint32_t>(rng() % (bins - len + 1));
+        for (std::uint32_t r = 0; r < 2; ++r) {
+          if (trial % 5 == 1 && r == 1) continue;  // one row only
+          for (std::uint32_t b = s; b < s + len; ++b) {
+            if (rng() % 7 != 0) q[r * bins + b] = value(rng);
+          }
+        }
+        if (std::all_of(q.begin(), q.end(), [](float v) { return std::isnan(v); })) q[s] = 1.0f;
+        const auto p = scalar.prepare(q.data(), q.size());
+        const auto a = scalar.squared_sums(p), b = best.squared_sums(p);
+        ASSERT_EQ(a.size(), b.size());
+        for (std::size_t k = 0; k < a.size(); ++k) ASSERT_EQ(a[k], b[k]) << "K " << K << " candidate " << k;
+      }
+    }
+  }
+}
+
+}  // namespace

@@ -29,7 +29,11 @@ FixedClassifier::FixedClassifier(std::shared_ptr<const ExemplarTable> table, std
                                  FixedKernel kernel)
     : table_(table ? std::move(table) : throw std::invalid_argument("classifier needs a table")),
       compact_(*table_, std::move(candidates)),
-      kernel_(kernel) {}
+      kernel_(kernel) {
+#if defined(__aarch64__)
+  if (kernel_ == FixedKernel::kBest) elements_ = std::make_unique<const ElementMajorTable>(compact_);
+#endif
+}
 
 FixedClassifier::Prepared FixedClassifier::prepare(const float* query, std::size_t n) const {
   const std::size_t len = table_->elements_per_material();
@@ -71,6 +75,17 @@ FixedClassifier::Prepared FixedClassifier::prepare(const float* query, std::size
 void FixedClassifier::squared_sums(const Prepared& p, SquaredSum* out) const {
   std::fill(out, out + compact_.n_candidates(), SquaredSum{});
   const std::size_t row_blocks = compact_.padded_bins() / kCompactBlock;
+#if defined(__aarch64__)
+  if (elements_) {  // every row in one pass over the query's valid elements
+    BlockRange ranges[kMaxRows];
+    std::size_t n = 0;
+    for (std::uint32_t r = 0; r < compact_.n_rows() && n < kMaxRows; ++r) {
+      if (p.first[r] < p.last[r]) ranges[n++] = {r * row_blocks + p.first[r], p.last[r] - p.first[r]};
+    }
+    squared_sums_elements_neon(*elements_, compact_, ranges, n, p.q.data(), p.mask.data(), out);
+    return;
+  }
+#endif
   for (std::uint32_t r = 0; r < compact_.n_rows(); ++r) {
     if (p.first[r] >= p.last[r]) continue;
     const std::size_t block0 = r * row_blocks + p.first[r];

@@ -39,3 +39,32 @@ const char* squared_sum_kernel() {
 }
 
 }  // namespace tofmat
+
+namespace tofmat {
+
+ElementMajorTable::ElementMajorTable(const CompactTable& table)
+    : slots((table.n_candidates() + kCompactBlock - 1) / kCompactBlock * kCompactBlock) {
+  const std::size_t elements = table.padded_elements(), K = table.n_candidates();
+  values.assign(elements * slots, 0);
+  gap_row.assign(elements, -1);
+  for (std::size_t k = 0; k < K; ++k) {
+    if (table.validity(k) != nullptr) gapped.push_back(static_cast<std::uint32_t>(k));
+  }
+  for (std::size_t e = 0; e < elements; ++e) {
+    bool gaps = false;
+    for (std::size_t k = 0; k < K; ++k) {
+      values[e * slots + k] = table.values(k)[e];
+      const std::uint8_t* m = table.validity(k);
+      gaps = gaps || (m != nullptr && ((m[e / 8] >> (e % 8)) & 1) == 0);
+    }
+    if (!gaps) continue;
+    gap_row[e] = static_cast<std::int32_t>(gap_lanes.size() / slots);
+    for (std::size_t k = 0; k < slots; ++k) {
+      const std::uint8_t* m = k < K ? table.validity(k) : nullptr;
+      const bool valid = k < K && (m == nullptr || ((m[e / 8] >> (e % 8)) & 1) != 0);
+      gap_lanes.push_back(valid ? 0xFFFF : 0);
+    }
+  }
+}
+
+}  // namespace tofmat

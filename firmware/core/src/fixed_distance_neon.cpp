@@ -133,5 +133,88 @@ void squared_sums_neon(const CompactTable& table, std::size_t block0, std::size_
   }
 }
 
+namespace {
+
+// Sums (and nothing else) of Blocks x 8 candidates over the query's valid
+// elements in the given block ranges: per element, a broadcast of the query
+// value, an absolute difference per 8 candidates (kept in 16 bits), the
+// element's validity lanes where some candidate misses it, two widening
+// squares and four widening adds into the candidates' uint64 lanes.
+// Blocks = 0: the table's slots / 8, in loops.
+template <int Blocks>
+void element_sums(const ElementMajorTable& em, const BlockRange* ranges, std::size_t n_ranges, const std::int16_t* q,
+                  const std::uint8_t* qmask, std::uint64_t* out) {
+  constexpr std::size_t kMaxGroups = 32;  // 256 slots
+  const std::size_t groups = Blocks > 0 ? static_cast<std::size_t>(Blocks) : em.slots / 8;
+  uint64x2_t acc[kMaxGroups * 4];
+  for (std::size_t j = 0; j < 4 * groups; ++j) acc[j] = vdupq_n_u64(0);
+  for (std::size_t r = 0; r < n_ranges; ++r) {
+    for (std::size_t b = ranges[r].block0; b < ranges[r].block0 + ranges[r].blocks; ++b) {
+      for (unsigned m = qmask[b]; m != 0; m &= m - 1) {
+        const std::size_t e = b * 8 + static_cast<std::size_t>(__builtin_ctz(m));
+        const int16x8_t qd = vdupq_n_s16(q[e]);
+        const std::int16_t* v = em.values.data() + e * em.slots;
+        const std::int32_t gap = em.gap_row[e];
+        const std::uint16_t* lanes = gap < 0 ? nullptr : em.gap_lanes.data() + static_cast<std::size_t>(gap) * em.slots;
+        for (std::size_t j = 0; j < groups; ++j) {
+          uint16x8_t d = vreinterpretq_u16_s16(vabdq_s16(qd, vld1q_s16(v + 8 * j)));  // |q - e| <= 65534
+          if (lanes) d = vandq_u16(d, vld1q_u16(lanes + 8 * j));
+          const uint32x4_t lo = vmull_u16(vget_low_u16(d), vget_low_u16(d));
+          const uint32x4_t hi = vmull_high_u16(d, d);
+          acc[4 * j] = vaddw_u32(acc[4 * j], vget_low_u32(lo));
+          acc[4 * j + 1] = vaddw_high_u32(acc[4 * j + 1], lo);
+          acc[4 * j + 2] = vaddw_u32(acc[4 * j + 2], vget_low_u32(hi));
+          acc[4 * j + 3] = vaddw_high_u32(acc[4 * j + 3], hi);
+        }
+      }
+    }
+  }
+  for (std::size_t j = 0; j < 4 * groups; ++j) vst1q_u64(out + 2 * j, acc[j]);
+}
+
+}  // namespace
+
+void squared_sums_elements_neon(const ElementMajorTable& em, const CompactTable& table, const BlockRange* ranges,
+                                std::size_t n_ranges, const std::int16_t* q, const std::uint8_t* qmask,
+                                SquaredSum* acc) {
+  std::uint64_t sums[256];
+  switch (em.slots / 8) {
+    case 1:
+      element_sums<1>(em, ranges, n_ranges, q, qmask, sums);
+      break;
+    case 2:
+      element_sums<2>(em, ranges, n_ranges, q, qmask, sums);
+      break;
+    case 3:
+      element_sums<3>(em, ranges, n_ranges, q, qmask, sums);
+      break;
+    case 4:
+      element_sums<4>(em, ranges, n_ranges, q, qmask, sums);
+      break;
+    default:
+      element_sums<0>(em, ranges, n_ranges, q, qmask, sums);
+  }
+  // Counts: the query's valid elements, then for the candidates with gaps
+  // the elements they miss taken off (a popcount a block).
+  std::uint32_t qcount = 0;
+  for (std::size_t r = 0; r < n_ranges; ++r) {
+    for (std::size_t b = ranges[r].block0; b < ranges[r].block0 + ranges[r].blocks; ++b) {
+      qcount += static_cast<std::uint32_t>(__builtin_popcount(qmask[b]));
+    }
+  }
+  for (std::size_t k = 0; k < table.n_candidates(); ++k) {
+    acc[k].sum += sums[k];
+    acc[k].count += qcount;
+  }
+  for (const std::uint32_t k : em.gapped) {
+    const std::uint8_t* m = table.validity(k);
+    for (std::size_t r = 0; r < n_ranges; ++r) {
+      for (std::size_t b = ranges[r].block0; b < ranges[r].block0 + ranges[r].blocks; ++b) {
+        acc[k].count -= static_cast<std::uint32_t>(__builtin_popcount(qmask[b] & ~m[b] & 0xFFu));
+      }
+    }
+  }
+}
+
 }  // namespace tofmat
 #endif

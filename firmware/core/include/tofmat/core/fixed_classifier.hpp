@@ -1,6 +1,7 @@
 // Eq. (12) in fixed point: the query quantised to the table's step, the
 // table held as a CompactTable, squared differences summed in integers by the
-// build's kernel (NEON on aarch64), candidates ranked by exact comparison of
+// build's kernel (NEON on aarch64: over an element-major copy of the table,
+// ElementMajorTable), candidates ranked by exact comparison of
 // the rationals sum / count. Same contract as FloatClassifier (errors, ties to
 // the lower table index, candidates without a common element left out); the
 // ordering is that of the float path on the quantised values (docs/numerics.md).
@@ -54,6 +55,9 @@ class FixedClassifier {
   std::shared_ptr<const ExemplarTable> table_;
   CompactTable compact_;
   FixedKernel kernel_;
+#if defined(__aarch64__)
+  std::unique_ptr<const ElementMajorTable> elements_;  // the NEON kernel's layout (kBest only)
+#endif
 };
 
 }  // namespace tofmat

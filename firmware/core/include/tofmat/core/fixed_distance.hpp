@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/fixed_kernel.hpp"
@@ -62,6 +63,32 @@ inline void squared_sums(FixedKernel kernel, const CompactTable& table, std::siz
   (void)kernel;
   squared_sums_scalar(table, block0, blocks, q, qmask, acc);
 }
+
+// The compact table rearranged element-major (each element's candidates side
+// by side, padded to a multiple of 8; validity lanes only for the elements
+// where some candidate is missing), for the NEON kernel that goes over a
+// query's valid elements once and keeps every candidate's sum in vector lanes:
+// a short query then costs its elements, not its candidates times its blocks.
+// A copy of the values (the real database: 25.6 KB beside the 23.7 KB table);
+// FixedClassifier builds it on aarch64 only.
+struct ElementMajorTable {
+  std::size_t slots = 0;                 // candidates rounded up to 8
+  std::vector<std::int16_t> values;      // element * slots + k (0 for padding)
+  std::vector<std::int32_t> gap_row;     // per element: its row of gap_lanes, or -1 (every candidate valid)
+  std::vector<std::uint16_t> gap_lanes;  // 0xFFFF where candidate k is valid at the element, else 0
+  std::vector<std::uint32_t> gapped;     // the candidates with a validity bitset
+  explicit ElementMajorTable(const CompactTable& table);
+};
+struct BlockRange {
+  std::size_t block0 = 0, blocks = 0;  // blocks [block0, block0 + blocks) of the padded layout
+};
+#if defined(__aarch64__)
+// The same sums as squared_sums_scalar over every range at once (q and qmask
+// are the whole query's, in the padded layout; a query's rows in one call).
+void squared_sums_elements_neon(const ElementMajorTable& em, const CompactTable& table, const BlockRange* ranges,
+                                std::size_t n_ranges, const std::int16_t* q, const std::uint8_t* qmask,
+                                SquaredSum* acc);
+#endif
 
 // The name of the build's kernel ("neon" or "scalar"), for benchmarks and logs.
 const char* squared_sum_kernel();
