@@ -384,9 +384,10 @@ TEST(ElementMajorTable, HoldsTheCompactTablesValuesAndValidity) {
   }
 }
 
-// The best kernel's sums (on aarch64 the element-major NEON kernel) equal the
-// scalar kernel's for every candidate, with gaps, candidate subsets, and
-// queries from one element to every element.
+// Both classifiers' sums (on aarch64 the best one is the element-major NEON
+// kernel) equal the single-candidate scalar definition called per candidate
+// and row, with gaps, candidate subsets, and queries from one element to
+// every element.
 TEST(FixedKernel, BestSquaredSumsEqualScalarOnRandomTables) {
   std::mt19937 rng(22);
   std::uniform_real_distribution<float> value(-2100.0f, 2100.0f);  // beyond the int16 range: saturation too
@@ -410,8 +411,24 @@ TEST(FixedKernel, BestSquaredSumsEqualScalarOnRandomTables) {
         if (std::all_of(q.begin(), q.end(), [](float v) { return std::isnan(v); })) q[s] = 1.0f;
         const auto p = scalar.prepare(q.data(), q.size());
         const auto a = scalar.squared_sums(p), b = best.squared_sums(p);
-        ASSERT_EQ(a.size(), b.size());
-        for (std::size_t k = 0; k < a.size(); ++k) ASSERT_EQ(a[k], b[k]) << "K " << K << " candidate " << k;
+        const CompactTable& c = scalar.compact();
+        const std::size_t row_blocks = c.padded_bins() / kCompactBlock;
+        ASSERT_EQ(a.size(), c.n_candidates());
+        ASSERT_EQ(b.size(), c.n_candidates());
+        for (std::size_t k = 0; k < a.size(); ++k) {
+          SquaredSum want;
+          for (std::uint32_t r = 0; r < c.n_rows(); ++r) {
+            if (p.first[r] >= p.last[r]) continue;
+            const std::size_t b0 = r * row_blocks + p.first[r];
+            const std::uint8_t* em = c.validity(k);
+            const SquaredSum one = squared_sum_scalar(p.q.data() + b0 * 8, p.mask.data() + b0, c.values(k) + b0 * 8,
+                                                      em ? em + b0 : nullptr, p.last[r] - p.first[r]);
+            want.sum += one.sum;
+            want.count += one.count;
+          }
+          ASSERT_EQ(a[k], want) << "K " << K << " candidate " << k;
+          ASSERT_EQ(b[k], want) << "K " << K << " candidate " << k;
+        }
       }
     }
   }

@@ -221,14 +221,8 @@ void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& t, st
 
 void decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, FixedDecodedFrame& out,
                         const DecodeOptions& options, FixedKernel kernel) {
-  const std::size_t n = t.pixels;
-  size_fixed(out, n);
-  for (std::size_t g = 0; g < 3; ++g) {
-    const std::int16_t* m = raw + 3 * g * n;
-    phase_amplitude(kernel, m, m + n, m + 2 * n, t.p0_turns[g].data(), n, out.phase_turns[g].data(),
-                    out.amplitude_q8[g].data(), out.flags.data());
-  }
-  finish_pixels(kernel, planes(out, 0), n, fixed_thresholds(options));
+  size_fixed(out, t.pixels);
+  decode_pixels_fixed(raw, t, 0, t.pixels, fixed_thresholds(options), planes(out, 0), kernel);
 }
 
 FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, const DecodeOptions& options,

@@ -122,8 +122,6 @@ std::size_t classify_pixels_scalar(const PixelClassifier::Layout& t, const std::
 
 namespace {
 
-constexpr std::size_t kChunk = 1024;  // pixels per pass: the scratch stays in L1
-
 void quantise(FixedKernel kernel, const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift,
               std::int32_t* q) {
 #if defined(__aarch64__)
@@ -148,14 +146,25 @@ std::size_t run_kernel(FixedKernel kernel, const PixelClassifier::Layout& t, con
 
 }  // namespace
 
+// Bins (computed here when `bin` is null) and labels of up to kChunk pixels.
+std::size_t PixelClassifier::classify_chunk(const std::int32_t* depth_q8, const std::uint8_t* flags,
+                                            const std::int32_t* bin, const std::int32_t* f0, const std::int32_t* f1,
+                                            std::size_t n, std::uint8_t* labels, FixedKernel kernel) const {
+  std::int32_t own_bin[kChunk], q[kChunk];
+  if (bin == nullptr) {
+    bin_indices(kernel, depth_q8, flags, n, binning_, own_bin);
+    bin = own_bin;
+  }
+  quantise(kernel, f0, f1, n, layout_.shift, q);
+  return run_kernel(kernel, layout_, bin, q, n, labels);
+}
+
 std::size_t PixelClassifier::classify(const std::int32_t* bin, const std::int32_t* f0, const std::int32_t* f1,
                                       std::size_t n, std::uint8_t* labels, FixedKernel kernel) const {
-  std::int32_t q[kChunk];
   std::size_t classified = 0;
   for (std::size_t at = 0; at < n; at += kChunk) {
     const std::size_t m = std::min(kChunk, n - at);
-    quantise(kernel, f0 + at, f1 + at, m, layout_.shift, q);
-    classified += run_kernel(kernel, layout_, bin + at, q, m, labels + at);
+    classified += classify_chunk(nullptr, nullptr, bin + at, f0 + at, f1 + at, m, labels + at, kernel);
   }
   return classified;
 }
@@ -165,13 +174,11 @@ std::size_t PixelClassifier::classify(const FixedDecodedFrame& f, std::uint8_t* 
       f.features_q16[1].size() != f.pixels) {
     throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
   }
-  std::int32_t bin[kChunk], q[kChunk];
   std::size_t classified = 0;
   for (std::size_t at = 0; at < f.pixels; at += kChunk) {
     const std::size_t m = std::min(kChunk, f.pixels - at);
-    bin_indices(kernel, f.combined_q8.data() + at, f.flags.data() + at, m, binning_, bin);
-    quantise(kernel, f.features_q16[0].data() + at, f.features_q16[1].data() + at, m, layout_.shift, q);
-    classified += run_kernel(kernel, layout_, bin, q, m, labels + at);
+    classified += classify_chunk(f.combined_q8.data() + at, f.flags.data() + at, nullptr, f.features_q16[0].data() + at,
+                                 f.features_q16[1].data() + at, m, labels + at, kernel);
   }
   return classified;
 }
@@ -180,8 +187,9 @@ std::size_t PixelClassifier::classify_frame(const std::int16_t* raw, const Fixed
                                             std::uint8_t* labels, const DecodeOptions& options,
                                             FixedKernel kernel) const {
   constexpr std::size_t kTile = 512;  // 12 planes of 512 values: 24 KiB, in L1 with the labels
+  static_assert(kTile <= kChunk, "a tile is classified as one chunk");
   std::uint32_t phase[3][kTile], amp[3][kTile];
-  std::int32_t depth[3][kTile], combined[kTile], features[2][kTile], bin[kTile], q[kTile];
+  std::int32_t depth[3][kTile], combined[kTile], features[2][kTile];
   std::uint8_t flags[kTile];
   FixedPlanes p;
   for (std::size_t g = 0; g < 3; ++g) {
@@ -198,9 +206,7 @@ std::size_t PixelClassifier::classify_frame(const std::int16_t* raw, const Fixed
   for (std::size_t at = 0; at < tables.pixels; at += kTile) {
     const std::size_t m = std::min(kTile, tables.pixels - at);
     decode_pixels_fixed(raw, tables, at, m, th, p, kernel);
-    bin_indices(kernel, combined, flags, m, binning_, bin);
-    quantise(kernel, features[0], features[1], m, layout_.shift, q);
-    classified += run_kernel(kernel, layout_, bin, q, m, labels + at);
+    classified += classify_chunk(combined, flags, nullptr, features[0], features[1], m, labels + at, kernel);
   }
   return classified;
 }

@@ -75,6 +75,11 @@ class PixelClassifier {
   const Layout& layout() const { return layout_; }
 
  private:
+  static constexpr std::size_t kChunk = 1024;  // pixels per pass: the scratch stays in L1
+  std::size_t classify_chunk(const std::int32_t* depth_q8, const std::uint8_t* flags, const std::int32_t* bin,
+                             const std::int32_t* f0, const std::int32_t* f1, std::size_t n, std::uint8_t* labels,
+                             FixedKernel kernel) const;
+
   std::size_t n_candidates_ = 0;
   FixedBinning binning_;
   Layout layout_;
