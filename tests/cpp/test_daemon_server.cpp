@@ -53,14 +53,18 @@ class Raw {
     send(encode_request(r));
   }
 
+  static int ms_left(Clock::time_point deadline) {
+    return static_cast<int>(std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count());
+  }
+
   // The next message within timeout_ms; nothing on a timeout or once the server closed.
   std::optional<Message> read(int timeout_ms = kPatienceMs) {
     const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
     for (;;) {
       if (auto m = reader_.next()) return m;
       if (closed_) return std::nullopt;
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-      if (left <= 0 || !wait_readable(fd_.get(), static_cast<int>(left))) return std::nullopt;
+      const int left = ms_left(deadline);
+      if (left <= 0 || !wait_readable(fd_.get(), left)) return std::nullopt;
       std::uint8_t buf[65536];
       const ssize_t n = ::recv(fd_.get(), buf, sizeof buf, 0);
       if (n > 0) {
@@ -82,14 +86,9 @@ class Raw {
   // false if it is still open after timeout_ms.
   bool closed_within(int timeout_ms = kPatienceMs) {
     const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (!closed_) {
-      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-      if (left <= 0 || !wait_readable(fd_.get(), static_cast<int>(left))) return false;
-      std::uint8_t buf[65536];
-      const ssize_t n = ::recv(fd_.get(), buf, sizeof buf, 0);
-      if (n == 0 || (n < 0 && errno != EAGAIN && errno != EINTR)) closed_ = true;
+    while (!closed_ && read(ms_left(deadline))) {
     }
-    return true;
+    return closed_;
   }
 
   // Reads the server's hello and does the client's side of the handshake.
@@ -105,7 +104,6 @@ class Raw {
   }
 
   void close() { fd_.reset(); }
-  int fd() const { return fd_.get(); }
 
  private:
   Fd fd_;
@@ -182,15 +180,8 @@ class ServerTest : public ::testing::Test {
     return o;
   }
 
-  void start(ServerOptions o = {}, bool defaults = true) {
-    if (defaults) {
-      const ServerOptions d = options();
-      if (o.socket_path.empty()) o.socket_path = d.socket_path;
-      if (o.tcp.empty()) o.tcp = d.tcp;
-      if (o.token.empty()) o.token = d.token;
-      o.server_name = d.server_name;
-      o.capabilities = d.capabilities;
-    }
+  void start() { start(options()); }
+  void start(const ServerOptions& o) {
     server_ = std::make_unique<Server>(o, answer);
     thread_ = std::thread([this] { server_->run(stop_); });
   }
@@ -388,7 +379,7 @@ TEST_F(ServerTest, HalfAMessageThenCloseDisturbsNobody) {
 }
 
 TEST_F(ServerTest, ClientWithoutHelloIsClosedAfterTheTimeout) {
-  ServerOptions o;
+  ServerOptions o = options();
   o.hello_timeout_ms = 200;
   start(o);
   const auto t0 = Clock::now();
@@ -478,7 +469,7 @@ TEST_F(ServerTest, SubscribeAndPublish) {
 }
 
 TEST_F(ServerTest, SlowSubscriberLosesOldestEventsOthersGetTheNewest) {
-  ServerOptions o;
+  ServerOptions o = options();
   o.max_queue_bytes = 64 * 1024;  // less than one label map (212 KiB)
   start(o);
   Raw slow(socket_path());
@@ -517,7 +508,7 @@ TEST_F(ServerTest, SlowSubscriberLosesOldestEventsOthersGetTheNewest) {
 }
 
 TEST_F(ServerTest, RepliesAreNeverDroppedAClientThatPilesThemUpIsClosed) {
-  ServerOptions o;
+  ServerOptions o = options();
   o.max_queue_bytes = 64 * 1024;
   start(o);
   Raw slow(socket_path());
@@ -579,7 +570,7 @@ TEST_F(ServerTest, LongErrorFromTheHandlerStillReachesTheClient) {
 }
 
 TEST_F(ServerTest, MaxClientsRefusesTheNextConnection) {
-  ServerOptions o;
+  ServerOptions o = options();
   o.max_clients = 2;
   start(o);
   Client a(socket_path());

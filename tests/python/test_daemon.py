@@ -469,7 +469,10 @@ def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_tab
 
 def test_the_shipped_example_config_parses(start: Callable[..., Daemon]) -> None:
     example = Path(__file__).resolve().parents[2] / "firmware" / "daemon" / "tofmatd.toml"
-    d = start("sim:static,material=cork,realtime=0", "--config", str(example))  # flags win over the file
+    # It parses and the daemon runs with it; its source (kinect) loses to the flag's. (Its profile
+    # and backend are the defaults, so they show nothing: test_config_file_has_the_flags_keys
+    # checks that a file's keys take effect.)
+    d = start("sim:static,material=cork,realtime=0", "--config", str(example))
     with d.client() as c:
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["source"].startswith("simulated")

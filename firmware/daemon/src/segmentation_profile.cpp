@@ -29,7 +29,10 @@ class SegmentationProfile : public Profile {
         compact_(*table_, candidate_indices(*table_, c.candidates)),
         pixels_(compact_, table_->bins()),
         bin_(kPixels),
-        q16_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)} {
+        q16_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)},
+        f0_(kHeight, kWidth, CV_32F),
+        f1_(kHeight, kWidth, CV_32F),
+        valid_(kHeight, kWidth, CV_32F) {
     for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
   }
 
@@ -66,10 +69,12 @@ class SegmentationProfile : public Profile {
 
  private:
   // The features averaged over a smooth x smooth window of valid pixels
-  // (OpenCV box filters), back in Q16 mm, and each pixel's bin (-1 where
-  // the pixel is invalid or no valid neighbour contributes).
+  // (OpenCV box filters, in place in planes allocated once), back in Q16 mm,
+  // and each pixel's bin (-1 where the pixel is invalid or out of the bins).
   void smooth_features() {
-    cv::Mat f0(kHeight, kWidth, CV_32F), f1(kHeight, kWidth, CV_32F), valid(kHeight, kWidth, CV_32F);
+    cv::Mat& f0 = f0_;
+    cv::Mat& f1 = f1_;
+    cv::Mat& valid = valid_;
     for (std::size_t i = 0; i < kPixels; ++i) {
       const bool ok = frame_.flags[i] == 0;
       const int at = static_cast<int>(i);
@@ -84,12 +89,10 @@ class SegmentationProfile : public Profile {
     bin_indices(FixedKernel::kBest, frame_.combined_q8.data(), frame_.flags.data(), kPixels, pixels_.binning(),
                 bin_.data());
     for (std::size_t i = 0; i < kPixels; ++i) {
+      // (A pixel with a bin is valid, so its own window counts it: n >= 1.)
+      if (bin_[i] < 0) continue;
       const int at = static_cast<int>(i);
       const float n = valid.at<float>(at);
-      if (n < 0.5f) {
-        bin_[i] = -1;
-        continue;
-      }
       // |mean| <= the largest |feature| (9375 mm): Q16 fits int32.
       q16_[0][i] = static_cast<std::int32_t>(std::lround(static_cast<double>(f0.at<float>(at) / n) * 65536.0));
       q16_[1][i] = static_cast<std::int32_t>(std::lround(static_cast<double>(f1.at<float>(at) / n) * 65536.0));
@@ -116,6 +119,7 @@ class SegmentationProfile : public Profile {
   FixedDecodedFrame frame_;
   std::vector<std::int32_t> bin_;
   std::array<std::vector<std::int32_t>, 2> q16_;
+  cv::Mat f0_, f1_, valid_;  // the smoothing's planes
   std::vector<std::string> names_;
 };
 

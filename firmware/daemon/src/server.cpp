@@ -42,8 +42,11 @@ struct Server::Connection {
   bool closing = false;  // close once the queue is written (a refused hello's reply)
   std::uint64_t accepted_ns = 0;
   protocol::MessageReader reader{protocol::kMaxRequestPayloadBytes};
-  std::deque<Bytes> out;
-  std::deque<bool> out_event;  // out[i] is an event (droppable), not a hello or reply
+  struct Queued {
+    Bytes bytes;
+    bool event;  // droppable: an event, not a hello or reply
+  };
+  std::deque<Queued> out;
   std::size_t out_offset = 0, out_bytes = 0;
   std::set<std::string> streams;
   std::uint64_t dropped = 0;
@@ -136,7 +139,7 @@ void Server::enqueue(Connection& c, Bytes bytes, bool event) {
   // of replies does not read what it asked for: it is closed.
   while (!c.out.empty() && (c.out_bytes + bytes->size() > options_.max_queue_bytes || c.out.size() >= kMaxQueuedMessages)) {
     std::size_t victim = c.out_offset > 0 ? 1 : 0;
-    while (victim < c.out.size() && !c.out_event[victim]) ++victim;
+    while (victim < c.out.size() && !c.out[victim].event) ++victim;
     if (victim >= c.out.size()) {
       if (event) {  // nothing older to drop: this one goes
         ++c.dropped;
@@ -147,15 +150,13 @@ void Server::enqueue(Connection& c, Bytes bytes, bool event) {
       c.dead = true;
       return;
     }
-    c.out_bytes -= c.out[victim]->size();
+    c.out_bytes -= c.out[victim].bytes->size();
     c.out.erase(c.out.begin() + static_cast<std::ptrdiff_t>(victim));
-    c.out_event.erase(c.out_event.begin() + static_cast<std::ptrdiff_t>(victim));
     ++c.dropped;
     ++dropped_events_;
   }
   c.out_bytes += bytes->size();
-  c.out.push_back(std::move(bytes));
-  c.out_event.push_back(event);
+  c.out.push_back({std::move(bytes), event});
 }
 
 void Server::reply(Connection& c, const protocol::Reply& r) {
@@ -267,7 +268,7 @@ void Server::read_from(Connection& c) {
 
 void Server::write_to(Connection& c) {
   while (!c.out.empty()) {
-    const auto& front = *c.out.front();
+    const auto& front = *c.out.front().bytes;
     const ssize_t n = ::send(c.fd.get(), front.data() + c.out_offset, front.size() - c.out_offset, MSG_NOSIGNAL);
     if (n < 0) {
       if (errno == EAGAIN || errno == EWOULDBLOCK) return;
@@ -279,7 +280,6 @@ void Server::write_to(Connection& c) {
     if (c.out_offset == front.size()) {
       c.out_bytes -= front.size();
       c.out.pop_front();
-      c.out_event.pop_front();
       c.out_offset = 0;
     }
   }
@@ -298,7 +298,7 @@ void Server::run(const std::atomic<bool>& stop) {
     }
     for (auto& [stream, bytes] : batch)
       for (auto& [id, c] : connections_)
-        if (c->ready && !c->closing && !c->dead && c->streams.count(stream)) enqueue(*c, bytes, true);
+        if (c->ready && !c->closing && c->streams.count(stream)) enqueue(*c, bytes, true);
 
     fds.clear();
     ids.clear();
@@ -337,7 +337,6 @@ void Server::run(const std::atomic<bool>& stop) {
     bool changed = false;
     for (auto it = connections_.begin(); it != connections_.end();) {
       Connection& c = *it->second;
-      if (c.closing && c.out.empty()) c.dead = true;  // a refused hello's reply is out
       if (!c.dead) {
         ++it;
         continue;

@@ -64,15 +64,15 @@ def _collect(client: Client, profile: str, until: float, out: list[tuple[float, 
             if profile == "handheld":
                 # a sweep's outcome is its last label before the target leaves
                 if e.state == "no_target":
-                    ok = last is not None and last.truth is not None and last.material == last.truth.material
-                    out.append((e.latency_ms, ok if last is not None else None))
+                    ok = None if last is None else last.truth is not None and last.material == last.truth.material
+                    out.append((e.latency_ms, ok))
                     last = None
                     continue
                 last = e
                 out.append((e.latency_ms, None))
             else:
-                ok = e.truth is not None and bool(e.truth.material) and e.material == e.truth.material
-                out.append((e.latency_ms, ok if (e.truth is not None and e.truth.material) else None))
+                truth = e.truth.material if e.truth is not None else ""
+                out.append((e.latency_ms, e.material == truth if truth else None))
 
 
 def run_profile(table: Path, profile: str, n_clients: int, seconds: float) -> ProfileRun:
