@@ -59,6 +59,8 @@ void register_sim(pyb::module_& parent) {
       .def_static("ideal_kinect2", &DeviceProfile::ideal_kinect2)
       .def_static("load", &load_device, pyb::arg("name_or_path"), pyb::arg("data_dir"))
       .def("to_dict", [](const DeviceProfile& d) { return loads(device_to_json(d)); })
+      .def("in_session", &DeviceProfile::in_session, pyb::arg("state"),
+           "The device in one capture session: harmonics G_h + t_f dG_h, state = (t_80, t_16, t_120).")
       .def_readonly("name", &DeviceProfile::name)
       .def("__repr__", [](const DeviceProfile& d) { return "<sim.DeviceProfile " + d.name + ">"; });
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <complex>
 #include <fstream>
+#include <stdexcept>
 #include <string>
 
 #include "test_util.hpp"
@@ -277,6 +278,66 @@ TEST(DeviceJson, RoundTripOfGeneralHarmonicsIsExact) {
       device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 0.05, "phase_rad": 0.3}])")));
   const DeviceProfile twice = device_from_json(device_to_json(once));
   EXPECT_EQ(twice.groups[0].harmonic(2), once.groups[0].harmonic(2));
+}
+
+// Session drift (docs/simulator-model.md 2.2): parsed like the harmonics, written only when
+// present, and a session moves every group's G_h by t_f dG_h.
+TEST(DeviceJson, SessionDriftParsesAndRoundTrips) {
+  const DeviceProfile d = device_from_json(device_json(
+      "", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 0.05, "phase_rad": 0.5}],
+                        "session_drift": [{"h": 2, "amplitude": 0.01, "phase_rad": -1.0}, {"h": 4, "amplitude": 0.002}])")));
+  EXPECT_EQ(d.groups[0].drift_amplitude[2], 0.01);
+  EXPECT_EQ(d.groups[0].drift_phase_rad[2], -1.0);
+  EXPECT_EQ(d.groups[0].drift(4), std::complex<double>(0.002, 0.0));
+  EXPECT_EQ(d.groups[1].drift(2), 0.0);
+  const DeviceProfile back = device_from_json(device_to_json(d));
+  for (std::size_t h = 0; h <= 32; ++h) {
+    EXPECT_EQ(back.groups[0].drift_amplitude[h], d.groups[0].drift_amplitude[h]) << h;
+    EXPECT_EQ(back.groups[0].drift_phase_rad[h], d.groups[0].drift_phase_rad[h]) << h;
+  }
+  // a profile without drift is written without the key (older readers stay able to read it)
+  EXPECT_EQ(device_to_json(DeviceProfile::ideal_kinect2()).find("session_drift"), std::string::npos);
+  EXPECT_NE(device_to_json(d).find("session_drift"), std::string::npos);
+}
+
+TEST(DeviceJson, RejectsBadSessionDrift) {
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": {"h": 2})"))), "session_drift");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 1, "amplitude": 0.1}])"))), "h must be");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 2, "amplitude": -0.1}])"))),
+                  "session drift amplitudes");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 2, "gain": 0.1}])"))), "gain");
+}
+
+TEST(DeviceSession, MovesEachGroupAlongItsDrift) {
+  DeviceProfile d = DeviceProfile::ideal_kinect2();
+  d.groups[0].harmonic_amplitude[2] = 0.05;
+  d.groups[0].harmonic_phase_rad[2] = 0.5;
+  d.groups[0].drift_amplitude[2] = 0.01;
+  d.groups[0].drift_phase_rad[2] = -1.0;
+  d.groups[2].drift_amplitude[5] = 0.02;
+  const DeviceProfile s = d.in_session({2.0, 7.0, -0.5});
+  const std::complex<double> want = std::polar(0.05, 0.5) + 2.0 * std::polar(0.01, -1.0);
+  EXPECT_NEAR(std::abs(s.groups[0].harmonic(2) - want), 0.0, 1e-15);
+  EXPECT_EQ(s.groups[1].harmonic(2), 0.0);                                   // group 16 MHz has no drift
+  EXPECT_NEAR(std::abs(s.groups[2].harmonic(5) - (-0.5 * 0.02)), 0.0, 1e-15);  // t < 0: the opposite way
+  for (std::size_t g = 0; g < 3; ++g) {
+    for (std::size_t h = 0; h <= 32; ++h) EXPECT_EQ(s.groups[g].drift_amplitude[h], 0.0) << g << " " << h;
+    EXPECT_EQ(s.groups[g].harmonic(1), 1.0);
+  }
+  // state 0: the nominal waveform
+  const DeviceProfile zero = d.in_session({0.0, 0.0, 0.0});
+  EXPECT_NEAR(std::abs(zero.groups[0].harmonic(2) - d.groups[0].harmonic(2)), 0.0, 1e-16);
+  // the original is untouched
+  EXPECT_EQ(d.groups[0].drift_amplitude[2], 0.01);
+}
+
+TEST(DeviceSession, RejectsNonFiniteStatesAndAmplitudesAboveOne) {
+  DeviceProfile d = DeviceProfile::ideal_kinect2();
+  d.groups[1].drift_amplitude[2] = 0.5;
+  EXPECT_THROW(d.in_session({0.0, std::nan(""), 0.0}), std::invalid_argument);
+  EXPECT_THROW(d.in_session({0.0, INFINITY, 0.0}), std::invalid_argument);
+  EXPECT_THROW(d.in_session({0.0, 3.0, 0.0}), std::invalid_argument);  // |G_2| = 1.5
+  EXPECT_NO_THROW(d.in_session({0.0, 1.9, 0.0}));
 }
 
 // The seed is a uint64 and is written as a JSON integer, but read back

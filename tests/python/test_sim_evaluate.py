@@ -128,3 +128,61 @@ def test_session_offsets_make_frequency_features_harder_but_not_depth_ones() -> 
                              session_offsets_mm=(8.0, 2.0))
     assert shifted.accuracy["frequency"] < clean.accuracy["frequency"]
     assert shifted.accuracy["depth"] == clean.accuracy["depth"]
+
+
+def test_session_state_spread_is_a_robust_sd_per_group() -> None:
+    states = [[0.0, 0.0, 0.0], [1.0, -2.0, 0.5], [-1.0, 2.0, -0.5], [9.0, 9.0, 9.0], [0.5, 1.0, 0.25]]
+    lib = {"materials": [{"name": f"m{i}", "fit": {"session": t}} for i, t in enumerate(states)]}
+    sd = ev.session_state_spread(lib)
+    # medians 0.5, 1, 0.25; median absolute deviations 0.5, 1, 0.25 (the wild capture ignored)
+    assert sd == pytest.approx((1.4826 * 0.5, 1.4826 * 1.0, 1.4826 * 0.25))
+    assert ev.session_state_spread({"materials": [{"name": "a", "fit": {}}]}) == (0.0, 0.0, 0.0)
+
+
+def test_session_drift_renders_each_capture_in_its_own_session() -> None:
+    mats = [mat("a", 150.0, 0.5), mat("b", 200.0, 0.5)]
+    r = renderer(mats, noise=False)
+    dev = r.device.to_dict()
+    for f in dev["frequencies"]:
+        f["session_drift"] = [{"h": h, "amplitude": 0.02, "phase_rad": 0.3 * h} for h in (2, 4, 5, 7)]
+    drifting = sim.Renderer(sim.DeviceProfile.from_dict(dev), r.library)
+    states: list[tuple[float, float, float]] = []
+
+    def in_session(t: tuple[float, float, float]) -> sim.Renderer:
+        states.append(t)
+        return sim.Renderer(drifting.device.in_session(t), r.library)
+
+    names = ["a", "b"]
+    orient = (0.0, 15.0)
+    plain, caps0 = ev.evaluate(drifting, names, orientations=orient, stage_mm=STAGE, seed=3)
+    moved, caps1 = ev.evaluate(drifting, names, orientations=orient, stage_mm=STAGE, seed=3,
+                               session_drift_sd=(1.0, 1.0, 1.0), session_renderer=in_session)  # fmt: skip
+    assert len(states) == 4 and len(set(states)) == 4  # one session per capture, drawn afresh
+    for key in caps0:  # the distortion's shape changed, so the depth feature (Eq. 11) moves too
+        d = ev.feature_depth(caps1[key], 0, 10) - ev.feature_depth(caps0[key], 0, 10)
+        assert np.nanmax(np.abs(d)) > 0.01, key
+    # seeded: the same states again
+    again: list[tuple[float, float, float]] = []
+    ev.evaluate(drifting, names, orientations=orient, stage_mm=STAGE, seed=3, session_drift_sd=(1.0, 1.0, 1.0),
+                session_renderer=lambda t: (again.append(t), in_session(t))[1])  # fmt: skip
+    assert again == states[:4]
+    with pytest.raises(ValueError, match="session_renderer"):
+        ev.evaluate(drifting, names, orientations=orient, stage_mm=STAGE, session_drift_sd=(1.0, 0.0, 0.0))
+    assert plain.accuracy.keys() == moved.accuracy.keys()
+
+
+@pytest.mark.parametrize("option,value,message", [
+    ("--session-drift", "1,2", "three finite"),
+    ("--session-drift", "1,nan,2", "three finite"),
+    ("--session-drift", "1,-1,2", "three finite"),
+    ("--session-drift", "a,b,c", "expected none, library or S80,S16,S120"),
+    ("--session-offsets", "1", "expected none, library or S0,S1"),
+    ("--session-offsets", "1,-2", "finite and >= 0"),
+])  # fmt: skip
+def test_evaluate_cli_rejects_bad_session_options(option: str, value: str, message: str) -> None:
+    from click.testing import CliRunner
+
+    from tofmat.cli import main
+
+    r = CliRunner().invoke(main, ["sim", "evaluate", "--materials", "cork", option, value])
+    assert r.exit_code == 2 and message in r.output, r.output

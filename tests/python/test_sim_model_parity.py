@@ -26,6 +26,7 @@ BINS = (600.0, 600.0 / 199.0, 200)  # the real database's bins (start, width, co
 def full_device(full_well: float | None = 1.0) -> dict[str, Any]:
     """A device with every term of the spec switched on, values of the calibrated magnitude."""
     rng = np.random.default_rng(7)
+    drift_rng = np.random.default_rng(8)
     d: dict[str, Any] = {"name": "parity", "version": 2, "range_ref_mm": 1000.0, "saturation": {"sharpness": 12.0},
                          "frequencies": [{"freq_mhz": f, "signal_scale": r}
                                          for f, r in zip((80.0, 16.0, 120.0), M.SIGNAL_SCALE_DEFAULT)]}  # fmt: skip
@@ -41,6 +42,11 @@ def full_device(full_well: float | None = 1.0) -> dict[str, Any]:
         grp["step_gain"] = [1.0, float(rng.uniform(0.95, 1.05)), float(rng.uniform(0.95, 1.05))]
         grp["step_offset"] = [0.0, float(rng.uniform(-0.05, 0.05)), float(rng.uniform(-0.05, 0.05))]
         grp["full_well"] = full_well
+        grp["session_drift"] = [  # (its own generator: the device's other terms stay as they were)
+            {"h": h, "amplitude": float(drift_rng.uniform(0.002, 0.02)),
+             "phase_rad": float(drift_rng.uniform(-math.pi, math.pi))}
+            for h in (2, 4, 5, 7, 11)
+        ]  # fmt: skip
     return d
 
 
@@ -81,6 +87,40 @@ def test_curves_match_the_numpy_model(full_well: float | None, method: str) -> N
         # the C++ curves are float32: ~2e-5 mm at 300 mm
         err = np.nanmax(np.abs(got[i] - want))
         assert err < 1e-4, f"{m['name']}: worst {err:.2e} mm"
+
+
+@pytest.mark.parametrize("state", [(0.0, 0.0, 0.0), (1.5, -2.0, 0.7), (-3.0, 0.0, 2.5)])
+def test_sessions_match_the_numpy_model(state: tuple[float, float, float]) -> None:
+    """Section 2.2: a session moves G_h by t_f dG_h; both implementations give the same device
+    and the same curves in it."""
+    device = full_device(0.6)
+    cpp_dev = sim.DeviceProfile.from_dict(device).in_session(state)
+    np_dev = M.in_session(device, state)
+    for g_cpp, g_np in zip(cpp_dev.to_dict()["frequencies"], np_dev["frequencies"]):
+        assert "session_drift" not in g_cpp and "session_drift" not in g_np
+        np.testing.assert_allclose(M.harmonic_vector(g_cpp, 13), M.harmonic_vector(g_np, 13), atol=1e-15)
+    ms = [sim.Material.from_dict(m) for m in MATERIALS]
+    got = np.asarray(sim.distortion_curves(cpp_dev, ms, tofmat.BinSpec(*BINS), 0.0, "bin"), float)
+    for i, m in enumerate(MATERIALS):
+        want = M.curve(device, m, BINS, "bin", session=state)
+        assert np.nanmax(np.abs(got[i] - want)) < 1e-4, m["name"]
+    if state == (0.0, 0.0, 0.0):  # the nominal waveform: the device as it is
+        assert np.array_equal(got, cpp_curves(device, MATERIALS, "bin"), equal_nan=True)
+    else:  # the waveform moved: so do the curves
+        assert np.nanmax(np.abs(got - cpp_curves(device, MATERIALS, "bin"))) > 0.05
+
+
+def test_session_states_are_checked() -> None:
+    device = full_device()
+    for bad in [(0.0, math.nan, 0.0), (math.inf, 0.0, 0.0)]:
+        with pytest.raises(ValueError, match="finite"):
+            sim.DeviceProfile.from_dict(device).in_session(bad)
+        with pytest.raises(ValueError, match="finite"):
+            M.in_session(device, bad)
+    with pytest.raises(ValueError, match="three"):
+        M.in_session(device, (1.0, 2.0))
+    with pytest.raises(TypeError):
+        sim.DeviceProfile.from_dict(device).in_session((1.0, 2.0))
 
 
 def test_every_term_changes_the_curves() -> None:

@@ -44,6 +44,12 @@ void DeviceProfile::validate() const {
       if (!(f.harmonic_amplitude[k] >= 0.0 && f.harmonic_amplitude[k] <= 1.0)) bad(tag + "harmonic amplitudes must be in [0, 1]");
       if (!std::isfinite(f.harmonic_phase_rad[k])) bad(tag + "harmonic phases must be finite");
     }
+    for (int h = 0; h <= kMaxHarmonic; ++h) {
+      const auto k = static_cast<std::size_t>(h);
+      if (h < 2 && f.drift_amplitude[k] != 0.0) bad(tag + "session drift starts at h = 2");
+      if (!(f.drift_amplitude[k] >= 0.0 && f.drift_amplitude[k] <= 1.0)) bad(tag + "session drift amplitudes must be in [0, 1]");
+      if (!std::isfinite(f.drift_phase_rad[k])) bad(tag + "session drift phases must be finite");
+    }
     for (int j = 0; j < 3; ++j) {
       if (!(f.step_gain[static_cast<std::size_t>(j)] > 0.5 && f.step_gain[static_cast<std::size_t>(j)] < 2.0)) bad(tag + "step gains must be in (0.5, 2)");
       if (!(std::fabs(f.step_offset[static_cast<std::size_t>(j)]) < 1.0)) bad(tag + "step offsets must be in (-1, 1)");
@@ -59,6 +65,26 @@ void DeviceProfile::validate() const {
       !(camera.fy > 0)) {
     bad("camera needs 1..4096 pixels a side and positive focal lengths");
   }
+}
+
+DeviceProfile DeviceProfile::in_session(const std::array<double, 3>& state) const {
+  for (double t : state) {
+    if (!std::isfinite(t)) throw std::invalid_argument("device '" + name + "': a session state must be finite");
+  }
+  DeviceProfile out = *this;
+  for (std::size_t g = 0; g < 3; ++g) {
+    auto& f = out.groups[g];
+    for (int h = 2; h <= kMaxHarmonic; ++h) {
+      const auto k = static_cast<std::size_t>(h);
+      const std::complex<double> moved = f.harmonic(h) + state[g] * f.drift(h);
+      f.harmonic_amplitude[k] = std::abs(moved);
+      f.harmonic_phase_rad[k] = f.harmonic_amplitude[k] > 0.0 ? std::arg(moved) : 0.0;
+    }
+    f.drift_amplitude.fill(0.0);
+    f.drift_phase_rad.fill(0.0);
+  }
+  out.validate();
+  return out;
 }
 
 }  // namespace tofmat::sim

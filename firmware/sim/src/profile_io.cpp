@@ -61,6 +61,24 @@ std::array<double, 3> triple(const json& j, const std::string& where, const char
   return out;
 }
 
+// A list of {h, amplitude, phase_rad} (h = 2..kMaxHarmonic) under key, into the arrays;
+// absent: left as they are.
+void harmonic_list(const json& f, const std::string& where, const char* key,
+                   std::array<double, kMaxHarmonic + 1>& amplitude, std::array<double, kMaxHarmonic + 1>& phase) {
+  if (!f.contains(key)) return;
+  const std::string hw = where + "." + key;
+  if (!f.at(key).is_array()) fail(hw, "expected a list");
+  for (const json& h : f.at(key)) {
+    only_keys(h, hw, {"h", "amplitude", "phase_rad"});
+    const double order = num(h, hw, "h", 0);
+    if (order != std::floor(order) || order < 2 || order > kMaxHarmonic) {
+      fail(hw, "h must be an integer 2.." + std::to_string(kMaxHarmonic));
+    }
+    amplitude[static_cast<std::size_t>(order)] = num(h, hw, "amplitude", 0.0);
+    phase[static_cast<std::size_t>(order)] = num(h, hw, "phase_rad", 0.0);
+  }
+}
+
 std::string str(const json& j, const std::string& where, const char* key) {
   if (!j.contains(key) || !j.at(key).is_string()) fail(where + "." + key, "expected a string");
   return j.at(key).get<std::string>();
@@ -166,7 +184,7 @@ DeviceProfile device_from(const std::string& text) {
     const std::string fw = w + ".frequencies[" + std::to_string(g) + "]";
     only_keys(f, fw,
               {"freq_mhz", "signal_scale", "full_well", "scale_error", "phase_offset_rad", "decode_offset_rad",
-               "harmonics", "step_gain", "step_offset"});
+               "harmonics", "session_drift", "step_gain", "step_offset"});
     auto& m = d.groups[g];
     m.freq_mhz = num(f, fw, "freq_mhz", 0.0);
     m.signal_scale = num(f, fw, "signal_scale", m.signal_scale);
@@ -177,19 +195,8 @@ DeviceProfile device_from(const std::string& text) {
     m.phase_offset_rad = num(f, fw, "phase_offset_rad", 0.0);
     m.step_gain = triple(f, fw, "step_gain", m.step_gain);
     m.step_offset = triple(f, fw, "step_offset", m.step_offset);
-    if (f.contains("harmonics")) {
-      if (!f.at("harmonics").is_array()) fail(fw + ".harmonics", "expected a list");
-      for (const json& h : f.at("harmonics")) {
-        const std::string hw = fw + ".harmonics";
-        only_keys(h, hw, {"h", "amplitude", "phase_rad"});
-        const double order = num(h, hw, "h", 0);
-        if (order != std::floor(order) || order < 2 || order > kMaxHarmonic) {
-          fail(hw, "h must be an integer 2.." + std::to_string(kMaxHarmonic));
-        }
-        m.harmonic_amplitude[static_cast<std::size_t>(order)] = num(h, hw, "amplitude", 0.0);
-        m.harmonic_phase_rad[static_cast<std::size_t>(order)] = num(h, hw, "phase_rad", 0.0);
-      }
-    }
+    harmonic_list(f, fw, "harmonics", m.harmonic_amplitude, m.harmonic_phase_rad);
+    harmonic_list(f, fw, "session_drift", m.drift_amplitude, m.drift_phase_rad);
   }
   if (j.contains("pixel_phase")) {
     const json& p = j.at("pixel_phase");
@@ -234,6 +241,13 @@ DeviceProfile device_from(const std::string& text) {
 std::string device_to_json(const DeviceProfile& d) {
   json freqs = json::array();
   for (const auto& f : d.groups) {
+    json drift = json::array();
+    for (int h = 2; h <= kMaxHarmonic; ++h) {
+      const auto k = static_cast<std::size_t>(h);
+      if (f.drift_amplitude[k] != 0.0) {
+        drift.push_back({{"h", h}, {"amplitude", f.drift_amplitude[k]}, {"phase_rad", f.drift_phase_rad[k]}});
+      }
+    }
     json hs = json::array();
     // h = 2..7 always, higher orders up to the last non-zero one.
     int top = 7;
@@ -253,6 +267,7 @@ std::string device_to_json(const DeviceProfile& d) {
                      {"harmonics", hs},
                      {"step_gain", f.step_gain},
                      {"step_offset", f.step_offset}});
+    if (!drift.empty()) freqs.back()["session_drift"] = drift;
   }
   const json j{{"name", d.name},
                {"version", kProfileFormatVersion},

@@ -83,7 +83,14 @@ SATURATION = True  # spec section 3.1 (tap full well); False: the linear model
 # device terms beyond the harmonics freed in the joint stage (section 2: step gains g_j, step
 # offsets o_j, scale errors s_f)
 # and full wells W_80, W_120 (W_16 = 1 is the albedo's unit)
-JOINT_DEVICE_EXTRAS = {"gain": True, "off": True, "scale": True, "full_well": True}
+JOINT_DEVICE_EXTRAS = {"gain": True, "off": True, "scale": True, "full_well": True, "drift": True}
+# Session drift (spec section 2.2): each capture session's waveform is G_h + t_f dG_h, dG a
+# shared direction per group (device, fitted in the joint stage with DRIFT_RIDGE), t_f per
+# capture and group (nuisance, prior N(0, SESSION_PRIOR^2), like the offsets). False: no drift.
+SESSION_DRIFT = True
+SESSION_KEYS = ("t0", "t1", "t2")  # t_80, t_16, t_120 of a capture
+SESSION_PRIOR = 1.0
+DRIFT_RIDGE = 10.0  # times sqrt(number of curves), as RIDGE
 # Joint fit: material weight 1 / clip(rms, floor, cap)^WEIGHT_EXP, recomputed before every pass
 # (iteratively reweighted). 1/sqrt(rms) (~ sum of rms) let the few curves a kernel cannot
 # represent (fakeleather's noise, copper) steer the shared device; a steeper weight aims at the
@@ -105,11 +112,12 @@ JOINT_NFEV = 30
 DEV_BOUNDS = {
     "hx": (-0.5, 0.5), "hy": (-0.5, 0.5), "delta": (-math.pi, math.pi), "s": (-0.02, 0.02),
     "gain": (0.8, 1.2), "off": (-0.5, 0.5), "satp": (2.0, 100.0), "lw": (-1.5, 1.5),
+    "dx": (-0.5, 0.5), "dy": (-0.5, 0.5),
 }  # fmt: skip
 MAT_BOUNDS = {
     "b": (0.0, 1.0), "lt": (-1.0, 3.5), "lk": (-1.0, 1.3), "beta": (0.0, 1.0), "lpf": (0.0, 2.5),
     "w": (0.0, 1.0), "lt2": (-1.0, 3.5), "noise": (0.0, 80.0), "lr": (-2.5, 1.5), "o0": (-400.0, 400.0),
-    "o1": (-400.0, 400.0),
+    "o1": (-400.0, 400.0), "t0": (-6.0, 6.0), "t1": (-6.0, 6.0), "t2": (-6.0, 6.0),
 }  # fmt: skip
 KIND_PARAMS = {
     "opaque": (),
@@ -134,6 +142,8 @@ def _default_state(names: Sequence[str]) -> State:
         for h in range(2, HMAX + 1):
             st[("hx", g, h)] = 0.0
             st[("hy", g, h)] = 0.0
+            st[("dx", g, h)] = 0.0  # session drift direction dG_h (section 2.2)
+            st[("dy", g, h)] = 0.0
         st[("delta", g)] = 0.0
         st[("s", g)] = 0.0
         for j in range(3):
@@ -146,7 +156,7 @@ def _default_state(names: Sequence[str]) -> State:
         st.update({
             ("b", i): 0.3, ("lt", i): 2.0, ("lk", i): 0.0, ("beta", i): 0.0, ("lpf", i): 0.5,
             ("w", i): 0.3, ("lt2", i): 3.0, ("noise", i): 0.0, ("o0", i): 0.0, ("o1", i): 0.0,
-            ("lr", i): -0.5,
+            ("lr", i): -0.5, ("t0", i): 0.0, ("t1", i): 0.0, ("t2", i): 0.0,
         })  # fmt: skip
     return st
 
@@ -159,6 +169,8 @@ def state_to_device(st: State, name: str = "kinect2_tanaka2017") -> dict[str, An
             x, y = st[("hx", g, h)], st[("hy", g, h)]
             harm.append({"h": h, "amplitude": float(math.hypot(x, y)),
                          "phase_rad": float(math.atan2(y, x)) if (x or y) else 0.0})  # fmt: skip
+        drift = M.harmonic_list(np.array([0.0, 0.0] + [
+            st[("dx", g, h)] + 1j * st[("dy", g, h)] for h in range(2, HMAX + 1)]))  # fmt: skip
         freqs.append({
             "freq_mhz": f,
             "signal_scale": float(M.SIGNAL_SCALE_DEFAULT[g]),
@@ -169,6 +181,7 @@ def state_to_device(st: State, name: str = "kinect2_tanaka2017") -> dict[str, An
             "harmonics": harm,
             "step_gain": [float(st[("gain", g, j)]) for j in range(3)],
             "step_offset": [float(st[("off", g, j)]) for j in range(3)],
+            **({"session_drift": drift} if drift else {}),
         })  # fmt: skip
     return {"name": name, "version": 2, "range_ref_mm": M.RANGE_REF_MM,
             "saturation": {"sharpness": float(st[("satp",)])}, "frequencies": freqs}  # fmt: skip
@@ -178,9 +191,12 @@ def device_to_state(dev: dict[str, Any], st: State) -> None:
     for g, f in enumerate(GROUPS):
         grp = M._group(dev, float(f))
         G = M.harmonic_vector(grp, HMAX)
+        dG = M.harmonic_vector(grp, HMAX, "session_drift")
         for h in range(2, HMAX + 1):
             st[("hx", g, h)] = float(G[h].real)
             st[("hy", g, h)] = float(G[h].imag)
+            st[("dx", g, h)] = float(dG[h].real)
+            st[("dy", g, h)] = float(dG[h].imag)
         st[("delta", g)] = float(grp.get("phase_offset_rad", 0.0))
         st[("eps", g)] = float(grp.get("decode_offset_rad", 0.0))
         st[("s", g)] = float(grp.get("scale_error", 0.0))
@@ -201,6 +217,7 @@ class _DeviceArrays(TypedDict):
     delta: FloatArray
     eps: FloatArray
     G: ComplexArray
+    dG: ComplexArray
     gain: FloatArray
     offset: FloatArray
     scale: FloatArray
@@ -211,15 +228,18 @@ class _DeviceArrays(TypedDict):
 def _device_arrays(st: State) -> _DeviceArrays:
     G = np.zeros((3, HMAX + 1), complex)
     G[:, 1] = 1.0
+    dG = np.zeros((3, HMAX + 1), complex)
     for g in range(3):
         for h in range(2, HMAX + 1):
             G[g, h] = st[("hx", g, h)] + 1j * st[("hy", g, h)]
+            dG[g, h] = st[("dx", g, h)] + 1j * st[("dy", g, h)]
     return {
         "f": np.array(GROUPS, float),
         "s": np.array([st[("s", g)] for g in range(3)]),
         "delta": np.array([st[("delta", g)] for g in range(3)]),
         "eps": np.array([st[("eps", g)] for g in range(3)]),
         "G": G,
+        "dG": dG,
         "gain": np.array([[st[("gain", g, j)] for j in range(3)] for g in range(3)]),
         "offset": np.array([[st[("off", g, j)] for j in range(3)] for g in range(3)]),
         "scale": np.array(M.SIGNAL_SCALE_DEFAULT),
@@ -274,6 +294,14 @@ def regauge(st: State, idx: Sequence[int]) -> tuple[float, float]:
     for i in idx:
         st[("o0", i)] -= o0
         st[("o1", i)] -= o1
+    if SESSION_DRIFT:  # the nominal waveform is the median session's: G_h += t_med dG_h (exact)
+        for g, k in enumerate(SESSION_KEYS):
+            t_med = float(np.median([st[(k, i)] for i in idx]))
+            for h in range(2, HMAX + 1):
+                st[("hx", g, h)] += t_med * st[("dx", g, h)]
+                st[("hy", g, h)] += t_med * st[("dy", g, h)]
+            for i in idx:
+                st[(k, i)] -= t_med
     return o0, o1
 
 
@@ -308,15 +336,19 @@ class Problem:
             M.material_harmonic_responses(state_to_material(st, i, self.names[i], kinds[i]), dev)
             for i in idx
         ])  # fmt: skip
+        G: ComplexArray = dev["G"]
+        if SESSION_DRIFT:  # every capture in its own session (section 2.2): G per material
+            t = np.array([[st[(k, i)] for k in SESSION_KEYS] for i in idx])
+            G = G[None] + t[:, :, None] * dev["dG"][None]
         if SATURATION:
             m = M.raw_samples_core(
-                dev["f"], dev["s"], dev["delta"], dev["G"], dev["gain"], dev["offset"], Rh,
+                dev["f"], dev["s"], dev["delta"], G, dev["gain"], dev["offset"], Rh,
                 self.D, self.A, 0.0, dev["scale"], dev["full_well"], float(dev["sat_p"]),
             )  # fmt: skip
             d = M.decode(m, 0.0, dev["eps"])
         else:
             z = M.phasor_direct(
-                dev["f"], dev["s"], dev["delta"], dev["G"], dev["gain"], dev["offset"], Rh, self.D
+                dev["f"], dev["s"], dev["delta"], G, dev["gain"], dev["offset"], Rh, self.D
             )
             d = M.depths_from_phasor(z, dev["eps"])
         _, dcomb = M.unwrap_combined(d)
@@ -358,10 +390,13 @@ class Problem:
         self.row_start = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
         n_data = int(self.row_start[-1])
         self.harm_pairs = [k for k in dev_free if k[0] == "hx"]
-        n_pen = 2 * len(self.idx) + 3 * len(self.harm_pairs)
+        pos = {k: c for c, k in enumerate(keys)}
+        # priors on the free session states and ridge on the free drift coordinates
+        self.pen_keys: list[StateKey] = [(k, i) for i in self.idx for k in SESSION_KEYS if (k, i) in pos]
+        self.pen_keys += [k for k in dev_free if k[0] in ("dx", "dy")]
+        n_pen = 2 * len(self.idx) + 3 * len(self.harm_pairs) + len(self.pen_keys)
         self.n_res = n_data + n_pen
         sp = lil_matrix((self.n_res, len(keys)), dtype=int)
-        pos = {k: c for c, k in enumerate(keys)}
         dev_cols = [c for c, k in enumerate(keys) if k[0] in DEV_BOUNDS]
         for a, i in enumerate(self.idx):
             r0, r1 = self.row_start[a], self.row_start[a + 1]
@@ -378,6 +413,9 @@ class Problem:
                 sp[base + 3 * q + r, pos[k]] = 1
                 if ky in pos:
                     sp[base + 3 * q + r, pos[ky]] = 1
+        base += 3 * len(self.harm_pairs)
+        for q, k in enumerate(self.pen_keys):
+            sp[base + q, pos[k]] = 1
         self.sparsity = sp.tocsr()
         self.ridge_w = self.ridge * math.sqrt(len(self.idx))
 
@@ -411,6 +449,8 @@ class Problem:
             hx, hy = st[k], st[("hy",) + k[1:]]
             pen += [self.ridge_w * hx, self.ridge_w * hy,
                     100.0 * max(0.0, math.hypot(hx, hy) - 0.5)]  # fmt: skip
+        drift_w = DRIFT_RIDGE * math.sqrt(len(self.idx))
+        pen += [st[k] / SESSION_PRIOR if k[0] in SESSION_KEYS else drift_w * st[k] for k in self.pen_keys]
         return np.concatenate(res + [np.array(pen)])
 
     def solve(self, max_nfev: int = 200) -> Any:
@@ -434,7 +474,7 @@ class Problem:
 
 def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: bool = False,
               gain: bool = False, off: bool = False, sat: bool = SATURATION,
-              full_well: bool = False) -> list[StateKey]:  # fmt: skip
+              full_well: bool = False, drift: bool = False) -> list[StateKey]:  # fmt: skip
     """Free device parameters. Gauges: delta_120 = 0 (a common range shift is unobservable),
     s_120 = 0, g_0 = 1, o_0 = 0 (the common mode of o_j cancels in the decode). With free
     per-capture offsets and free harmonic phases, the deltas are pure gauge too (see regauge)."""
@@ -453,6 +493,10 @@ def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: b
             keys += [("off", g, 1), ("off", g, 2)]
         if full_well and GROUPS[g] != 16:  # gauge: W_16 = 1 (the albedo's unit)
             keys.append(("lw", g))
+        if drift and SESSION_DRIFT:
+            for h in harm:
+                if h <= GROUP_HMAX[g]:
+                    keys += [("dx", g, h), ("dy", g, h)]
     if sat:
         keys.append(("satp",))
     return keys
@@ -622,6 +666,8 @@ class CalibrationResult:
     kind_scores: dict[str, dict[str, float]] = field(default_factory=dict)
     log: list[str] = field(default_factory=list)
     config: dict[str, Any] = field(default_factory=dict)
+    # per-capture session states (t_80, t_16, t_120) of section 2.2; {}: fitted without drift
+    sessions: dict[str, list[float]] = field(default_factory=dict)
 
 
 def _table_arrays(table: Any) -> tuple[FloatArray, list[str], tuple[float, float, int]]:
@@ -634,9 +680,14 @@ def _table_arrays(table: Any) -> tuple[FloatArray, list[str], tuple[float, float
 def simulated_curves(
     device: dict[str, Any], materials: Sequence[dict[str, Any]], offsets: dict[str, list[float]],
     bins: tuple[float, float, int], mode: str = "bin", grid: tuple[float, float, float] = REPORT_GRID,
+    sessions: Mapping[str, Sequence[float]] | None = None,
 ) -> FloatArray:  # fmt: skip
+    """Every material's curve with its capture's offsets and session state (when given)."""
+    sessions = sessions or {}
     return np.stack([
-        M.curve(device, m, bins, mode, grid, offsets.get(m["name"], (0.0, 0.0))) for m in materials
+        M.curve(device, m, bins, mode, grid, offsets.get(m["name"], (0.0, 0.0)),
+                session=sessions.get(m["name"]))
+        for m in materials
     ])  # fmt: skip
 
 
@@ -702,6 +753,10 @@ def calibrate(
     prob = Problem(Y, names, bins, grid=FIT_GRID)
     kinds = ["exponential"] * nm
     _init_offsets(prob, st, kinds, allidx)
+    if SESSION_DRIFT:  # random session states: with dG = 0 and t = 0 both gradients vanish
+        for i in allidx:
+            for key in SESSION_KEYS:
+                st[(key, i)] = float(rng.normal(0.0, SESSION_PRIOR))
     noisy = {i for i in allidx if _wants_noise(Y[i], bins)}
     log("  materials with the 120 MHz wrap in the averaging: "
         + (", ".join(names[i] for i in sorted(noisy)) or "none"))  # fmt: skip
@@ -735,7 +790,7 @@ def calibrate(
         log(f"round {rnd + 1}: stage 3, joint refinement")
         mat_free = {
             i: KIND_PARAMS[kinds[i]] + ("o0", "o1") + (("noise",) if i in noisy else ())
-            + (("lr",) if SATURATION else ())
+            + (("lr",) if SATURATION else ()) + (SESSION_KEYS if SESSION_DRIFT else ())
             for i in allidx
         }  # fmt: skip
         passes = JOINT_PASSES[min(rnd, len(JOINT_PASSES) - 1)]
@@ -754,7 +809,9 @@ def calibrate(
     device = state_to_device(st)
     materials = [state_to_material(st, i, names[i], kinds[i]) for i in allidx]
     offsets = {names[i]: [float(st[("o0", i)]), float(st[("o1", i)])] for i in allidx}
-    sim_bin = simulated_curves(device, materials, offsets, bins, "bin")
+    sessions = ({names[i]: [float(st[(k, i)]) for k in SESSION_KEYS] for i in allidx}
+                if SESSION_DRIFT else {})  # fmt: skip
+    sim_bin = simulated_curves(device, materials, offsets, bins, "bin", sessions=sessions)
     rms_bin = rms_per_material(sim_bin, Y)
     rms_int = prob.rms(st, kinds, allidx)
     runtime = time.time() - t0
@@ -763,6 +820,7 @@ def calibrate(
         device=device,
         materials=materials,
         offsets_mm=offsets,
+        sessions=sessions,
         rms_mm={names[i]: float(rms_bin[i]) for i in allidx},
         rms_interp_mm={names[i]: float(rms_int[i]) for i in allidx},
         median_rms_mm=float(np.median(rms_bin)),
@@ -772,7 +830,8 @@ def calibrate(
         config={"restarts": restarts, "seed": seed, "rounds": rounds, "bins": list(bins),
                 "h_max": HMAX, "group_h_max": list(GROUP_HMAX), "ridge": RIDGE, "offset_prior_mm": OFFSET_PRIOR_MM,
                 "weight": {"exp": WEIGHT_EXP, "floor_mm": WEIGHT_FLOOR_MM, "cap_mm": WEIGHT_CAP_MM},
-                "joint_passes": list(JOINT_PASSES), "joint_nfev": JOINT_NFEV, "kind_cycles": KIND_CYCLES},  # fmt: skip
+                "joint_passes": list(JOINT_PASSES), "joint_nfev": JOINT_NFEV, "kind_cycles": KIND_CYCLES,
+                "session_drift": SESSION_DRIFT, "session_prior": SESSION_PRIOR, "drift_ridge": DRIFT_RIDGE},  # fmt: skip
     )
 
 
@@ -827,6 +886,7 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
             "rms_mm": result.rms_mm[m["name"]],
             "rms_interp_mm": result.rms_interp_mm[m["name"]],
             "offsets_mm": result.offsets_mm[m["name"]],
+            **({"session": result.sessions[m["name"]]} if m["name"] in result.sessions else {}),
             "kind_scores_rms_mm": result.kind_scores.get(m["name"], {}),
             "albedo_note": "seen by the curves only through tap saturation: the relative signal in "
             "units of the 16 MHz taps' full well at range_ref_mm, not an optical albedo",

@@ -25,6 +25,23 @@ def _renderer(device: str, library: str, threads: int = 0) -> Renderer:
         raise click.ClickException(str(e)) from e
 
 
+def _session_drift_sd(option: str, library_path: Path) -> tuple[float, float, float]:
+    """--session-drift: none, library (the library's fitted spread) or S80,S16,S120."""
+    from . import evaluate as ev
+
+    if option == "none":
+        return (0.0, 0.0, 0.0)
+    if option == "library":
+        return ev.session_state_spread(json.loads(library_path.read_text()))
+    try:
+        s = tuple(float(v) for v in option.split(","))
+    except ValueError as e:
+        raise click.BadParameter("expected none, library or S80,S16,S120", param_hint="--session-drift") from e
+    if len(s) != 3 or not all(np.isfinite(v) and v >= 0.0 for v in s):
+        raise click.BadParameter("three finite standard deviations >= 0", param_hint="--session-drift")
+    return (s[0], s[1], s[2])
+
+
 @sim_cli.command("evaluate")
 @click.option("--device", default=DEFAULT_DEVICE, show_default=True, help="Device profile name or path.")
 @click.option("--library", default=DEFAULT_LIBRARY, show_default=True, help="Material library name or path.")
@@ -36,10 +53,13 @@ def _renderer(device: str, library: str, threads: int = 0) -> Renderer:
 @click.option("--session-offsets", default="none", show_default=True,
               help="Per-capture row offsets: 'none', 'library' (the spread the calibrated library's fits carry) "
               "or 'S0,S1' (standard deviations in mm of rows 0 and 1).")  # fmt: skip
+@click.option("--session-drift", default="none", show_default=True,
+              help="Per-capture session states of the waveform (docs/simulator-model.md 2.2): 'none', 'library' "
+              "(the spread of the states the calibrated library's fits carry) or 'S80,S16,S120' (standard deviations).")  # fmt: skip
 @click.option("--compare-fixed", is_flag=True,
               help="Also classify every query with the fixed-point backend and report where it differs.")
 def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None, step: float, seed: int,
-                 session_offsets: str, compare_fixed: bool) -> None:  # fmt: skip
+                 session_offsets: str, session_drift: str, compare_fixed: bool) -> None:  # fmt: skip
     """Leave-one-orientation-out nearest neighbour in the paper's protocol (Sec. 5)."""
     from . import evaluate as ev
     from . import plots
@@ -47,12 +67,12 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
     stage = np.arange(600.0, 1250.0 + 1e-9, step)
+    p = Path(library)
+    library_path = p if (p.suffix or p.parent != Path(".")) else data_dir() / "materials" / f"{library}.json"
     if session_offsets == "none":
         spread = (0.0, 0.0)
     elif session_offsets == "library":
-        p = Path(library)
-        path = p if (p.suffix or p.parent != Path(".")) else data_dir() / "materials" / f"{library}.json"
-        spread = ev.session_offset_spread(json.loads(path.read_text()))
+        spread = ev.session_offset_spread(json.loads(library_path.read_text()))
     else:
         try:
             s0, s1 = (float(v) for v in session_offsets.split(","))
@@ -61,11 +81,14 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
         if not (s0 >= 0.0 and s1 >= 0.0 and np.isfinite(s0) and np.isfinite(s1)):
             raise click.BadParameter("standard deviations must be finite and >= 0", param_hint="--session-offsets")
         spread = (s0, s1)
+    drift_sd = _session_drift_sd(session_drift, library_path)
     t0 = time.perf_counter()
     result, _ = ev.evaluate(r, names, stage_mm=stage, seed=seed, progress=lambda s: click.echo(s, err=True),
-                            session_offsets_mm=spread, compare_fixed=compare_fixed)  # fmt: skip
+                            session_offsets_mm=spread, compare_fixed=compare_fixed, session_drift_sd=drift_sd,
+                            session_renderer=lambda t: Renderer(r.device.in_session(t), r.library, 0))  # fmt: skip
     click.echo(f"{len(names)} materials x {len(ev.ORIENTATIONS_DEG)} orientations, stage {stage[0]:g}..{stage[-1]:g} mm "
                f"step {step:g} mm, ROI 20x20 px, session offsets sd {spread[0]:.2f}, {spread[1]:.2f} mm, "
+               f"session drift sd {drift_sd[0]:.2f}, {drift_sd[1]:.2f}, {drift_sd[2]:.2f}, "
                f"capture {result.capture_seconds:.0f} s")
     click.echo("| feature | accuracy (sim) | paper | classify time |")
     click.echo("|---|---:|---:|---:|")
@@ -97,6 +120,7 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
         "orientations_deg": list(ev.ORIENTATIONS_DEG),
         "stage_mm": [float(stage[0]), float(stage[-1]), step],
         "session_offsets_sd_mm": list(spread),
+        "session_drift_sd": list(drift_sd),
         "accuracy": result.accuracy,
         "paper_accuracy": ev.PAPER_ACCURACY,
         "confusions": conf,
@@ -118,14 +142,18 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
 @click.option("--restarts", default=3, show_default=True, help="Restarts of the harmonic phases (multimodal fit).")
 @click.option("--rounds", default=2, show_default=True, help="Rounds of per-material and joint refinement.")
 @click.option("--seed", default=0, show_default=True)
-def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed: int) -> None:
-    """Fit the device profile and material library to the real database's curves (~10 min, one core)."""
+@click.option("--session-drift/--no-session-drift", default=True, show_default=True,
+              help="Fit a drift direction of the waveform and every capture's session state "
+              "(docs/simulator-model.md 2.2); without it only the per-capture offsets.")  # fmt: skip
+def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed: int, session_drift: bool) -> None:
+    """Fit the device profile and material library to the real database's curves (~40 min, one core)."""
     import tofmat
 
     from . import calibrate as cal
 
     if restarts < 1 or rounds < 1:
         raise click.BadParameter("--restarts and --rounds must be >= 1")
+    cal.SESSION_DRIFT = session_drift
     try:
         table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))
     except (ValueError, OSError) as e:

@@ -16,6 +16,12 @@ drawn N(0, sigma) per row and seeded, added to its 16 and 80 MHz depths: they sh
 Eq. (10) rows and cancel in Eq. (11), which is why the paper's depth-only feature beats its
 frequency-only one.
 
+The calibration also fits every capture's session state: the illumination waveform of a session
+is the device's harmonics moved along a fitted drift direction (docs/simulator-model.md 2.2).
+With ``session_drift_sd`` every capture is rendered by a device in its own session, the state
+drawn N(0, sigma_f) per group and seeded: unlike the offsets this changes the shape of the
+distortion, so it disturbs the depth-only feature as well.
+
 Also the feature stability of Figs. 6 and 7: the distance of a material's
 query to its own class as the orientation (or the fold angle) changes, next
 to the distance from that class to its nearest other class.
@@ -163,6 +169,17 @@ def session_offset_spread(library_json: dict[str, Any]) -> tuple[float, float]:
     return (float(1.4826 * mad[0]), float(1.4826 * mad[1]))
 
 
+def session_state_spread(library_json: dict[str, Any]) -> tuple[float, float, float]:
+    """Robust standard deviation (1.4826 x MAD) per group (80, 16, 120 MHz) of the session states
+    a calibrated library's materials carry in their "fit" blocks; zeros without them."""
+    states = [m.get("fit", {}).get("session") for m in library_json.get("materials", [])]
+    t = np.array([s for s in states if s is not None], dtype=float)
+    if t.size == 0:
+        return (0.0, 0.0, 0.0)
+    mad = 1.4826 * np.median(np.abs(t - np.median(t, axis=0)), axis=0)
+    return (float(mad[0]), float(mad[1]), float(mad[2]))
+
+
 def with_session_offsets(c: Capture, offsets_mm: tuple[float, float]) -> Capture:
     """The capture with row offsets (o0, o1) added: d16 += o0, d80 += o1 (d120 the reference)."""
     d = c.depth_mm.copy()
@@ -180,14 +197,27 @@ def evaluate(
     progress: Callable[[str], None] | None = None,
     session_offsets_mm: tuple[float, float] = (0.0, 0.0),
     compare_fixed: bool = False,
+    session_drift_sd: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    session_renderer: Callable[[tuple[float, float, float]], Renderer] | None = None,
 ) -> tuple[Evaluation, dict[tuple[str, float], Capture]]:
+    """``session_renderer(state)`` renders in a session (a device moved by ``in_session``); it is
+    needed when ``session_drift_sd`` is not all zero."""
     stage = np.arange(600.0, 1250.0 + 1e-9, 1.0) if stage_mm is None else stage_mm
+    drift = any(s > 0.0 for s in session_drift_sd)
+    if drift and session_renderer is None:
+        raise ValueError("session_drift_sd needs a session_renderer")
     t0 = time.perf_counter()
     captures: dict[tuple[str, float], Capture] = {}
     rng = np.random.default_rng(seed + 424242)
+    rng_drift = np.random.default_rng(seed + 737373)  # its own stream: the offsets stay as they were
     for i, m in enumerate(materials):
         for j, o in enumerate(orientations):
-            c = capture(renderer, m, o, stage, seed + 1000 * i + j)
+            r = renderer
+            if drift:
+                assert session_renderer is not None
+                state = tuple(float(rng_drift.normal(0.0, sd)) for sd in session_drift_sd)
+                r = session_renderer((state[0], state[1], state[2]))
+            c = capture(r, m, o, stage, seed + 1000 * i + j)
             if session_offsets_mm != (0.0, 0.0):
                 c = with_session_offsets(c, (float(rng.normal(0.0, session_offsets_mm[0])),
                                              float(rng.normal(0.0, session_offsets_mm[1]))))  # fmt: skip

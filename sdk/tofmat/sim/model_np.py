@@ -29,6 +29,7 @@ Units: distances in mm, times in ns (``tau_ps`` in ps), angular frequencies in r
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import Any, Mapping, Sequence, TypeAlias, cast
 
@@ -159,20 +160,45 @@ def _group(device: Mapping[str, Any], freq_mhz: float) -> Mapping[str, Any]:
 
 
 def n_harmonics(device: Mapping[str, Any]) -> int:
-    """Highest harmonic listed by any group (at least 7)."""
-    hs = [int(hh["h"]) for g in device["frequencies"] for hh in g.get("harmonics", [])]
+    """Highest harmonic listed by any group, drift included (at least 7)."""
+    hs = [int(hh["h"]) for g in device["frequencies"]
+          for key in ("harmonics", "session_drift") for hh in g.get(key, [])]  # fmt: skip
     return max([N_HARM] + hs)
 
 
-def harmonic_vector(group: Mapping[str, Any], n_harm: int = N_HARM) -> ComplexArray:
-    """G_h for h = 0..n_harm (index h), G_0 = 0 (unused), G_1 = 1."""
+def harmonic_vector(group: Mapping[str, Any], n_harm: int = N_HARM, key: str = "harmonics") -> ComplexArray:
+    """G_h for h = 0..n_harm (index h), G_0 = 0 (unused), G_1 = 1; with key="session_drift" the
+    drift direction dG_h of section 2.2 (dG_0 = dG_1 = 0)."""
     g = np.zeros(n_harm + 1, complex)
-    g[1] = 1.0
-    for hh in group.get("harmonics", []):
+    if key == "harmonics":
+        g[1] = 1.0
+    for hh in group.get(key, []):
         h = int(hh["h"])
         if 2 <= h <= n_harm:
             g[h] += float(hh["amplitude"]) * np.exp(1j * float(hh["phase_rad"]))
     return g
+
+
+def harmonic_list(G: ComplexArray) -> list[dict[str, Any]]:
+    """The profile's form of G_h (h >= 2): amplitude and phase, zeros dropped."""
+    return [{"h": h, "amplitude": float(abs(G[h])), "phase_rad": float(np.angle(G[h]))}
+            for h in range(2, len(G)) if G[h] != 0]  # fmt: skip
+
+
+def in_session(device: Mapping[str, Any], state: Sequence[float]) -> dict[str, Any]:
+    """The device in one capture session (spec section 2.2): G_h + t_f dG_h in every group, with
+    ``state`` = (t_80, t_16, t_120). The result has the drift applied and no drift of its own."""
+    t = [float(x) for x in state]
+    if len(t) != 3 or not all(math.isfinite(x) for x in t):
+        raise ValueError("a session state is three finite numbers (t_80, t_16, t_120)")
+    out = copy.deepcopy(dict(device))
+    nh = n_harmonics(device)
+    for g in out["frequencies"]:
+        tf = t[GROUP_FREQS_MHZ.index(float(g["freq_mhz"]))]
+        G = harmonic_vector(g, nh) + tf * harmonic_vector(g, nh, "session_drift")
+        g["harmonics"] = harmonic_list(G)
+        g.pop("session_drift", None)
+    return out
 
 
 def device_arrays(device: Mapping[str, Any]) -> dict[str, npt.NDArray[Any]]:
@@ -487,8 +513,12 @@ def curve(
     grid: tuple[float, float, float] = (450.0, 1400.0, 0.25),
     offsets_mm: Sequence[float] = (0.0, 0.0),
     accumulator: str = "numpy",
+    session: Sequence[float] | None = None,
 ) -> FloatArray:
-    """Simulated database curve (2, count) of a material at incidence 0 (section 4)."""
+    """Simulated database curve (2, count) of a material at incidence 0 (section 4), in the
+    capture session ``session`` (section 2.2; None: the device's nominal waveform)."""
+    if session is not None:
+        device = in_session(device, session)
     D = sweep_grid(*grid)
     sim = simulate(device, material, D)
     rows = rows_from_depths(sim["d"], float(material_defaults(material)["noise_mm"]))

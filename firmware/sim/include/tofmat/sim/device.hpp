@@ -40,6 +40,13 @@ struct FrequencyModel {
   std::complex<double> harmonic(int h) const {
     return std::polar(harmonic_amplitude[static_cast<std::size_t>(h)], harmonic_phase_rad[static_cast<std::size_t>(h)]);
   }
+  // dG_h: the direction in which this group's waveform moves from one capture session to the
+  // next (docs/simulator-model.md 2.2; a session in state t has G_h + t dG_h). All zero: none.
+  std::array<double, kMaxHarmonic + 1> drift_amplitude{};
+  std::array<double, kMaxHarmonic + 1> drift_phase_rad{};
+  std::complex<double> drift(int h) const {
+    return std::polar(drift_amplitude[static_cast<std::size_t>(h)], drift_phase_rad[static_cast<std::size_t>(h)]);
+  }
   std::array<double, 3> step_gain{1.0, 1.0, 1.0};
   std::array<double, 3> step_offset{0.0, 0.0, 0.0};  // relative to the received DC, A r_f R(0)
 
@@ -91,6 +98,11 @@ struct DeviceProfile {
   // Ideal Kinect v2: 80/16/120 MHz, pure sinusoids, no errors, no noise.
   static DeviceProfile ideal_kinect2();
   void validate() const;  // throws std::invalid_argument
+
+  // The device in one capture session (docs/simulator-model.md 2.2): every group's harmonics
+  // become G_h + t_f dG_h for state = (t_80, t_16, t_120); the copy has no drift of its own.
+  // Throws std::invalid_argument for a non-finite state or harmonics that leave [0, 1].
+  DeviceProfile in_session(const std::array<double, 3>& state) const;
 };
 
 }  // namespace tofmat::sim
