@@ -51,16 +51,27 @@ def test_recorded_rms_is_what_the_shipped_parameters_give(real: Any) -> None:
     dev, lib = shipped()
     mats = {m["name"]: m for m in lib["materials"]}
     offsets = {n: mats[n]["fit"]["offsets_mm"] for n in names}
-    numpy_curves = cal.simulated_curves(dev, [mats[n] for n in names], offsets, bins, "bin")
+    # every capture's session state (spec 2.2): the shipped device drifts in every group
+    sessions = {n: mats[n]["fit"]["session"] for n in names}
+    assert all(len(t) == 3 and all(math.isfinite(x) for x in t) for t in sessions.values())
+    assert all(g.get("session_drift") for g in dev["frequencies"])
+    numpy_curves = cal.simulated_curves(dev, [mats[n] for n in names], offsets, bins, "bin", sessions=sessions)
     rms = cal.rms_per_material(numpy_curves, Y)
     for n, r in zip(names, rms):
         assert r == pytest.approx(mats[n]["fit"]["rms_mm"], abs=1e-6), n
     assert float(np.median(rms)) == pytest.approx(dev["fit"]["median_rms_mm"], abs=1e-6)
+    # the states carry part of the fit: the nominal waveform alone fits worse
+    nominal = cal.rms_per_material(cal.simulated_curves(dev, [mats[n] for n in names], offsets, bins, "bin"), Y)
+    assert float(np.median(nominal)) > float(np.median(rms)) + 0.05
 
     # The C++ simulator (what renders frames) gives the same curves: within float32 rounding.
-    cpp = np.asarray(sim.distortion_curves(sim.load_device("kinect2_tanaka2017"),
-                                           [sim.load_library("tanaka2017")[n] for n in names],
-                                           tofmat.BinSpec(*bins), 0.0, "bin"), float)  # fmt: skip
+    device = sim.load_device("kinect2_tanaka2017")
+    library = sim.load_library("tanaka2017")
+    cpp = np.stack([
+        np.asarray(sim.distortion_curves(device.in_session(tuple(sessions[n])), [library[n]],
+                                         tofmat.BinSpec(*bins), 0.0, "bin"), float)[0]
+        for n in names
+    ])  # fmt: skip
     cpp += np.array([offsets[n] for n in names])[:, :, None]
     rms_cpp = cal.rms_per_material(cpp, Y)
     assert np.max(np.abs(rms_cpp - rms)) < 1e-3
@@ -90,6 +101,7 @@ def test_write_outputs_gives_files_the_simulator_loads(tmp_path: Path) -> None:
         median_rms_mm=dev["fit"]["median_rms_mm"],
         runtime_s=1.0,
         log=["test"],
+        sessions={m["name"]: m["fit"]["session"] for m in lib["materials"]},
     )
     paths = cal.write_outputs(res, tmp_path)
     d = sim.DeviceProfile.load(paths["device"], str(tmp_path))
@@ -102,6 +114,9 @@ def test_write_outputs_gives_files_the_simulator_loads(tmp_path: Path) -> None:
         assert written_dev[k] == ideal[k], k
     written = json.loads(Path(paths["materials"]).read_text())
     assert written["version"] == 2 and all("rms_mm" in x["fit"] for x in written["materials"])
+    assert [x["fit"]["session"] for x in written["materials"]] == [m["fit"]["session"] for m in lib["materials"]]
+    assert [g.get("session_drift") for g in written_dev["frequencies"]] == [
+        g.get("session_drift") for g in dev["frequencies"]]
     assert Path(paths["log"]).read_text().strip() == "test"
     # A parameter the simulator refuses makes the tool fail at once, not when someone renders.
     res.materials = [dict(mats[0], albedo=-1.0)] + mats[1:]

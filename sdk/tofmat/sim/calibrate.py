@@ -4,7 +4,9 @@ Shared device parameters (per-frequency harmonics up to GROUP_HMAX, tap saturati
 and offsets, scale errors; sections 2.1 and 3.1 of the spec) and
 per-material response parameters are fitted so that the simulated relative distortions (rows
 d16 - d120 and d80 - d120 against the combined depth) match the 29 real curves, with one nuisance
-offset per material and row (each material was captured in its own session).
+offset per material and row and one session state per material and group (each material was
+captured in its own session; the state moves the waveform's harmonics along a fitted drift
+direction, spec section 2.2; SESSION_DRIFT = False fits the offsets only).
 
 Staged fit (scipy.optimize.least_squares, finite differences with a block-sparse Jacobian):
 
@@ -17,13 +19,14 @@ Staged fit (scipy.optimize.least_squares, finite differences with a block-sparse
    nominal 1 mm layer with a fitted path factor unless the thickness is known), several starting
    points each; the per-sample noise of section 4.1 for curves that show the 120 MHz wrap
    inside the averaging (fakeleather);
-3. joint refinement of the device (harmonics, saturation sharpness, full wells W_80 and W_120,
-   step gains, step offsets, scale errors) and all materials, in passes that reweight each
+3. joint refinement of the device (harmonics, session drift direction, saturation sharpness,
+   full wells W_80 and W_120, step gains, step offsets, scale errors), all materials and their
+   session states (started at random, N(0, SESSION_PRIOR)), in passes that reweight each
    material by 1 / rms^WEIGHT_EXP (rms clipped to [WEIGHT_FLOOR_MM, WEIGHT_CAP_MM]) so that the
    fit aims at the median of the per-material rms rather than at the worst curves; the pass with
    the lowest median is kept;
-4. gauge: the median per-capture offsets are moved into the device's decode offsets
-   (``regauge``, exact); then KIND_CYCLES times (2) (every kind again, warm starts), (3) and (4),
+4. gauge: the median per-capture offsets are moved into the device's decode offsets and the
+   median session state into the harmonics (``regauge``, exact); then KIND_CYCLES times (2) (every kind again, warm starts), (3) and (4),
    and a report in ``bin`` mode (the database's averaging, 0.25 mm sweep).
 
 Re-run: ``python -m tofmat.sim.calibrate --db shared/data/tanaka2017_kinect2_db --out <dir>``
@@ -932,7 +935,8 @@ def plot_fit(result: CalibrationResult, table: Any, path: str) -> None:
     Y, names, bins = _table_arrays(table)
     centres = bins[0] + bins[1] * (np.arange(bins[2]) + 0.5)
     mats = {m["name"]: m for m in result.materials}
-    sim = simulated_curves(result.device, [mats[n] for n in names], result.offsets_mm, bins, "bin")
+    sim = simulated_curves(result.device, [mats[n] for n in names], result.offsets_mm, bins, "bin",
+                           sessions=result.sessions)  # fmt: skip
     ncol = 5
     nrow = math.ceil(len(names) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.0 * ncol, 3.0 * nrow), sharex=True)

@@ -146,7 +146,7 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
               help="Fit a drift direction of the waveform and every capture's session state "
               "(docs/simulator-model.md 2.2); without it only the per-capture offsets.")  # fmt: skip
 def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed: int, session_drift: bool) -> None:
-    """Fit the device profile and material library to the real database's curves (~40 min, one core)."""
+    """Fit the device profile and material library to the real database's curves (~43 min, one core)."""
     import tofmat
 
     from . import calibrate as cal
