@@ -6,6 +6,7 @@ import json
 import os
 import time
 from pathlib import Path
+from typing import Any, Callable, Sequence, cast
 
 import click
 import numpy as np
@@ -25,21 +26,25 @@ def _renderer(device: str, library: str, threads: int = 0) -> Renderer:
         raise click.ClickException(str(e)) from e
 
 
-def _session_drift_sd(option: str, library_path: Path) -> tuple[float, float, float]:
-    """--session-drift: none, library (the library's fitted spread) or S80,S16,S120."""
-    from . import evaluate as ev
-
+def _spread_option(option: str, hint: str, form: str, from_library: Callable[[], Sequence[float]]) -> tuple[float, ...]:
+    """A spread option (--session-offsets, --session-drift): 'none' (zeros), 'library' (the spread
+    the calibrated library's fits carry) or comma-separated standard deviations in the form ``form``."""
+    count = len(form.split(","))
+    word = {2: "two", 3: "three"}[count]
     if option == "none":
-        return (0.0, 0.0, 0.0)
+        return (0.0,) * count
     if option == "library":
-        return ev.session_state_spread(json.loads(library_path.read_text()))
+        return tuple(from_library())
     try:
         s = tuple(float(v) for v in option.split(","))
     except ValueError as e:
-        raise click.BadParameter("expected none, library or S80,S16,S120", param_hint="--session-drift") from e
-    if len(s) != 3 or not all(np.isfinite(v) and v >= 0.0 for v in s):
-        raise click.BadParameter("three finite standard deviations >= 0", param_hint="--session-drift")
-    return (s[0], s[1], s[2])
+        raise click.BadParameter(f"expected none, library or {form}", param_hint=hint) from e
+    if len(s) != count:
+        raise click.BadParameter(f"expected none, library or {form}: {word} finite standard deviations >= 0",
+                                 param_hint=hint)  # fmt: skip
+    if not all(np.isfinite(v) and v >= 0.0 for v in s):
+        raise click.BadParameter(f"{word} finite standard deviations: each must be finite and >= 0", param_hint=hint)
+    return s
 
 
 @sim_cli.command("evaluate")
@@ -69,19 +74,15 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     stage = np.arange(600.0, 1250.0 + 1e-9, step)
     p = Path(library)
     library_path = p if (p.suffix or p.parent != Path(".")) else data_dir() / "materials" / f"{library}.json"
-    if session_offsets == "none":
-        spread = (0.0, 0.0)
-    elif session_offsets == "library":
-        spread = ev.session_offset_spread(json.loads(library_path.read_text()))
-    else:
-        try:
-            s0, s1 = (float(v) for v in session_offsets.split(","))
-        except ValueError as e:
-            raise click.BadParameter("expected none, library or S0,S1", param_hint="--session-offsets") from e
-        if not (s0 >= 0.0 and s1 >= 0.0 and np.isfinite(s0) and np.isfinite(s1)):
-            raise click.BadParameter("standard deviations must be finite and >= 0", param_hint="--session-offsets")
-        spread = (s0, s1)
-    drift_sd = _session_drift_sd(session_drift, library_path)
+
+    def fits() -> dict[str, Any]:  # the library file, read only for 'library'
+        return cast(dict[str, Any], json.loads(library_path.read_text()))
+
+    s0, s1 = _spread_option(session_offsets, "--session-offsets", "S0,S1", lambda: ev.session_offset_spread(fits()))
+    spread = (s0, s1)
+    t80, t16, t120 = _spread_option(session_drift, "--session-drift", "S80,S16,S120",
+                                    lambda: ev.session_state_spread(fits()))  # fmt: skip
+    drift_sd = (t80, t16, t120)
     t0 = time.perf_counter()
     result, _ = ev.evaluate(r, names, stage_mm=stage, seed=seed, progress=lambda s: click.echo(s, err=True),
                             session_offsets_mm=spread, compare_fixed=compare_fixed, session_drift_sd=drift_sd,

@@ -158,26 +158,26 @@ def leave_one_orientation_out(
     return conf
 
 
+def _fit_spread(library_json: dict[str, Any], key: str, count: int) -> Array:
+    """Robust standard deviation (1.4826 x MAD) of one per-capture quantity (``key``, ``count``
+    values) that a calibrated library's materials carry in their "fit" blocks; zeros without it."""
+    values = [m.get("fit", {}).get(key) for m in library_json.get("materials", [])]
+    x = np.array([v for v in values if v is not None], dtype=float)
+    if x.size == 0:
+        return np.zeros(count)
+    return np.asarray(1.4826 * np.median(np.abs(x - np.median(x, axis=0)), axis=0), dtype=np.float64)
+
+
 def session_offset_spread(library_json: dict[str, Any]) -> tuple[float, float]:
-    """Robust standard deviation (1.4826 x MAD) of the per-capture row offsets a calibrated
-    library file's materials carry in their "fit" blocks; (0, 0) for a library without them."""
-    offs = [m.get("fit", {}).get("offsets_mm") for m in library_json.get("materials", [])]
-    rows = np.array([o for o in offs if o is not None], dtype=float)
-    if rows.size == 0:
-        return (0.0, 0.0)
-    mad = np.median(np.abs(rows - np.median(rows, axis=0)), axis=0)
-    return (float(1.4826 * mad[0]), float(1.4826 * mad[1]))
+    """The spread of the per-capture row offsets (rows 0 and 1, mm); (0, 0) without them."""
+    s = _fit_spread(library_json, "offsets_mm", 2)
+    return (float(s[0]), float(s[1]))
 
 
 def session_state_spread(library_json: dict[str, Any]) -> tuple[float, float, float]:
-    """Robust standard deviation (1.4826 x MAD) per group (80, 16, 120 MHz) of the session states
-    a calibrated library's materials carry in their "fit" blocks; zeros without them."""
-    states = [m.get("fit", {}).get("session") for m in library_json.get("materials", [])]
-    t = np.array([s for s in states if s is not None], dtype=float)
-    if t.size == 0:
-        return (0.0, 0.0, 0.0)
-    mad = 1.4826 * np.median(np.abs(t - np.median(t, axis=0)), axis=0)
-    return (float(mad[0]), float(mad[1]), float(mad[2]))
+    """The spread of the per-capture session states per group (80, 16, 120 MHz); zeros without them."""
+    s = _fit_spread(library_json, "session", 3)
+    return (float(s[0]), float(s[1]), float(s[2]))
 
 
 def with_session_offsets(c: Capture, offsets_mm: tuple[float, float]) -> Capture:
