@@ -2,8 +2,8 @@
 // (issue 5). A benchmark, not a test: it prints figures and never fails on
 // timing (it exits non-zero only on bad options or a missing database).
 //
-//   tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame] [--kernel best|scalar|float]
-//                      [--reps N] [--db DIR] [--window BINS]
+//   tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]
+//                      [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]
 //
 // --op all (the default) measures everything on this host and prints markdown
 // tables: full-frame (512x424) and 20x20 ROI decode, float reference against
@@ -11,7 +11,10 @@
 // float; nearest-neighbour queries on the real database, FloatClassifier
 // against FixedClassifier (us/query and accuracy per window length); and the
 // composite "fixed-point full-frame decode + features + per-pixel
-// classification of 29 materials" (ms per frame, one core).
+// classification of 29 materials" (ms per frame, one core); and the 11-bit
+// unpack of a depth packet (firmware/kinect raw_unpack.hpp: nine sub-images
+// to raw values), whole, rows 188..236 and the 48x48 region at the centre, the
+// definition (the unpack as first written) against the scalar and best kernels.
 //
 // Any other --op runs only that operation with that kernel N times after its
 // set-up (N = 0: set-up only) and prints one line, so that an instruction
@@ -22,8 +25,15 @@
 //   nn      one query, quantised and searched       unit: a query
 //   dist    the distance kernel only (queries quantised in set-up)   unit: a query
 //   frame   fixed decode + per-pixel classification                   unit: a frame
-// Kernels: best (NEON on aarch64, scalar elsewhere), scalar, float (decode,
-// roi, nn: the float reference). nn is FixedClassifier::classify with the
+//   unpack      11-bit unpack of a whole depth packet (9 sub-images)   unit: a packet
+//   unpack_roi  the same for output rows 188..236 only (48 rows: the
+//               rows of the daemon's default 48 x 48 region)           unit: a packet's rows
+//   unpack_region  the same for that 48 x 48 region only (columns
+//               232..280 of those rows)                                unit: a packet's region
+// Kernels: best (NEON on aarch64, AVX2 on x86-64 CPUs with it, scalar
+// elsewhere), scalar, float (decode, roi, nn: the float reference), reference
+// (unpack, unpack_roi: the definition, unpack_raw_reference, which has rows
+// but no columns). nn is FixedClassifier::classify with the
 // kernel given, dist its squared_sums() on queries prepared beforehand.
 #include <algorithm>
 #include <chrono>
@@ -49,6 +59,8 @@
 #include "tofmat/core/frame_decode.hpp"
 #include "tofmat/core/pixel_classifier.hpp"
 #include "tofmat/core/raw_lut.hpp"
+#include "tofmat/kinect/constants.hpp"
+#include "tofmat/kinect/raw_unpack.hpp"
 #include "synthetic_raw.hpp"
 
 #ifndef TOFMAT_DB_DIR
@@ -64,6 +76,8 @@ constexpr int kWidth = 512, kHeight = 424;
 constexpr std::size_t kPixels = static_cast<std::size_t>(kWidth) * kHeight;
 constexpr const double* kRange = tofmat_test::kGroupRangeMm;  // group order 80, 16, 120 MHz
 constexpr PixelRegion kRoi{246, 202, 266, 222};          // 20x20 in the middle
+constexpr int kUnpackRow0 = 188, kUnpackRow1 = 236;      // unpack_roi: the rows of a 48x48 region at the centre
+constexpr PixelRegion kUnpackRegion{232, kUnpackRow0, 280, kUnpackRow1};  // unpack_region: that region
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
 volatile std::int64_t g_sink = 0;  // keeps results alive
@@ -139,6 +153,42 @@ Frame material_frame(const ExemplarTable& t, std::uint32_t seed, std::vector<std
   }
   return f;
 }
+
+// ---------------------------------------------------------------- depth packets
+
+// A frame's raw values as the camera sends them: each sample's nearest 11-bit
+// code (the saturation marker for 32767), packed into nine sub-images.
+std::vector<std::uint8_t> packet_of(const Frame& f) {
+  std::vector<std::uint8_t> packet(kinect::kUsedSubImages * kinect::kSubImageBytes);
+  std::vector<std::uint16_t> codes(kPixels);
+  for (int s = 0; s < kinect::kUsedSubImages; ++s) {
+    const std::int16_t* raw = f.raw.data() + static_cast<std::size_t>(s) * kPixels;
+    for (std::size_t i = 0; i < kPixels; ++i) {
+      codes[i] = raw[i] == kRawSaturated ? kRawSaturationCode : raw_code_nearest(raw[i]);
+    }
+    kinect::pack_codes(codes.data(), packet.data() + static_cast<std::size_t>(s) * kinect::kSubImageBytes);
+  }
+  return packet;
+}
+
+// A region of a packet's nine sub-images with the kernel named ("reference":
+// the definition, sub-image by sub-image, whole rows).
+void unpack_packet(const std::string& kernel, const std::uint8_t* packet, std::int16_t* raw, const PixelRegion& g) {
+  if (kernel == "reference") {
+    for (int s = 0; s < kinect::kUsedSubImages; ++s) {
+      kinect::unpack_raw_reference(packet + static_cast<std::size_t>(s) * kinect::kSubImageBytes,
+                                   raw + static_cast<std::size_t>(s) * kPixels, g.y0, g.y1);
+    }
+  } else if (g.x0 == 0 && g.x1 == kWidth) {
+    kinect::unpack_depth_packet_rows(packet, raw, g.y0, g.y1,
+                                     kernel == "scalar" ? FixedKernel::kScalar : FixedKernel::kBest);
+  } else {
+    kinect::unpack_depth_packet_region(packet, raw, g, kernel == "scalar" ? FixedKernel::kScalar : FixedKernel::kBest);
+  }
+}
+
+constexpr PixelRegion kWholeFrame{0, 0, kWidth, kHeight};
+constexpr PixelRegion kUnpackRows{0, kUnpackRow0, kWidth, kUnpackRow1};
 
 // ---------------------------------------------------------------- decode error
 
@@ -229,8 +279,8 @@ struct Options {
 
 [[noreturn]] void usage(const char* why) {
   std::fprintf(stderr,
-               "error: %s\nusage: tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame] [--kernel best|scalar|float]\n"
-               "                          [--reps N] [--db DIR] [--window BINS]\n",
+               "error: %s\nusage: tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]\n"
+               "                          [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]\n",
                why);
   std::exit(2);
 }
@@ -257,10 +307,17 @@ Options parse(int argc, char** argv) {
       usage(("unknown option " + a).c_str());
     }
   }
-  const std::vector<std::string> ops{"all", "decode", "roi", "nn", "dist", "frame"};
+  const std::vector<std::string> ops{"all",  "decode", "roi",        "nn",           "dist",
+                                     "frame", "unpack", "unpack_roi", "unpack_region"};
   if (std::find(ops.begin(), ops.end(), o.op) == ops.end()) usage("unknown --op");
-  if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float") usage("unknown --kernel");
-  if (o.kernel == "float" && (o.op == "dist" || o.op == "frame")) usage("--kernel float is for decode, roi and nn");
+  if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float" && o.kernel != "reference") {
+    usage("unknown --kernel");
+  }
+  const bool unpack = o.op == "unpack" || o.op == "unpack_roi" || o.op == "unpack_region";
+  if (o.kernel == "float" && (o.op == "dist" || o.op == "frame" || unpack)) usage("--kernel float is for decode, roi and nn");
+  if (o.kernel == "reference" && o.op != "unpack" && o.op != "unpack_roi") {
+    usage("--kernel reference is for unpack and unpack_roi");
+  }
   return o;
 }
 
@@ -336,6 +393,14 @@ int run_single(const Options& o) {
     labels.resize(kPixels);
     for (long r = 0; r < reps; ++r) {
       g_sink = g_sink + static_cast<std::int64_t>(pc.classify_frame(f.raw.data(), t, labels.data(), {}, k));
+    }
+  } else if (o.op == "unpack" || o.op == "unpack_roi" || o.op == "unpack_region") {
+    const std::vector<std::uint8_t> packet = packet_of(random_frame(7));
+    std::vector<std::int16_t> raw(kinect::kUsedSubImages * kPixels);
+    const PixelRegion g = o.op == "unpack" ? kWholeFrame : o.op == "unpack_roi" ? kUnpackRows : kUnpackRegion;
+    for (long r = 0; r < reps; ++r) {
+      unpack_packet(o.kernel, packet.data(), raw.data(), g);
+      g_sink = g_sink + raw[static_cast<std::size_t>(kUnpackRow0) * kWidth + 240];
     }
   }
   std::printf("op %s kernel %s (best = %s) reps %ld units %zu\n", o.op.c_str(), o.kernel.c_str(), best_name(), reps,
@@ -486,6 +551,48 @@ int run_all(const Options& o) {
     row("**decode + features + per-pixel classification fused in 512-pixel tiles** (`classify_frame`, " + kn + ")",
         [&] { g_sink = g_sink + static_cast<std::int64_t>(pc.classify_frame(mf.raw.data(), mt, fused.data(), {}, k)); });
     if (fused != labels) throw std::logic_error("classify_frame disagrees with decode + classify");
+  }
+
+  // The 11-bit unpack of a depth packet, before and after.
+  const std::vector<std::uint8_t> packet = packet_of(f);
+  std::vector<std::int16_t> want(kinect::kUsedSubImages * kPixels), got(want.size());
+  unpack_packet("reference", packet.data(), want.data(), kWholeFrame);
+  std::printf("\n### 11-bit unpack of a depth packet (9 sub-images of 512x424 packed codes to int16 raw values; "
+              "the decode benchmark's frame as codes; one core)\n\n"
+              "Whole packet, output rows %d..%d (%d rows: the rows of a 48x48 region at the centre) and that region "
+              "(columns %d..%d of those rows). The definition is the unpack as first written (code by code from "
+              "16-bit words, then the device table; whole rows only); before the region-aware unpack a consumer "
+              "of a region paid the whole packet.\n\n",
+              kUnpackRow0, kUnpackRow1, kUnpackRow1 - kUnpackRow0, kUnpackRegion.x0, kUnpackRegion.x1);
+  std::printf("| kernel | whole packet, ms (median of %ld) | best | rows %d..%d, ms (median of %ld) | best | "
+              "48x48 region, ms (median of %ld) | best | equals the definition |\n"
+              "|---|---:|---:|---:|---:|---:|---:|---|\n",
+              frame_reps, kUnpackRow0, kUnpackRow1, roi_reps, roi_reps);
+  for (const char* kname : {"reference", "scalar", "best"}) {
+    const std::string k = kname;
+    std::fill(got.begin(), got.end(), std::int16_t{0});
+    unpack_packet(k, packet.data(), got.data(), kWholeFrame);
+    const bool equal = got == want;
+    const auto timed = [&](long reps, const PixelRegion& g) {
+      return sorted_seconds(reps, [&] {
+        unpack_packet(k, packet.data(), got.data(), g);
+        g_sink = g_sink + got[static_cast<std::size_t>(kUnpackRow0) * kWidth + 240];
+      });
+    };
+    const std::vector<double> full = timed(frame_reps, kWholeFrame), rows = timed(roi_reps, kUnpackRows);
+    std::string region = "- | -";
+    if (k != "reference") {
+      const std::vector<double> t = timed(roi_reps, kUnpackRegion);
+      char buf[64];
+      std::snprintf(buf, sizeof buf, "%.4f | %.4f", t[t.size() / 2] * 1e3, t.front() * 1e3);
+      region = buf;
+    }
+    const std::string name = k == "reference" ? "definition (`unpack_raw_reference`, the old unpack)"
+                             : k == "scalar"  ? "scalar kernel"
+                                              : std::string("best kernel (= ") + kinect::best_unpack_kernel() + ")";
+    std::printf("| %s | %.3f | %.3f | %.4f | %.4f | %s | %s |\n", name.c_str(), full[full.size() / 2] * 1e3,
+                full.front() * 1e3, rows[rows.size() / 2] * 1e3, rows.front() * 1e3, region.c_str(),
+                equal ? "yes" : "**NO**");
   }
   return 0;
 }

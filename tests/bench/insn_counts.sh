@@ -2,8 +2,8 @@
 # Guest instructions per frame / ROI / query of tofmat_bench_fixed (aarch64)
 # under qemu-aarch64 with the instruction-counting plugin (qemu_insn_count.c):
 # for each op and kernel, count(R) - count(0) over R reps, divided by R and by
-# the units a rep holds (1 frame, 1 ROI, or the number of queries). Prints a
-# markdown table. Used by `make bench-cross`.
+# the units a rep holds (1 frame, 1 ROI, 1 depth packet, or the number of
+# queries). Prints markdown tables. Used by `make bench-cross`.
 #   usage: insn_counts.sh PLUGIN.so BENCH_EXECUTABLE DB_DIR [R]
 set -euo pipefail
 plugin=$1 bench=$2 db=$3 reps=${4:-3}
@@ -36,11 +36,13 @@ echo "qemu: $("$qemu" --version | head -n 1); R = $reps; instructions per unit =
 echo
 echo "| op | unit | float | fixed scalar | fixed NEON | scalar / NEON | issue's target | met |"
 echo "|---|---|---:|---:|---:|---:|---|---|"
+declare -A counted  # "OP KERNEL" -> instructions per unit, for the unpack table below
 row() {  # OP UNIT TARGET_RATIO (empty: none) WITH_FLOAT
   local op=$1 unit=$2 target=$3 fl="" s n ratio met="" tgt=""
   if [ "$4" = yes ]; then fl=$(per_unit "$op" float); fi
   s=$(per_unit "$op" scalar)
   n=$(per_unit "$op" best)
+  counted["$op scalar"]=$s counted["$op best"]=$n
   ratio=$(awk -v s="$s" -v n="$n" 'BEGIN { printf "%.2f", s / n }')
   if [ -n "$target" ]; then
     tgt=">= ${target}x fewer"
@@ -59,3 +61,22 @@ for window in 1 10 100; do
 done
 window=0
 row frame "frame: decode + per-pixel classification" "" no
+# The 11-bit unpack (firmware/kinect raw_unpack.hpp): nine sub-images of packed
+# codes to raw values, whole, the rows of a 48x48 region at the centre, and
+# that region alone.
+row unpack "depth packet: 11-bit unpack of 9 sub-images" "" no
+row unpack_roi "depth packet rows 188..236: 11-bit unpack (9 x 48 rows)" "" no
+row unpack_region "depth packet 48x48 region (x 232..280, rows 188..236): 11-bit unpack" "" no
+
+# The unpack's definition (the unpack as first written: code by code from
+# 16-bit words, then the device table; whole rows only) against the kernels
+# above. Before the region-aware unpack, a region cost the whole packet.
+echo
+echo "| unpack | definition | scalar | NEON | definition / scalar | definition / NEON |"
+echo "|---|---:|---:|---:|---:|---:|"
+for op in unpack unpack_roi; do
+  d=$(per_unit "$op" reference)
+  s=${counted["$op scalar"]} n=${counted["$op best"]}
+  awk -v op="$op" -v d="$d" -v s="$s" -v n="$n" \
+    'BEGIN { printf "| %s | %d | %d | %d | %.1f | %.1f |\n", op, d, s, n, d / s, d / n }'
+done
