@@ -68,6 +68,7 @@ class Label:
     ranking: tuple[Rank, ...]
     trigger: int | None
     truth: Truth | None
+    simulated: bool  # the frame came from the simulated camera (or a recording of it), not a camera
 
     @property
     def latency_ms(self) -> float:
@@ -83,6 +84,7 @@ class LabelMap:
     labels: npt.NDArray[np.uint8]  # (height, width); 255 = no label
     materials: list[str]
     truth_accuracy: float | None  # simulated source: fraction of target pixels labelled right
+    simulated: bool  # the frame came from the simulated camera (or a recording of it), not a camera
 
     NO_LABEL = 255
 
@@ -130,11 +132,18 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event:
             ranking=tuple(Rank(r["material"], r["distance"]) for r in meta["ranking"]),
             trigger=meta.get("trigger"),
             truth=Truth(truth["material"], truth["depth_mm"]) if truth else None,
+            simulated=bool(meta.get("simulated", False)),
         )
     if name == "label_map":
         labels = np.frombuffer(blob, np.uint8).reshape(meta["height"], meta["width"])
         return LabelMap(
-            meta["frame"], meta["timestamp_ns"], now, labels, list(meta["materials"]), meta.get("truth_accuracy")
+            meta["frame"],
+            meta["timestamp_ns"],
+            now,
+            labels,
+            list(meta["materials"]),
+            meta.get("truth_accuracy"),
+            bool(meta.get("simulated", False)),
         )
     if name == "depth":
         depth = np.frombuffer(blob, "<f4").reshape(meta["height"], meta["width"])

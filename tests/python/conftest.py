@@ -19,6 +19,14 @@ REPO = Path(__file__).resolve().parents[2]
 DEFAULT_DB_DIR = REPO.parent / "shared" / "data" / "tanaka2017_kinect2_db"
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        "board: a daemon test that `make cross-test` also runs against the aarch64 tofmatd under qemu "
+        "(TOFMAT_DAEMON=tests/cross/tofmatd-qemu)",
+    )
+
+
 @pytest.fixture(scope="session")
 def db_dir() -> Path:
     """Folder of the real database: $TOFMAT_DB_DIR, else <repo>/../shared/data/tanaka2017_kinect2_db."""

@@ -9,6 +9,7 @@ a hung test.
 from __future__ import annotations
 
 import json
+import shutil
 import signal
 import socket
 import struct
@@ -102,6 +103,7 @@ def final_labels(client: tofmat.Client, sweeps: int, timeout: float = 60.0) -> l
 # --- the main job --------------------------------------------------------------------------
 
 
+@pytest.mark.board
 def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]) -> None:
     d = start(sweep(["cork", "paper", "acryl", "pvc"]))
     with d.client() as c:
@@ -113,9 +115,11 @@ def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]
             assert distances == sorted(distances) and len(label.ranking) == 5
             assert label.ranking[0].material == label.material and label.distance == distances[0]
             assert label.latency_ms >= 0.0
+            assert label.simulated  # a simulated source says so in every label
         assert sorted(label.material for label in labels) == ["acryl", "cork", "paper", "pvc"]
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["device"]["state"] == "streaming"
+        assert s["simulated"] is True
         assert s["frames_processed"] > 0 and s["processing_errors"] == 0
 
 
@@ -141,6 +145,7 @@ def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:
 # --- many clients, bad clients ---------------------------------------------------------------
 
 
+@pytest.mark.board
 def test_eight_clients_at_once(start: Callable[..., Daemon]) -> None:
     d = start(sweep(["cork", "paper"], frames=40, gap=4))
     clients = [d.client() for _ in range(8)]
@@ -183,6 +188,7 @@ def read_until_closed(s: socket.socket) -> bytes:
         data += chunk
 
 
+@pytest.mark.board
 def test_garbage_closes_only_that_connection(start: Callable[..., Daemon]) -> None:
     d = start(sweep(["cork"], frames=30, gap=4))
     with d.client() as good:
@@ -262,6 +268,7 @@ def test_tcp_without_a_token_file_is_refused_at_start(tmp_path: Path, sim_table:
     assert p.returncode != 0 and "token" in p.stderr
 
 
+@pytest.mark.board
 def test_unplug_and_replug(start: Callable[..., Daemon]) -> None:
     d = start(sweep(["cork"], frames=30, gap=0, extra=",unplug_at=15,replug_ms=300"))
     with d.client() as c:
@@ -280,6 +287,7 @@ def test_unplug_and_replug(start: Callable[..., Daemon]) -> None:
         assert s["source_counters"]["disconnects"] == 1 and s["source_counters"]["opens"] == 2
 
 
+@pytest.mark.board
 def test_sighup_with_a_corrupt_table_keeps_the_old_one(start: Callable[..., Daemon], sim_table: Path,
                                                        tmp_path: Path) -> None:  # fmt: skip
     table = tmp_path / "live.tmx"
@@ -346,6 +354,7 @@ def test_commands_refuse_bad_input_and_keep_serving(start: Callable[..., Daemon]
         assert {r.material for r in label.ranking} <= {"cork", "paper"}
 
 
+@pytest.mark.board
 def test_sorting_profile_labels_a_burst_per_trigger(start: Callable[..., Daemon]) -> None:
     # One depth, a few frames: m = 1 in effect, so a material whose curve no other one shares there.
     d = start("sim:static,material=acryl,depth=850,realtime=0", "--profile", "sorting", "--burst", "6")
@@ -360,6 +369,7 @@ def test_sorting_profile_labels_a_burst_per_trigger(start: Callable[..., Daemon]
         assert next(c.labels(timeout=30)).trigger == m
 
 
+@pytest.mark.board
 def test_segmentation_label_map(start: Callable[..., Daemon]) -> None:
     # Three targets side by side at 700, 850 and 1000 mm (the regions scene's 3 x 1 grid).
     d = start("sim:regions,materials=acryl+cork+paper,near=700,far=1000,realtime=0", "--profile", "segmentation",
@@ -447,6 +457,7 @@ def test_client_reconnects_after_the_daemon_restarts(start: Callable[..., Daemon
 # --- recordings -------------------------------------------------------------------------------
 
 
+@pytest.mark.board
 def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_table: Path) -> None:
     rec = tmp_path / "acryl.tmrec"
     p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", "sim:static,material=acryl,depth=800,realtime=0",
@@ -458,13 +469,121 @@ def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_tab
     with d.client() as c:
         label = next(lb for lb in c.labels(timeout=30) if lb.state == "tracking")
         assert label.material == "acryl" and label.truth is None  # a replay knows no truth
-        assert c.status()["source_counters"]["frames"] >= 1
+        # ... but a recording of the simulator stays simulated when it is played back.
+        assert label.simulated
+        s = c.status()
+        assert s["source_counters"]["frames"] >= 1 and s["simulated"] is True
+        assert s["source"].startswith("replay of a simulated recording")
     # A recording cut short in its header is refused with the reason.
     (tmp_path / "cut.tmrec").write_bytes(rec.read_bytes()[:1000])
     p = subprocess.run([str(daemon_binary()), "--source", f"replay:{tmp_path / 'cut.tmrec'}", "--table",
                         str(sim_table), "--socket", str(tmp_path / "s")], capture_output=True, text=True,
                        timeout=30)  # fmt: skip
     assert p.returncode != 0 and "shorter than its header" in p.stderr
+
+
+def _one_replay_loop(binary: Path, recording: Path, table: Path, tmp_path: Path, profile: str) -> list[Any]:
+    """Every event of the second whole loop of a lossless replay (pace=0: no frame dropped), without
+    timestamps: label fields, or a label map's bytes. (The first loop may start before the client listens.)"""
+    sock, log = tmp_path / f"{binary.name}-{profile}.sock", tmp_path / f"{binary.name}-{profile}.log"
+    cmd = [str(binary), "--source", f"replay:{recording},loop=1,pace=0", "--table", str(table), "--socket",
+           str(sock), "--profile", profile]  # fmt: skip
+    d = Daemon(subprocess.Popen(cmd, stdout=log.open("wb"), stderr=subprocess.STDOUT), sock, log)
+    out: list[Any] = []
+    try:
+        with d.client() as c:
+            c.subscribe("labels" if profile == "handheld" else "label_map")
+            loops, last = 0, -1
+            for e in c.events(timeout=300):
+                assert isinstance(e, (Label, LabelMap))
+                if e.frame < last:  # the replay went round again
+                    loops += 1
+                    if loops == 3:
+                        return out
+                last = e.frame
+                if loops == 2 and isinstance(e, Label):
+                    out.append((e.frame, e.state, e.material, e.index, e.distance, e.valid, e.bins_covered,
+                                e.ranking, e.simulated))  # fmt: skip
+                elif loops == 2 and isinstance(e, LabelMap):
+                    out.append((e.frame, e.materials, e.labels.tobytes(), e.simulated))
+    finally:
+        assert d.stop() == 0, log.read_text()
+    raise AssertionError("unreachable")
+
+
+@pytest.mark.board
+@pytest.mark.parametrize("profile", ["handheld", "segmentation"])
+def test_a_replay_gives_the_same_labels_bit_for_bit_on_every_build(tmp_path: Path, sim_table: Path,
+                                                                   profile: str) -> None:  # fmt: skip
+    # Under `make cross-test` daemon_binary() is the aarch64 tofmatd (qemu) and the reference the x86 one
+    # shipped in the SDK: the fixed-point path (NEON there, AVX2 or scalar here) and everything around it
+    # must give the same labels from the same recorded frames. Natively both are the x86 daemon, and the
+    # test asserts that a lossless replay is deterministic.
+    rec = tmp_path / "two.tmrec"
+    scene = "sim:sweep,materials=cork+pvc,frames=12,gap=3,realtime=0" if profile == "handheld" else \
+        "sim:regions,materials=acryl+cork+paper,realtime=0"  # fmt: skip
+    frames = 30 if profile == "handheld" else 3
+    p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", scene, "-o", str(rec), "--frames",
+                        str(frames)], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    reference = Path(tofmat.client.__file__).parent / "bin" / "tofmatd"
+    ours = _one_replay_loop(daemon_binary(), rec, sim_table, tmp_path, profile)
+    theirs = _one_replay_loop(reference, rec, sim_table, tmp_path, profile)
+    assert ours == theirs
+    if profile == "handheld":
+        assert len(ours) == 24 + 2  # every target frame labelled, and one no_target per gap
+        # The last label of each sweep (before its no_target) is the material swept; earlier ones converge.
+        finals = [ours[i - 1][2] for i, e in enumerate(ours) if e[1] == "no_target" and i > 0]
+        assert sorted(finals) == ["cork", "pvc"] and all(e[-1] for e in ours)
+    else:
+        assert len(ours) == frames and all(e[-1] for e in ours)
+
+
+def test_without_a_source_the_daemon_uses_the_camera(tmp_path: Path, sim_table: Path) -> None:
+    # A box that was misconfigured must never serve simulated labels: no --source means the Kinect
+    # (none is attached here, so it says so and keeps trying), never the simulator.
+    sock, log = tmp_path / "cam.sock", tmp_path / "cam.log"
+    proc = subprocess.Popen([str(daemon_binary()), "--table", str(sim_table), "--socket", str(sock)],
+                            stdout=log.open("wb"), stderr=subprocess.STDOUT)  # fmt: skip
+    d = Daemon(proc, sock, log)
+    try:
+        with d.client() as c:
+            deadline = time.monotonic() + 30
+            while (s := c.status())["device"]["state"] != "disconnected":
+                assert time.monotonic() < deadline, s
+                time.sleep(0.1)
+            assert s["source"].startswith("Kinect v2") and s["simulated"] is False
+            assert s["device"]["message"] and s["frames_processed"] == 0
+    finally:
+        assert d.stop() == 0, log.read_text()
+
+
+def test_simulator_data_is_found_beside_the_installed_program(tmp_path: Path, sim_table: Path) -> None:
+    # A package installs tofmatd in <prefix>/sbin and the simulator's data in <prefix>/share/tofmat/sim;
+    # nothing of the build machine is compiled in, so a lone copy of the program asks for --sim-data.
+    if daemon_binary().read_bytes()[:4] != b"\x7fELF":
+        pytest.fail(f"{daemon_binary()} is not the program itself (a wrapper): run this test natively")
+    prefix = tmp_path / "usr"
+    (prefix / "sbin").mkdir(parents=True)
+    shutil.copy2(daemon_binary(), prefix / "sbin" / "tofmatd")
+    shutil.copytree(sim_data_dir(), prefix / "share" / "tofmat" / "sim")
+    sock, log = tmp_path / "inst.sock", tmp_path / "inst.log"
+    proc = subprocess.Popen([str(prefix / "sbin" / "tofmatd"), "--source", "sim:static,material=cork,realtime=0",
+                             "--table", str(sim_table), "--socket", str(sock)],
+                            stdout=log.open("wb"), stderr=subprocess.STDOUT)  # fmt: skip
+    d = Daemon(proc, sock, log)
+    try:
+        with d.client() as c:
+            assert c.status()["simulated"] is True
+            assert next(iter(c.labels(timeout=30))).simulated
+    finally:
+        assert d.stop() == 0, log.read_text()
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    shutil.copy2(daemon_binary(), lone / "tofmatd")
+    p = subprocess.run([str(lone / "tofmatd"), "--source", "sim", "--table", str(sim_table), "--socket",
+                        str(tmp_path / "lone.sock")], capture_output=True, text=True, timeout=30)  # fmt: skip
+    assert p.returncode == 1 and "--sim-data" in p.stderr, p.stderr
 
 
 def test_the_shipped_example_config_parses(start: Callable[..., Daemon]) -> None:

@@ -62,7 +62,14 @@ void Daemon::start() {
   pipeline_thread_ = std::thread([this] { pipeline_->run(stop_); });
   source_thread_ = std::thread([this] {
     SourceCallbacks cb;
-    cb.frame = [this](RawFrame&& f) { pipeline_->push(std::move(f)); };
+    cb.region = [this] { return pipeline_->wanted_region(); };
+    cb.raw_buffer = [this] { return pipeline_->raw_buffer(); };
+    cb.frame = [this](RawFrame&& f) {
+      if (source_->lossless())
+        pipeline_->push_wait(std::move(f), stop_);
+      else
+        pipeline_->push(std::move(f));
+    };
     cb.state = [this](DeviceState s, const std::string& message) {
       {
         std::lock_guard<std::mutex> lock(state_mutex_);
@@ -81,6 +88,8 @@ void Daemon::start() {
   });
   spdlog::info("{} serving: source {}, profile {}, table {}", kVersion, source_->describe(), options_.profile.name,
                options_.table);
+  if (source_->simulated())
+    spdlog::warn("the source is SIMULATED: its labels are not a camera's (every label and status say so)");
 }
 
 void Daemon::stop() {
@@ -111,6 +120,7 @@ nlohmann::json Daemon::status() const {
   std::lock_guard<std::mutex> lock(state_mutex_);
   s["server"] = kVersion;
   s["source"] = source_->describe();
+  s["simulated"] = source_->simulated();
   s["source_counters"] = source_->counters();
   s["device"] = {{"state", device_state_name(device_state_)}, {"message", device_message_}, {"changes", device_changes_}};
   s["clients"] = server_->status();

@@ -21,8 +21,12 @@ const char* device_state_name(DeviceState s) {
   return "unknown";
 }
 
-DeviceSource::DeviceSource(std::string description, OpenTransport open, TruthOf truth, int retry_ms)
-    : description_(std::move(description)), open_(std::move(open)), truth_(std::move(truth)), retry_ms_(retry_ms) {}
+DeviceSource::DeviceSource(std::string description, OpenTransport open, TruthOf truth, int retry_ms, bool simulated)
+    : description_(std::move(description)),
+      open_(std::move(open)),
+      truth_(std::move(truth)),
+      retry_ms_(retry_ms),
+      simulated_(simulated) {}
 
 void DeviceSource::stream(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) {
   callbacks.state(DeviceState::kOpening, "opening " + description_);
@@ -33,9 +37,20 @@ void DeviceSource::stream(const SourceCallbacks& callbacks, const std::atomic<bo
     RawFrame f;
     f.sequence = packet.sequence;
     f.arrival_ns = protocol::monotonic_ns();
-    f.raw.resize(9 * kPixels);
-    kinect::unpack_depth_packet(packet.data, f.raw.data());
+    // Only the pixels the profile reads (docs/daemon.md): a region of
+    // interest, the whole frame, or nothing at all between sorting bursts.
+    const std::optional<PixelRegion> wanted =
+        callbacks.region ? callbacks.region() : std::optional<PixelRegion>(PixelRegion{0, 0, kWidth, kHeight});
+    if (wanted && !region_empty(*wanted)) {
+      f.raw = callbacks.raw_buffer ? callbacks.raw_buffer() : std::vector<std::int16_t>(9 * kPixels);
+      f.raw.resize(9 * kPixels);
+      kinect::unpack_depth_packet_region(packet.data, f.raw.data(), *wanted);
+      f.region = *wanted;
+    } else {
+      f.region = PixelRegion{0, 0, 0, 0};
+    }
     f.calibration = calibration;
+    f.simulated = simulated_;
     if (truth_) f.truth = truth_(packet.sequence);
     {
       std::lock_guard<std::mutex> lock(mutex_);

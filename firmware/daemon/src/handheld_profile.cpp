@@ -14,6 +14,8 @@ class HandheldProfile : public Profile {
   HandheldProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
       : config_(c), table_(table), matcher_(table, candidate_indices(*table, c.candidates), c.backend) {}
 
+  std::optional<PixelRegion> input_region() const override { return config_.roi; }
+
   void process(const RawFrame& frame, const Emitter& emit) override {
     const auto d = matcher_.decode(frame, config_.roi);
     RegionMatcher::emit_depths(d, frame, emit);
@@ -54,6 +56,7 @@ class HandheldProfile : public Profile {
     e.timestamp_ns = frame.arrival_ns;
     e.profile = "handheld";
     e.truth = region_truth(frame, config_.roi);
+    e.simulated = frame.simulated;
     return e;
   }
 

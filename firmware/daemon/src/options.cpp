@@ -2,11 +2,28 @@
 
 #include <CLI/CLI.hpp>
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <system_error>
 
 namespace tofmat::daemon {
 namespace {
+
+// The simulator's data beside the running program: <prefix>/share/tofmat/sim
+// for a package (/usr/sbin/tofmatd), <package>/sim_data for the Python SDK's
+// copy (tofmat/bin/tofmatd). "" when neither is there: the sim source then
+// asks for --sim-data. No path of the build machine is compiled in.
+std::string installed_sim_data_dir() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (ec) return "";
+  const fs::path bin = exe.parent_path();
+  for (const fs::path& dir : {bin / ".." / "share" / "tofmat" / "sim", bin / ".." / "sim_data"})
+    if (fs::is_directory(dir / "devices", ec)) return fs::weakly_canonical(dir, ec).string();
+  return "";
+}
 
 PixelRegion parse_roi(const std::string& text) {
   PixelRegion r;
@@ -33,14 +50,14 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   CommandLine cl;
   DaemonOptions& o = cl.daemon;
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
-  o.source_options.sim_data_dir = TOFMAT_SIM_DATA_DIR;
+  o.source_options.sim_data_dir = installed_sim_data_dir();
   std::string profile = o.profile.name, backend = "fixed", roi, tcp, token_file, socket_mode = "0660";
   std::vector<std::string> candidates;
 
   CLI::App app{"tofmatd: material labels from a Time-of-Flight camera, served over a socket"};
   app.set_version_flag("--version", "tofmatd 0.1.0");
   app.set_config("--config", "", "configuration file (TOML/INI, the long flags as keys)");
-  app.add_option("--source", o.source, "kinect[:SERIAL] | sim[:SCENE[,key=value...]] | replay:FILE[,loop=1]")
+  app.add_option("--source", o.source, "kinect[:SERIAL] (the camera) | sim[:SCENE[,key=value...]] | replay:FILE[,loop=0|1][,pace=0|1]")
       ->capture_default_str();
   app.add_option("--profile", profile, "handheld | segmentation | sorting")->capture_default_str();
   app.add_option("--table", o.table, "exemplar table (.tmx, or a folder of <material>.npy)")->required();
@@ -59,7 +76,8 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
   app.add_option("--max-clients", o.server.max_clients, "connections at once")->capture_default_str()->check(CLI::Range(1, 1024));
-  app.add_option("--sim-data", o.source_options.sim_data_dir, "simulator device profiles and material libraries")
+  app.add_option("--sim-data", o.source_options.sim_data_dir,
+                 "simulator device profiles and material libraries (default: installed beside tofmatd)")
       ->capture_default_str();
   app.add_option("--log-level", cl.log_level, "trace | debug | info | warn | error")
       ->capture_default_str()
@@ -78,10 +96,13 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     if (used != socket_mode.size() || mode > 0777) throw CLI::ValidationError("--socket-mode", "expected octal like 0660");
     o.server.socket_mode = static_cast<unsigned>(mode);
   } catch (const CLI::ParseError& e) {
-    exit_code = app.exit(e);
+    // --help and --version are CLI11's "errors" with status 0; every other is
+    // a usage error: status 2 (CLI11's own codes are 100 and up).
+    exit_code = app.exit(e) == 0 ? 0 : 2;
     return std::nullopt;
   } catch (const std::exception& e) {
-    exit_code = app.exit(CLI::ValidationError(e.what()));
+    app.exit(CLI::ValidationError(e.what()));
+    exit_code = 2;
     return std::nullopt;
   }
   return cl;

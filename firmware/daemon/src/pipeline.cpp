@@ -21,55 +21,100 @@ void Pipeline::apply(const ProfileConfig& config, std::shared_ptr<const Exemplar
   config_ = config;
   table_ = std::move(table);
   table_path_ = path;
+  publish_wanted_region();
+}
+
+void Pipeline::publish_wanted_region() {
+  const auto wanted = profile_->input_region();
+  std::lock_guard<std::mutex> lock(source_mutex_);
+  wanted_ = wanted;
+}
+
+std::optional<PixelRegion> Pipeline::wanted_region() const {
+  std::lock_guard<std::mutex> lock(source_mutex_);
+  return wanted_;
+}
+
+std::vector<std::int16_t> Pipeline::raw_buffer() {
+  {
+    std::lock_guard<std::mutex> lock(source_mutex_);
+    if (!spare_raw_.empty()) {
+      auto buffer = std::move(spare_raw_.back());
+      spare_raw_.pop_back();
+      return buffer;
+    }
+  }
+  return std::vector<std::int16_t>(9 * kPixels);
 }
 
 void Pipeline::run(const std::atomic<bool>& stop) {
   while (!stop.load()) {
     auto frame = queue_.pop(std::chrono::milliseconds(100));
     if (!frame) continue;
-    if (!frame->calibration || frame->raw.size() != 9 * kPixels) continue;
-    std::lock_guard<std::mutex> lock(mutex_);
-    const auto t0 = std::chrono::steady_clock::now();
-    try {
-      profile_->process(*frame, emit_);
-      ++processed_;
-    } catch (const std::exception& e) {
-      // One bad frame costs itself only; say it once per distinct reason.
-      ++errors_;
-      if (last_error_ != e.what()) spdlog::error("processing frame {}: {}", frame->sequence, e.what());
-      last_error_ = e.what();
+    if (!frame->calibration) continue;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto needed = profile_->input_region();
+      const bool has_samples = frame->raw.size() == 9 * kPixels;
+      if (needed && !region_empty(*needed) && !(has_samples && region_covers(frame->region, *needed))) {
+        // Unpacked for the profile before a switch (or a trigger) took effect:
+        // its pixels are not the ones needed now.
+        ++skipped_;
+      } else {
+        const auto t0 = std::chrono::steady_clock::now();
+        try {
+          profile_->process(*frame, emit_);
+          ++processed_;
+        } catch (const std::exception& e) {
+          // One bad frame costs itself only; say it once per distinct reason.
+          ++errors_;
+          if (last_error_ != e.what()) spdlog::error("processing frame {}: {}", frame->sequence, e.what());
+          last_error_ = e.what();
+        }
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        process_ms_ewma_ = processed_ + errors_ <= 1 ? ms : 0.9 * process_ms_ewma_ + 0.1 * ms;
+        recent_ns_.push_back(frame->arrival_ns);
+        while (!recent_ns_.empty() && recent_ns_.front() + 1'000'000'000ull < frame->arrival_ns)
+          recent_ns_.pop_front();
+      }
+      publish_wanted_region();  // a burst may have ended
     }
-    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    process_ms_ewma_ = processed_ + errors_ <= 1 ? ms : 0.9 * process_ms_ewma_ + 0.1 * ms;
-    recent_ns_.push_back(frame->arrival_ns);
-    while (!recent_ns_.empty() && recent_ns_.front() + 1'000'000'000ull < frame->arrival_ns) recent_ns_.pop_front();
+    if (frame->raw.size() == 9 * kPixels) {
+      std::lock_guard<std::mutex> lock(source_mutex_);
+      if (spare_raw_.size() < 4) spare_raw_.push_back(std::move(frame->raw));
+    }
   }
 }
 
 void Pipeline::reset() {
   std::lock_guard<std::mutex> lock(mutex_);
   profile_->reset();
+  publish_wanted_region();
 }
 
 void Pipeline::set_profile(const std::string& name) {
+  std::lock_guard<std::mutex> command(commands_mutex_);  // read, change, apply: one command at a time
   auto c = config();
   c.name = name;
   apply(c, table(), table_path());
 }
 
 void Pipeline::set_roi(const PixelRegion& roi) {
+  std::lock_guard<std::mutex> command(commands_mutex_);  // read, change, apply: one command at a time
   auto c = config();
   c.roi = roi;
   apply(c, table(), table_path());
 }
 
 void Pipeline::set_candidates(const std::vector<std::string>& names) {
+  std::lock_guard<std::mutex> command(commands_mutex_);  // read, change, apply: one command at a time
   auto c = config();
   c.candidates = names;
   apply(c, table(), table_path());
 }
 
 void Pipeline::set_table(std::shared_ptr<const ExemplarTable> table, const std::string& path) {
+  std::lock_guard<std::mutex> command(commands_mutex_);  // read, change, apply: one command at a time
   auto c = config();
   // Candidates the new table lacks would make it unusable: refuse, keep the old.
   apply(c, std::move(table), path);
@@ -77,7 +122,9 @@ void Pipeline::set_table(std::shared_ptr<const ExemplarTable> table, const std::
 
 std::uint64_t Pipeline::trigger(int burst) {
   std::lock_guard<std::mutex> lock(mutex_);
-  return profile_->trigger(burst);
+  const auto n = profile_->trigger(burst);
+  publish_wanted_region();  // the burst's frames need the belt's ROI
+  return n;
 }
 
 ProfileConfig Pipeline::config() const {
@@ -108,6 +155,7 @@ nlohmann::json Pipeline::status() const {
             {"bin_width_mm", table_->bins().width_mm}}},
           {"frames_processed", processed_},
           {"frames_dropped", queue_.dropped()},
+          {"frames_skipped", skipped_},
           {"processing_errors", errors_},
           {"last_error", last_error_},
           {"fps", static_cast<double>(recent_ns_.size())},

@@ -1,5 +1,6 @@
 #include "tofmat/daemon/recording.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -35,19 +36,26 @@ std::uint64_t get_u64(const std::uint8_t* p) {
   return v;
 }
 
+struct Header {
+  std::vector<float> p0_rad;
+  bool simulated = false;
+};
+
 // The header's checks, shared by the in-memory parser and the file reader.
-std::vector<float> parse_header(const std::uint8_t* h) {
+Header parse_header(const std::uint8_t* h) {
   if (std::memcmp(h, kRecordingMagic, 8) != 0) throw FormatError("not a tofmat recording (bad magic)");
   const std::uint32_t width = get_u32(h + 8), height = get_u32(h + 12), flags = get_u32(h + 16);
   if (width != static_cast<std::uint32_t>(kWidth) || height != static_cast<std::uint32_t>(kHeight))
     throw FormatError("recording is " + std::to_string(width) + " x " + std::to_string(height) +
                       ", expected the Kinect v2's 512 x 424");
-  if (flags != 0) throw FormatError("recording has unknown flags " + std::to_string(flags));
-  std::vector<float> p0(3 * kPixels);
-  std::memcpy(p0.data(), h + 20, p0.size() * sizeof(float));
-  for (float v : p0)
+  if ((flags & ~kRecordingFlagSimulated) != 0) throw FormatError("recording has unknown flags " + std::to_string(flags));
+  Header header;
+  header.simulated = (flags & kRecordingFlagSimulated) != 0;
+  header.p0_rad.resize(3 * kPixels);
+  std::memcpy(header.p0_rad.data(), h + 20, header.p0_rad.size() * sizeof(float));
+  for (float v : header.p0_rad)
     if (!std::isfinite(v) || std::abs(v) > 1000.0f) throw FormatError("recording holds a P0 correction that is not a finite phase");
-  return p0;
+  return header;
 }
 
 RecordedFrame parse_frame(const std::uint8_t* p) {
@@ -62,14 +70,14 @@ RecordedFrame parse_frame(const std::uint8_t* p) {
 
 }  // namespace
 
-RecordingWriter::RecordingWriter(const std::string& path, const std::vector<float>& p0_rad)
+RecordingWriter::RecordingWriter(const std::string& path, const std::vector<float>& p0_rad, bool simulated)
     : out_(path, std::ios::binary | std::ios::trunc), path_(path) {
   if (!out_) throw std::runtime_error("cannot create recording \"" + path + "\"");
   if (p0_rad.size() != 3 * kPixels) throw std::invalid_argument("recording: P0 corrections must be 3 x 512 x 424");
   out_.write(kRecordingMagic, 8);
   put_u32(out_, kWidth);
   put_u32(out_, kHeight);
-  put_u32(out_, 0);
+  put_u32(out_, simulated ? kRecordingFlagSimulated : 0);
   out_.write(reinterpret_cast<const char*>(p0_rad.data()), static_cast<std::streamsize>(p0_rad.size() * sizeof(float)));
 }
 
@@ -94,7 +102,9 @@ void RecordingWriter::close() {
 Recording parse_recording(const std::uint8_t* data, std::size_t size, std::size_t max_frames) {
   if (size < kRecordingHeaderBytes) throw FormatError("recording is shorter than its header");
   Recording r;
-  r.p0_rad = parse_header(data);
+  Header header = parse_header(data);
+  r.p0_rad = std::move(header.p0_rad);
+  r.simulated = header.simulated;
   std::size_t at = kRecordingHeaderBytes;
   while (size - at >= kRecordedFrameBytes && r.frames.size() < max_frames) {
     r.frames.push_back(parse_frame(data + at));
@@ -109,7 +119,9 @@ RecordingReader::RecordingReader(const std::string& path) : in_(path, std::ios::
   std::vector<std::uint8_t> header(kRecordingHeaderBytes);
   if (!in_.read(reinterpret_cast<char*>(header.data()), static_cast<std::streamsize>(header.size())))
     throw FormatError("recording \"" + path + "\" is shorter than its header");
-  p0_rad_ = parse_header(header.data());
+  Header parsed = parse_header(header.data());
+  p0_rad_ = std::move(parsed.p0_rad);
+  simulated_ = parsed.simulated;
 }
 
 std::optional<RecordedFrame> RecordingReader::next() {
@@ -127,8 +139,13 @@ namespace {
 
 class ReplaySource : public Source {
  public:
-  ReplaySource(std::string path, bool loop) : path_(std::move(path)), loop_(loop), reader_(path_) {}
-  std::string describe() const override { return "replay of " + path_; }
+  ReplaySource(std::string path, bool loop, bool paced)
+      : path_(std::move(path)), loop_(loop), paced_(paced), reader_(path_) {}
+  std::string describe() const override {
+    return std::string(reader_.simulated() ? "replay of a simulated recording " : "replay of ") + path_;
+  }
+  bool simulated() const override { return reader_.simulated(); }
+  bool lossless() const override { return !paced_; }
   nlohmann::json counters() const override {
     std::lock_guard<std::mutex> lock(mutex_);
     return {{"frames", frames_}, {"loops", loops_}};
@@ -149,12 +166,18 @@ class ReplaySource : public Source {
         continue;
       }
       last_ns = base_ns + f->offset_ns;
-      std::this_thread::sleep_until(start + std::chrono::nanoseconds(last_ns));
+      // Paced: as recorded (the stop flag is looked at every 100 ms of a long pause).
+      if (paced_) {
+        const auto due = start + std::chrono::nanoseconds(last_ns);
+        while (!stop.load() && std::chrono::steady_clock::now() < due)
+          std::this_thread::sleep_until(std::min(due, std::chrono::steady_clock::now() + std::chrono::milliseconds(100)));
+      }
       RawFrame frame;
       frame.sequence = f->sequence;
       frame.arrival_ns = protocol::monotonic_ns();
       frame.raw = std::move(f->raw);
       frame.calibration = calibration;
+      frame.simulated = reader_.simulated();
       {
         std::lock_guard<std::mutex> lock(mutex_);
         ++frames_;
@@ -166,7 +189,7 @@ class ReplaySource : public Source {
 
  private:
   std::string path_;
-  bool loop_;
+  bool loop_, paced_;
   RecordingReader reader_;
   mutable std::mutex mutex_;
   std::uint64_t frames_ = 0, loops_ = 0;
@@ -175,17 +198,23 @@ class ReplaySource : public Source {
 }  // namespace
 
 std::unique_ptr<Source> make_replay_source(const std::string& spec) {
+  // Options trail the path (which may itself hold commas): ",loop=0|1", ",pace=0|1".
   std::string path = spec;
-  bool loop = false;
-  const auto comma = spec.rfind(",loop=");
-  if (comma != std::string::npos) {
-    const std::string v = spec.substr(comma + 6);
-    if (v != "0" && v != "1") throw std::invalid_argument("replay: loop must be 0 or 1");
-    loop = v == "1";
-    path = spec.substr(0, comma);
+  bool loop = false, paced = true;
+  for (;;) {
+    const auto comma = path.rfind(',');
+    if (comma == std::string::npos) break;
+    const std::string option = path.substr(comma + 1);
+    const auto eq = option.find('=');
+    const std::string key = option.substr(0, eq);
+    if (eq == std::string::npos || (key != "loop" && key != "pace")) break;
+    const std::string v = option.substr(eq + 1);
+    if (v != "0" && v != "1") throw std::invalid_argument("replay: " + key + " must be 0 or 1");
+    (key == "loop" ? loop : paced) = v == "1";
+    path.erase(comma);
   }
   if (path.empty()) throw std::invalid_argument("replay: needs a file (replay:FILE)");
-  return std::make_unique<ReplaySource>(path, loop);
+  return std::make_unique<ReplaySource>(path, loop, paced);
 }
 
 }  // namespace tofmat::daemon

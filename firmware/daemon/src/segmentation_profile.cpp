@@ -36,6 +36,8 @@ class SegmentationProfile : public Profile {
     for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
   }
 
+  std::optional<PixelRegion> input_region() const override { return PixelRegion{0, 0, kWidth, kHeight}; }
+
   void process(const RawFrame& frame, const Emitter& emit) override {
     // Into the same buffers every frame (a fresh full-frame decode costs more
     // in page faults than in arithmetic).
@@ -56,6 +58,7 @@ class SegmentationProfile : public Profile {
     e.height = kHeight;
     e.materials = names_;
     if (frame.truth) e.truth_accuracy = accuracy(*frame.truth, e.labels);
+    e.simulated = frame.simulated;
     RegionMatcher::Decoded d;
     d.region = PixelRegion{0, 0, kWidth, kHeight};
     d.pixels = kPixels;

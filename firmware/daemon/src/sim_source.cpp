@@ -130,6 +130,10 @@ sim::Scene sim_scene_at(const SimSpec& spec, std::uint64_t frame) {
 }
 
 std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions& options) {
+  if (options.sim_data_dir.empty())
+    throw std::invalid_argument(
+        "sim: the simulator's data (device profiles, material libraries) was not found beside this tofmatd: "
+        "pass --sim-data DIR");
   auto device = sim::load_device(spec.device, options.sim_data_dir);
   auto library = sim::load_library(spec.library, options.sim_data_dir);
   for (const auto& m : spec.materials) library.find(m);  // throws, naming a material the library lacks
@@ -168,7 +172,7 @@ std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions
     return t;
   };
   std::string description = "simulated Kinect v2 (scene " + spec.scene + ", device " + spec.device + ")";
-  return std::make_unique<DeviceSource>(description, open, truth, std::min(options.retry_ms, 100));
+  return std::make_unique<DeviceSource>(description, open, truth, std::min(options.retry_ms, 100), /*simulated=*/true);
 }
 
 }  // namespace tofmat::daemon

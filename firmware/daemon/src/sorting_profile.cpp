@@ -19,6 +19,11 @@ class SortingProfile : public Profile {
     return ++trigger_;
   }
 
+  std::optional<PixelRegion> input_region() const override {
+    if (remaining_ == 0) return std::nullopt;  // between bursts: no pixel at all
+    return config_.roi;
+  }
+
   void process(const RawFrame& frame, const Emitter& emit) override {
     if (remaining_ == 0) return;
     const auto d = matcher_.decode(frame, config_.roi);
@@ -40,6 +45,7 @@ class SortingProfile : public Profile {
     e.profile = "sorting";
     e.trigger = trigger_;
     e.truth = region_truth(frame, config_.roi);
+    e.simulated = frame.simulated;
     emit.label(e);
   }
 

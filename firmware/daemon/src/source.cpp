@@ -29,7 +29,8 @@ std::unique_ptr<Source> make_source(const std::string& spec, const SourceOptions
     const std::string serial = rest;
     return std::make_unique<DeviceSource>(
         serial.empty() ? "Kinect v2 (libusb)" : "Kinect v2 " + serial + " (libusb)",
-        [serial] { return kinect::open_libusb_kinect(serial); }, nullptr, options.retry_ms);
+        [serial] { return kinect::open_libusb_kinect(serial); }, nullptr, options.retry_ms,
+        /*simulated=*/false);
 #else
     throw std::invalid_argument("this tofmatd was built without libusb");
 #endif

@@ -74,6 +74,12 @@ double get_number(const Json& obj, const char* key) {
   return x;
 }
 
+bool get_bool(const Json& obj, const char* key) {
+  const Json& v = field(obj, key);
+  if (!v.is_boolean()) throw ProtocolError(std::string("field \"") + key + "\" must be true or false");
+  return v.get<bool>();
+}
+
 std::vector<std::string> get_string_list(const Json& obj, const char* key, std::size_t max_items,
                                          std::size_t max_bytes) {
   const Json& v = field(obj, key);
@@ -113,9 +119,7 @@ Hello decode_hello(const Message& m) {
   h.protocol = static_cast<std::uint32_t>(get_uint(m.meta, "protocol", 0xffff));
   h.server = get_string(m.meta, "server", kMaxTextBytes);
   h.capabilities = get_string_list(m.meta, "capabilities", 64, kMaxNameBytes);
-  const Json& a = field(m.meta, "auth_required");
-  if (!a.is_boolean()) throw ProtocolError("field \"auth_required\" must be true or false");
-  h.auth_required = a.get<bool>();
+  h.auth_required = get_bool(m.meta, "auth_required");
   return h;
 }
 
@@ -157,9 +161,7 @@ Reply decode_reply(const Message& m) {
   expect(m, MessageType::kReply, "reply");
   Reply r;
   r.id = static_cast<std::uint32_t>(get_uint(m.meta, "id", 0xffffffffu));
-  const Json& ok = field(m.meta, "ok");
-  if (!ok.is_boolean()) throw ProtocolError("field \"ok\" must be true or false");
-  r.ok = ok.get<bool>();
+  r.ok = get_bool(m.meta, "ok");
   if (!r.ok) {
     r.code = get_string(m.meta, "code", kMaxNameBytes);
     r.error = get_string(m.meta, "error", kMaxTextBytes);
@@ -178,6 +180,7 @@ Message encode_label(const LabelEvent& e) {
             {"bins_covered", e.bins_covered}, {"ranking", encode_ranking(e.ranking)}};
   if (e.trigger) m.meta["trigger"] = *e.trigger;
   if (e.truth) m.meta["truth"] = {{"material", e.truth->material}, {"depth_mm", e.truth->depth_mm}};
+  if (e.simulated) m.meta["simulated"] = true;
   return m;
 }
 
@@ -204,6 +207,7 @@ LabelEvent decode_label(const Message& m) {
     const Json& t = j["truth"];
     e.truth = Truth{get_string(t, "material", kMaxNameBytes), get_number(t, "depth_mm")};
   }
+  e.simulated = j.contains("simulated") && get_bool(j, "simulated");
   return e;
 }
 
@@ -214,6 +218,7 @@ Message encode_label_map(const LabelMapEvent& e) {
   m.meta = {{"event", "label_map"}, {"frame", e.frame},   {"timestamp_ns", e.timestamp_ns},
             {"width", e.width},     {"height", e.height}, {"materials", e.materials}};
   if (e.truth_accuracy) m.meta["truth_accuracy"] = *e.truth_accuracy;
+  if (e.simulated) m.meta["simulated"] = true;
   m.blob = e.labels;
   return m;
 }
@@ -233,6 +238,7 @@ LabelMapEvent decode_label_map(const Message& m) {
     if (v != kNoLabel && v >= e.materials.size())
       throw ProtocolError("label map holds an index beyond its material list");
   if (m.meta.contains("truth_accuracy")) e.truth_accuracy = get_number(m.meta, "truth_accuracy");
+  e.simulated = m.meta.contains("simulated") && get_bool(m.meta, "simulated");
   e.labels = m.blob;
   return e;
 }

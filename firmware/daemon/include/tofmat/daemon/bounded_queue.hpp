@@ -1,7 +1,10 @@
-// A bounded queue between two threads that never blocks the producer: when
-// it is full, push() drops the oldest item (a camera frame that waited too
-// long is worth less than the new one) and counts it.
+// A bounded queue between two threads. push() never blocks the producer:
+// when the queue is full it drops the oldest item (a camera frame that waited
+// too long is worth less than the new one) and counts it. push_wait() is for
+// a producer that must lose nothing (a replay as fast as it is processed): it
+// waits for room, and gives up when stop is set or the queue is closed.
 #pragma once
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -28,13 +31,34 @@ class BoundedQueue {
     ready_.notify_one();
   }
 
+  // Waits until there is room, then appends. Returns false (item not queued)
+  // once `stop` is set or the queue is closed; `stop` is polled every 50 ms,
+  // so the wait ends promptly even if nobody closes the queue.
+  bool push_wait(T item, const std::atomic<bool>& stop) {
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      while (items_.size() >= capacity_ && !closed_) {
+        if (stop.load()) return false;
+        space_.wait_for(lock, std::chrono::milliseconds(50));
+      }
+      if (closed_ || stop.load()) return false;
+      items_.push_back(std::move(item));
+    }
+    ready_.notify_one();
+    return true;
+  }
+
   // The oldest item, or nothing after `timeout` or once closed and empty.
   std::optional<T> pop(std::chrono::milliseconds timeout) {
-    std::unique_lock<std::mutex> lock(mutex_);
-    ready_.wait_for(lock, timeout, [&] { return !items_.empty() || closed_; });
-    if (items_.empty()) return std::nullopt;
-    T item = std::move(items_.front());
-    items_.pop_front();
+    std::optional<T> item;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      ready_.wait_for(lock, timeout, [&] { return !items_.empty() || closed_; });
+      if (items_.empty()) return std::nullopt;
+      item = std::move(items_.front());
+      items_.pop_front();
+    }
+    space_.notify_one();
     return item;
   }
 
@@ -44,6 +68,7 @@ class BoundedQueue {
       closed_ = true;
     }
     ready_.notify_all();
+    space_.notify_all();
   }
 
   std::uint64_t dropped() const {
@@ -58,7 +83,7 @@ class BoundedQueue {
  private:
   const std::size_t capacity_;
   mutable std::mutex mutex_;
-  std::condition_variable ready_;
+  std::condition_variable ready_, space_;
   std::deque<T> items_;
   std::uint64_t dropped_ = 0;
   bool closed_ = false;

@@ -16,7 +16,9 @@
 namespace tofmat::daemon {
 
 struct DaemonOptions {
-  std::string source = "sim";
+  // The camera: a box that was misconfigured must never serve simulated
+  // labels, so the simulator is only ever a source asked for by name.
+  std::string source = "kinect";
   std::string table;  // .tmx (or a folder of <material>.npy)
   ProfileConfig profile;
   ServerOptions server;

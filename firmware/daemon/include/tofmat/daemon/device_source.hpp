@@ -14,8 +14,10 @@ class DeviceSource : public Source {
   using OpenTransport = std::function<std::unique_ptr<kinect::UsbTransport>()>;
   // Ground truth of a frame sent, for a simulated device (may be empty).
   using TruthOf = std::function<std::shared_ptr<const FrameTruth>(std::uint32_t sequence)>;
-  DeviceSource(std::string description, OpenTransport open, TruthOf truth, int retry_ms);
+  // `simulated`: the transport is the simulated Kinect (frames are marked so).
+  DeviceSource(std::string description, OpenTransport open, TruthOf truth, int retry_ms, bool simulated);
   std::string describe() const override { return description_; }
+  bool simulated() const override { return simulated_; }
   void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) override;
   nlohmann::json counters() const override;
 
@@ -25,6 +27,7 @@ class DeviceSource : public Source {
   OpenTransport open_;
   TruthOf truth_;
   int retry_ms_;
+  bool simulated_;
   mutable std::mutex mutex_;
   std::uint64_t frames_ = 0, opens_ = 0, disconnects_ = 0, driver_skipped_ = 0;
   std::string last_error_;

@@ -16,6 +16,13 @@ inline constexpr int kWidth = 512;
 inline constexpr int kHeight = 424;
 inline constexpr std::size_t kPixels = static_cast<std::size_t>(kWidth) * kHeight;
 
+inline bool region_empty(const PixelRegion& r) { return r.x1 <= r.x0 || r.y1 <= r.y0; }
+// True when `outer` holds every pixel of `inner`.
+inline bool region_covers(const PixelRegion& outer, const PixelRegion& inner) {
+  return region_empty(inner) ||
+         (outer.x0 <= inner.x0 && outer.y0 <= inner.y0 && inner.x1 <= outer.x1 && inner.y1 <= outer.y1);
+}
+
 // The decode's per-pixel corrections, built once per device start (the P0
 // tables do not change while the camera streams) and shared by its frames.
 struct Calibration {
@@ -37,9 +44,14 @@ struct FrameTruth {
 struct RawFrame {
   std::uint64_t sequence = 0;
   std::uint64_t arrival_ns = 0;  // CLOCK_MONOTONIC when the last packet arrived
-  std::vector<std::int16_t> raw;  // 9 x kPixels, sub-image-major
+  std::vector<std::int16_t> raw;  // 9 x kPixels, sub-image-major (or empty: nothing unpacked)
+  // The pixels of `raw` that hold this frame's samples: a camera source
+  // unpacks only what the profile reads (Pipeline::wanted_region); the rest
+  // of a recycled buffer is stale. Empty (x0 == x1) when nothing was unpacked.
+  PixelRegion region{0, 0, kWidth, kHeight};
   std::shared_ptr<const Calibration> calibration;
   std::shared_ptr<const FrameTruth> truth;  // null for a real camera
+  bool simulated = false;                   // rendered by the simulator (or a replay of such frames)
 };
 
 }  // namespace tofmat::daemon

@@ -15,8 +15,8 @@ struct CommandLine {
   std::string log_level = "info";
 };
 
-// Parses argv. Returns nothing when the program should exit with `exit_code`
-// (--help, --version, or an error already printed to stderr).
+// Parses argv. Returns nothing when the program should exit with `exit_code`:
+// 0 after --help or --version, 2 after a usage error (already printed to stderr).
 std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_code);
 
 }  // namespace tofmat::daemon

@@ -9,6 +9,8 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -24,6 +26,15 @@ class Pipeline {
 
   void set_emitter(Emitter emit) { emit_ = std::move(emit); }  // before run()
   void push(RawFrame&& frame) { queue_.push(std::move(frame)); }
+  // What a camera source should unpack from its next packet: the active
+  // profile's input region, nothing between sorting bursts (any thread).
+  std::optional<PixelRegion> wanted_region() const;
+  // A buffer for a frame's raw samples, recycled from processed frames so a
+  // frame costs no 3.9 MB allocation and zero-fill (any thread).
+  std::vector<std::int16_t> raw_buffer();
+  // For a source that must lose no frame (Source::lossless): waits for room;
+  // false once stop is set.
+  bool push_wait(RawFrame&& frame, const std::atomic<bool>& stop) { return queue_.push_wait(std::move(frame), stop); }
   // The processing thread's loop, until stop is set.
   void run(const std::atomic<bool>& stop);
 
@@ -47,6 +58,11 @@ class Pipeline {
   BoundedQueue<RawFrame> queue_;
   Emitter emit_;
   mutable std::mutex mutex_;  // held while a frame is processed and while a command swaps state
+  // Serialises the commands that change the configuration: each reads it,
+  // changes one thing and applies the whole (two clients' commands at once
+  // must not undo each other). Held while a new profile is built, outside
+  // mutex_, so frames keep flowing meanwhile.
+  std::mutex commands_mutex_;
   std::shared_ptr<const ExemplarTable> table_;
   std::string table_path_;
   ProfileConfig config_;
@@ -54,6 +70,12 @@ class Pipeline {
   // Statistics (under mutex_).
   std::uint64_t processed_ = 0, errors_ = 0;
   std::deque<std::uint64_t> recent_ns_;  // arrival times of the last second's frames
+  std::uint64_t skipped_ = 0;            // unpacked for another profile's region (a switch in flight)
+  // What the source should unpack, and spare sample buffers (under source_mutex_).
+  void publish_wanted_region();  // with mutex_ held
+  mutable std::mutex source_mutex_;
+  std::optional<PixelRegion> wanted_;
+  std::vector<std::vector<std::int16_t>> spare_raw_;
   double process_ms_ewma_ = 0.0;
   std::string last_error_;
 };

@@ -10,6 +10,7 @@
 #pragma once
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,10 @@ struct Emitter {
 class Profile {
  public:
   virtual ~Profile() = default;
+  // The pixels the next process() reads (its raw samples must be unpacked
+  // there); nothing when the next frame is not needed at all (sorting
+  // between bursts). Called on the processing thread, like process().
+  virtual std::optional<PixelRegion> input_region() const = 0;
   virtual void process(const RawFrame& frame, const Emitter& emit) = 0;
   virtual void reset() = 0;
   // sorting: arm a burst of `burst` frames; returns the trigger's number.

@@ -1,7 +1,8 @@
 // Recordings of the raw stream (`tofmat record`, `--source replay:FILE`):
 // what the camera delivered, so a session can be replayed through the same
 // pipeline. Little-endian, fixed sizes (docs/protocol.md, "Recordings"):
-//   header  "TMREC001", u32 width (512), u32 height (424), u32 flags (0),
+//   header  "TMREC001", u32 width (512), u32 height (424), u32 flags (bit 0:
+//           the frames are the simulator's; no other bit may be set),
 //           3 x width x height float32 P0 corrections (radians, finite)
 //   frames  "FRM1", u64 sequence, u64 time since the first frame (ns),
 //           9 x width x height int16 raw samples
@@ -21,12 +22,14 @@ namespace tofmat::daemon {
 inline constexpr char kRecordingMagic[8] = {'T', 'M', 'R', 'E', 'C', '0', '0', '1'};
 inline constexpr char kFrameMagic[4] = {'F', 'R', 'M', '1'};
 inline constexpr std::size_t kRecordingHeaderBytes = 8 + 12 + 3 * kPixels * sizeof(float);
+inline constexpr std::uint32_t kRecordingFlagSimulated = 1;  // header flags: frames rendered by the simulator
 inline constexpr std::size_t kRecordedFrameBytes = 4 + 16 + 9 * kPixels * sizeof(std::int16_t);
 
 class RecordingWriter {
  public:
-  // Throws std::runtime_error if the file cannot be created.
-  RecordingWriter(const std::string& path, const std::vector<float>& p0_rad);
+  // Throws std::runtime_error if the file cannot be created. `simulated`:
+  // the frames come from the simulator (kept in the header's flags).
+  RecordingWriter(const std::string& path, const std::vector<float>& p0_rad, bool simulated);
   void write(const RawFrame& frame);
   std::uint64_t frames() const { return frames_; }
   void close();
@@ -46,6 +49,7 @@ struct RecordedFrame {
 // Throws tofmat::FormatError (core/error.hpp) naming what is wrong.
 struct Recording {
   std::vector<float> p0_rad;
+  bool simulated = false;
   std::vector<RecordedFrame> frames;
   bool truncated = false;  // bytes after the last whole frame
 };
@@ -56,6 +60,7 @@ class RecordingReader {
  public:
   explicit RecordingReader(const std::string& path);  // reads and checks the header
   const std::vector<float>& p0_rad() const { return p0_rad_; }
+  bool simulated() const { return simulated_; }
   // The next frame; nothing at the end (or at a cut-short frame). Throws FormatError.
   std::optional<RecordedFrame> next();
   void rewind();
@@ -64,6 +69,7 @@ class RecordingReader {
   std::ifstream in_;
   std::string path_;
   std::vector<float> p0_rad_;
+  bool simulated_ = false;
 };
 
 // `replay:FILE[,loop=1]`: plays the frames at the pace they were recorded.

@@ -7,7 +7,9 @@
 #include <atomic>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -21,6 +23,13 @@ const char* device_state_name(DeviceState s);
 struct SourceCallbacks {
   std::function<void(RawFrame&&)> frame;
   std::function<void(DeviceState, const std::string& message)> state;
+  // Which pixels a camera source unpacks from the next packet: nothing
+  // returned means none (the profile does not need the frame); no function
+  // means the whole frame (recording).
+  std::function<std::optional<PixelRegion>()> region;
+  // A 9 x kPixels buffer for a frame's samples, recycled by the pipeline (no
+  // function: a new one each frame).
+  std::function<std::vector<std::int16_t>()> raw_buffer;
 };
 
 class Source {
@@ -32,14 +41,20 @@ class Source {
   virtual void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) = 0;
   // Counters for status (frames, reconnects, ...).
   virtual nlohmann::json counters() const = 0;
+  // True when the frames are not a camera's: the simulator, or a recording of
+  // it. The daemon says so in every label and in status.
+  virtual bool simulated() const = 0;
+  // True when no frame may be dropped: the daemon then waits for the
+  // pipeline instead of dropping the oldest frame (a replay with pace=0).
+  virtual bool lossless() const { return false; }
 };
 
 struct SourceOptions {
-  std::string sim_data_dir;  // device profiles and material libraries of the simulator
+  std::string sim_data_dir;  // device profiles and material libraries of the simulator ("" = not installed)
   int retry_ms = 500;        // wait between attempts to open a device that is gone
 };
 
-// "kinect[:SERIAL]", "sim[:SCENE[,key=value...]]", "replay:FILE[,loop=1]".
+// "kinect[:SERIAL]", "sim[:SCENE[,key=value...]]", "replay:FILE[,loop=1][,pace=0]".
 // Throws std::invalid_argument with what is wrong with the spec.
 std::unique_ptr<Source> make_source(const std::string& spec, const SourceOptions& options);
 

@@ -80,6 +80,7 @@ struct LabelEvent {
   std::vector<RankEntry> ranking;  // best first, at most kMaxRanking
   std::optional<std::uint64_t> trigger;  // sorting: the trigger this answers
   std::optional<Truth> truth;
+  bool simulated = false;  // the frame came from a simulated camera (sent only when true)
 };
 Message encode_label(const LabelEvent& e);
 LabelEvent decode_label(const Message& m);
@@ -90,6 +91,7 @@ struct LabelMapEvent {
   std::vector<std::string> materials;  // index -> name; kNoLabel = none
   std::vector<std::uint8_t> labels;    // width x height, row-major
   std::optional<double> truth_accuracy;  // simulated source: fraction of target pixels labelled right
+  bool simulated = false;                // the frame came from a simulated camera (sent only when true)
 };
 Message encode_label_map(const LabelMapEvent& e);
 LabelMapEvent decode_label_map(const Message& m);
@@ -116,6 +118,7 @@ std::string get_string(const Json& obj, const char* key, std::size_t max_bytes);
 std::uint64_t get_uint(const Json& obj, const char* key, std::uint64_t max_value);
 std::int64_t get_int(const Json& obj, const char* key, std::int64_t min_value, std::int64_t max_value);
 double get_number(const Json& obj, const char* key);
+bool get_bool(const Json& obj, const char* key);
 std::vector<std::string> get_string_list(const Json& obj, const char* key, std::size_t max_items,
                                          std::size_t max_bytes);
 
