@@ -8,6 +8,10 @@ Depth-Dependent Time-of-Flight Distortion" (CVPR 2017) on a C++ core:
 >>> clf = tofmat.Classifier(table, backend="float")
 >>> clf.classify(table.features[0]).material
 'acryl'
+
+The core needs numpy only (and click for the `tofmat` command); the simulator's calibration and
+evaluation need the ``sim`` extra, the plots the ``plot`` extra (``pip install 'tofmat[all]'``):
+without them those raise :class:`MissingExtraError` (an ImportError) naming what to install.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from ._tofmat import (
     unambiguous_range_mm,
 )
 
+from ._extras import MissingExtraError
 from .client import (  # noqa: E402  (after the extension it wraps)
     AuthenticationError,
     Client,
@@ -63,6 +68,7 @@ __all__ = [
     "DepthBinAccumulator",
     "ExemplarTable",
     "FormatError",
+    "MissingExtraError",
     "RankedMatch",
     "UsbError",
     "depth_from_phase_mm",

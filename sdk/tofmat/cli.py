@@ -12,6 +12,7 @@ import click
 import numpy as np
 
 from . import Classifier, ClassificationResult, ExemplarTable, __version__
+from ._extras import MissingExtraError, require_pyplot
 from .tools.tables import open_table
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -36,7 +37,18 @@ def csv_list(value: str | None) -> list[str] | None:
     return [v.strip() for v in value.split(",") if v.strip()] if value else None
 
 
-@click.group()
+class ExtrasGroup(click.Group):
+    """A command that needs an optional dependency which is not installed ends in one line naming the
+    extra to install (pip install 'tofmat[...]'), exit status 1, not a traceback."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except MissingExtraError as e:
+            raise click.ClickException(str(e)) from e
+
+
+@click.group(cls=ExtrasGroup)
 @click.version_option(__version__, prog_name="tofmat")
 @click.option("-v", "--verbose", is_flag=True, help="Log progress to stderr.")
 def main(verbose: bool) -> None:
@@ -148,6 +160,7 @@ def plot() -> None:
 @user_errors
 def plot_table_cmd(path: Path, output: Path) -> None:
     """Plot every material's distortion curves (like the paper's Fig. 4)."""
+    require_pyplot(extra="plot", feature="tofmat plot table")
     from .tools.plot import plot_table
 
     plot_table(open_table(path), output, title=f"{path.name}: relative depth distortion")
@@ -270,6 +283,8 @@ def watch(address: str, token_file: Path | None, top: int, count: int) -> None:
                     line = f"frame {e.frame:6d}  bins {e.bins_covered:3d}  {e.material:12s}  | {ranks} mm^2"
                 if e.truth is not None and e.truth.material:
                     line += f"  [truth {e.truth.material}]"
+                if e.simulated:
+                    line += "  [SIMULATED]"
                 click.echo(("\r\033[K" + line) if redraw else line, nl=not redraw)
                 n += 1
                 if count and n >= count:
@@ -291,7 +306,7 @@ def status(address: str, token_file: Path | None) -> None:
 
 
 @main.command()
-@click.option("--source", default="sim", show_default=True, help="kinect[:SERIAL] | sim[:SCENE,...] | replay:FILE")
+@click.option("--source", required=True, help="kinect[:SERIAL] | sim[:SCENE,...] | replay:FILE (named: never a default)")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Recording file.")
 @click.option("--frames", default=30, show_default=True, help="Frames to record (2.6 MB each).")
 @click.option("--timeout", default=60.0, show_default=True, help="Seconds to wait for them.")

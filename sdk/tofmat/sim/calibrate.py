@@ -46,11 +46,13 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence, TypeAlias, TypedDict, cast
 
 import numpy as np
-from scipy.optimize import least_squares  # type: ignore[import-untyped]  # scipy ships no type stubs
-from scipy.sparse import lil_matrix  # type: ignore[import-untyped]  # scipy ships no type stubs
 
+from .._extras import require, require_pyplot
 from . import model_np as M
 from .model_np import ComplexArray, FloatArray
+
+# What needs the ``sim`` extra here: the fit (scipy, imported where it is used) and its figure (matplotlib).
+FEATURE = "the simulator's calibration (tofmat.sim.calibrate)"
 
 # A state key: the parameter's name, then its indices (group, harmonic / step, or material).
 StateKey: TypeAlias = tuple[str, *tuple[int, ...]]
@@ -399,6 +401,9 @@ class Problem:
         self.pen_keys += [k for k in dev_free if k[0] in ("dx", "dy")]
         n_pen = 2 * len(self.idx) + 3 * len(self.harm_pairs) + len(self.pen_keys)
         self.n_res = n_data + n_pen
+        require("scipy.sparse", extra="sim", feature=FEATURE)
+        from scipy.sparse import lil_matrix  # type: ignore[import-untyped]  # scipy ships no type stubs
+
         sp = lil_matrix((self.n_res, len(keys)), dtype=int)
         dev_cols = [c for c, k in enumerate(keys) if k[0] in DEV_BOUNDS]
         for a, i in enumerate(self.idx):
@@ -457,6 +462,9 @@ class Problem:
         return np.concatenate(res + [np.array(pen)])
 
     def solve(self, max_nfev: int = 200) -> Any:
+        require("scipy.optimize", extra="sim", feature=FEATURE)
+        from scipy.optimize import least_squares  # type: ignore[import-untyped]  # scipy ships no type stubs
+
         r = least_squares(
             self.residuals, self.x0(), bounds=(self.lo, self.hi), jac_sparsity=self.sparsity,
             method="trf", x_scale="jac", max_nfev=max_nfev, ftol=1e-9, xtol=1e-9, gtol=1e-9,
@@ -927,9 +935,7 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
 
 
 def plot_fit(result: CalibrationResult, table: Any, path: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
+    require_pyplot(extra="sim", feature=FEATURE)
     import matplotlib.pyplot as plt
 
     Y, names, bins = _table_arrays(table)
@@ -969,6 +975,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     import tofmat
 
+    try:  # the fit (scipy) and its figure (matplotlib): fail before the long run, in one line
+        require("scipy.optimize", extra="sim", feature="python -m tofmat.sim.calibrate")
+        require_pyplot(extra="sim", feature="python -m tofmat.sim.calibrate")
+    except tofmat.MissingExtraError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
     table = tofmat.ExemplarTable.from_npy_dir(a.db)
     res = calibrate(table, restarts=a.restarts, seed=a.seed, rounds=a.rounds)
     paths = write_outputs(res, a.out, table)

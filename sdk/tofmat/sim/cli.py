@@ -11,6 +11,7 @@ from typing import Any, Callable, Sequence, cast
 import click
 import numpy as np
 
+from .._extras import require, require_pyplot
 from . import DEFAULT_DEVICE, DEFAULT_LIBRARY, Renderer, Scene, Target, data_dir, load_device, load_library
 
 
@@ -66,6 +67,7 @@ def _spread_option(option: str, hint: str, form: str, from_library: Callable[[],
 def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None, step: float, seed: int,
                  session_offsets: str, session_drift: str, compare_fixed: bool) -> None:  # fmt: skip
     """Leave-one-orientation-out nearest neighbour in the paper's protocol (Sec. 5)."""
+    require_pyplot(extra="sim", feature="tofmat sim evaluate")  # its figures: fail before the long run
     from . import evaluate as ev
     from . import plots
 
@@ -154,6 +156,8 @@ def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed:
 
     if restarts < 1 or rounds < 1:
         raise click.BadParameter("--restarts and --rounds must be >= 1")
+    require("scipy.optimize", extra="sim", feature="tofmat sim calibrate")
+    require_pyplot(extra="sim", feature="tofmat sim calibrate")  # the fit's figure, written after ~43 min
     cal.SESSION_DRIFT = session_drift
     try:
         table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))

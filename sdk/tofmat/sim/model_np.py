@@ -35,7 +35,8 @@ from typing import Any, Mapping, Sequence, TypeAlias, cast
 
 import numpy as np
 import numpy.typing as npt
-from scipy.special import erfc  # type: ignore[import-untyped]  # scipy ships no type stubs
+
+from .._extras import require
 
 FloatArray: TypeAlias = npt.NDArray[np.float64]
 ComplexArray: TypeAlias = npt.NDArray[np.complex128]
@@ -408,6 +409,9 @@ def expected_wrapped(d: FloatArray, noise_mm: Any) -> FloatArray:
     noise = np.asarray(noise_mm, float)
     if not np.any(noise > 0.0):
         return d
+    require("scipy.special", extra="sim", feature="the NumPy model's wrap noise (tofmat.sim.model_np)")
+    from scipy.special import erfc  # type: ignore[import-untyped]  # scipy ships no type stubs
+
     f = np.array(GROUP_FREQS_MHZ)
     U = (C_DEV / (2e-3 * f))[:, None]  # (3, 1)
     sig = noise[..., None, None] * (120.0 / f)[:, None]  # (..., 3, 1)

@@ -1,19 +1,22 @@
-"""Figures of the simulator's calibration and evaluation (docs/simulator.md)."""
+"""Figures of the simulator's calibration and evaluation (docs/simulator.md); need the ``sim`` extra (matplotlib)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any, Sequence
 
-import matplotlib
+import numpy as np
+import numpy.typing as npt
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import numpy.typing as npt  # noqa: E402
+from .._extras import require_pyplot
+
+FEATURE = "the simulator's figures (tofmat.sim.plots)"
 
 
 def confusion_matrix(conf: npt.NDArray[np.int64], materials: Sequence[str], title: str, out: Path) -> None:
+    require_pyplot(extra="sim", feature=FEATURE)
+    import matplotlib.pyplot as plt
+
     n = len(materials)
     frac = conf / np.maximum(conf.sum(axis=1, keepdims=True), 1)
     fig, ax = plt.subplots(figsize=(9.5, 8.5))
@@ -36,6 +39,9 @@ def confusion_matrix(conf: npt.NDArray[np.int64], materials: Sequence[str], titl
 
 
 def stability(results: Sequence[dict[str, Any]], xlabel: str, title: str, out: Path) -> None:
+    require_pyplot(extra="sim", feature=FEATURE)
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     for k, r in enumerate(results):
         color = f"C{k}"

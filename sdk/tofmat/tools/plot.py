@@ -4,13 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")  # files only; never needs a display
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .. import ExemplarTable  # noqa: E402
+from .. import ExemplarTable
+from .._extras import require_pyplot
 
 
 def row_label(row: tuple[int, int]) -> str:
@@ -19,7 +16,10 @@ def row_label(row: tuple[int, int]) -> str:
 
 
 def plot_table(table: ExemplarTable, out: Path, title: str | None = None) -> None:
-    """One panel per row, one line per material, depth (bin centres) on x."""
+    """One panel per row, one line per material, depth (bin centres) on x (needs the ``plot`` extra)."""
+    require_pyplot(extra="plot", feature="plotting a table (tofmat.tools.plot)")
+    import matplotlib.pyplot as plt
+
     feats = table.features
     if not np.isfinite(feats).any():
         raise ValueError("table has no valid value to plot")
