@@ -116,6 +116,38 @@ cross-test: cross check-db setup build-python
 cross-test-all: cross-test
 	ctest --test-dir $(CROSS) --output-on-failure -j$(JOBS) -R '$(QEMU_SLOW_SUITES)'
 
+# The box's Debian packages, tofmatd_<version>_{amd64,arm64}.deb in
+# build/packages (CPack over the amd64 and the aarch64 builds; the default
+# table is the real database, imported once), and their test: lintian, and
+# install / start / status / upgrade / removal in a scratch Debian root
+# (debootstrap) that is thrown away afterwards. Needs root.
+PACKAGES     := build/packages
+PKG_TABLE    := build/package/tanaka2017.tmx
+PACKAGE_APT_PACKAGES := dpkg-dev lintian debootstrap systemd man-db
+.PHONY: package package-test setup-package
+setup-package:
+	@missing=$$(for p in $(PACKAGE_APT_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "setup-package: installing $$missing"; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing >/dev/null; \
+	fi
+
+package: setup setup-package check-db build-cpp build-python cross
+	@mkdir -p $(dir $(PKG_TABLE)) $(PACKAGES)
+	$(TOFMAT) table import $(DB) -o $(PKG_TABLE)
+	@for dir in $(BUILD) $(CROSS); do \
+	  cmake -S . -B $$dir -DTOFMAT_PACKAGE_TABLE=$(abspath $(PKG_TABLE)) >/dev/null && \
+	  cmake --build $$dir -j$(JOBS) --target tofmatd tofmat_package_docs >/dev/null && \
+	  arch=$$(grep -q aarch64 $$dir/CMakeCache.txt && echo arm64 || echo amd64) && \
+	  (cd $$dir && rm -rf packages && DEB_HOST_ARCH=$$arch cpack -G DEB >/dev/null) && \
+	  cp $$dir/packages/tofmatd_*_$$arch.deb $(PACKAGES)/ || exit 1; \
+	done
+	@ls -l $(PACKAGES)/*.deb
+
+package-test: package
+	TOFMAT_DEB_AMD64=$$(ls $(abspath $(PACKAGES))/tofmatd_*_amd64.deb) TOFMAT_DEB_ARM64=$$(ls $(abspath $(PACKAGES))/tofmatd_*_arm64.deb) \
+	  TOFMAT_PACKAGE_TABLE=$(abspath $(PKG_TABLE)) TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/package -q
+
 $(TABLE): check-db
 	$(TOFMAT) table import $(DB) -o $(TABLE)
 

@@ -11,7 +11,7 @@ qemu=${QEMU_AARCH64:-qemu-aarch64}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 
-# count OP KERNEL R -> "instructions units" (no -L: the executables are static)
+# count OP KERNEL R -> "instructions units" (no -L: qemu takes the arm64 loader and libraries of multiarch from /)
 # $window: only queries of that window length (nn, dist; 0 = all five lengths)
 window=0
 count() {
