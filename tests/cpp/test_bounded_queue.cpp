@@ -106,15 +106,21 @@ TEST(BoundedQueue, PopOnAnEmptyQueueReturnsNothingAfterItsTimeout) {
   EXPECT_EQ(q.pop(0ms), std::optional<int>(5));
 }
 
-TEST(BoundedQueue, PushWakesAWaitingPop) {
-  BoundedQueue<int> q(2);
+// A pop(kLongPop) on another thread, started and (most likely) blocked by the time this returns.
+std::future<std::optional<int>> waiting_pop(BoundedQueue<int>& q) {
   std::promise<void> waiting;
-  auto popped = std::async(std::launch::async, [&] {
+  auto popped = std::async(std::launch::async, [&q, &waiting] {
     waiting.set_value();
     return q.pop(kLongPop);
   });
   waiting.get_future().wait();
   std::this_thread::sleep_for(20ms);  // (likely already blocked in pop; correct either way)
+  return popped;
+}
+
+TEST(BoundedQueue, PushWakesAWaitingPop) {
+  BoundedQueue<int> q(2);
+  auto popped = waiting_pop(q);
   q.push(42);
   ASSERT_EQ(popped.wait_for(kHang), std::future_status::ready) << "push did not wake the waiting pop";
   EXPECT_EQ(popped.get(), std::optional<int>(42));
@@ -122,13 +128,7 @@ TEST(BoundedQueue, PushWakesAWaitingPop) {
 
 TEST(BoundedQueue, CloseWakesAWaitingPopWithNothing) {
   BoundedQueue<int> q(2);
-  std::promise<void> waiting;
-  auto popped = std::async(std::launch::async, [&] {
-    waiting.set_value();
-    return q.pop(kLongPop);
-  });
-  waiting.get_future().wait();
-  std::this_thread::sleep_for(20ms);
+  auto popped = waiting_pop(q);
   q.close();
   ASSERT_EQ(popped.wait_for(kHang), std::future_status::ready) << "close did not wake the waiting pop";
   EXPECT_FALSE(popped.get());

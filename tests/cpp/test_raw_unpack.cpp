@@ -117,6 +117,20 @@ void expect_every_kernel_equals_the_definition(const std::uint8_t* sub, const st
   }
 }
 
+// Every kernel gives the device's value of each packed code (columns 0 and 511 read code 0).
+void expect_every_kernel_gives_the_device_values(const std::uint8_t* sub, const std::vector<std::uint16_t>& codes,
+                                                 const std::string& what) {
+  for (const auto& k : kernels()) {
+    std::vector<std::int16_t> got(kPixels, kUnwritten);
+    k.rows(sub, got.data(), 0, kHeight);
+    for (std::size_t i = 0; i < kPixels; ++i) {
+      const int x = static_cast<int>(i % kWidth);
+      const std::int16_t want = (x == 0 || x == kWidth - 1) ? 0 : tofmat::raw_code_value(codes[i]);
+      ASSERT_EQ(got[i], want) << what << ", " << k.name << ": pixel " << i << " code " << codes[i];
+    }
+  }
+}
+
 std::vector<std::uint8_t> packed(const std::vector<std::uint16_t>& codes) {
   std::vector<std::uint8_t> sub(kSubImageBytes);
   pack_codes(codes.data(), sub.data());
@@ -166,15 +180,7 @@ TEST(RawUnpackKernels, EveryCodeAtEveryBitOffsetGoesThroughTheDeviceTable) {
     }
   }
   const auto sub = packed(codes);
-  for (const auto& k : kernels()) {
-    std::vector<std::int16_t> got(kPixels, kUnwritten);
-    k.rows(sub.data(), got.data(), 0, kHeight);
-    for (std::size_t i = 0; i < kPixels; ++i) {
-      const int x = static_cast<int>(i % kWidth);
-      const std::int16_t want = (x == 0 || x == kWidth - 1) ? 0 : tofmat::raw_code_value(codes[i]);
-      ASSERT_EQ(got[i], want) << k.name << ": pixel " << i << " code " << codes[i];
-    }
-  }
+  expect_every_kernel_gives_the_device_values(sub.data(), codes, "every code");
   expect_every_kernel_equals_the_definition(sub.data(), "every code");
 }
 
@@ -188,15 +194,7 @@ TEST(RawUnpackKernels, PackThenUnpackGivesTheDeviceValuesExceptTheBorderColumns)
       c = static_cast<std::uint16_t>(u % 16 == 0 ? tofmat::kRawSaturationCode : (u >> 4) & 0x7FF);
     }
     const auto sub = packed(codes);
-    for (const auto& k : kernels()) {
-      std::vector<std::int16_t> got(kPixels, kUnwritten);
-      k.rows(sub.data(), got.data(), 0, kHeight);
-      for (std::size_t i = 0; i < kPixels; ++i) {
-        const int x = static_cast<int>(i % kWidth);
-        const std::int16_t want = (x == 0 || x == kWidth - 1) ? 0 : tofmat::raw_code_value(codes[i]);
-        ASSERT_EQ(got[i], want) << k.name << ": pixel " << i;
-      }
-    }
+    expect_every_kernel_gives_the_device_values(sub.data(), codes, "random codes");
   }
 }
 

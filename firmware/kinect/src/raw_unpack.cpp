@@ -171,13 +171,8 @@ void unpack_depth_packet(const std::uint8_t* packet, std::int16_t* raw, FixedKer
   unpack_depth_packet_rows(packet, raw, 0, kHeight, kernel);
 }
 
-const char* best_unpack_kernel() {
-#if defined(__aarch64__)
-  return "neon";
-#else
-  return cpu_has_avx2() ? "avx2" : "scalar";
-#endif
-}
+// The unpack dispatches FixedKernel::kBest as the core's kernels do.
+const char* best_unpack_kernel() { return best_pixel_kernel(); }
 
 void pack_codes(const std::uint16_t* codes, std::uint8_t* sub_image) {
   std::memset(sub_image, 0, kSubImageBytes);
