@@ -180,6 +180,19 @@ bench-cpp:
 	cmake --build $(BENCH_DIR) -j$(JOBS) --target tofmat_bench_fixed qemu_insn_count
 	$(BENCH_DIR)/tests/bench/tofmat_bench_fixed --op all --db $(DB)
 
+# What each scene profile costs per frame, from the depth packet to the
+# event's bytes (docs/benchmarks.md, "The box"): host ms on one core with
+# error against truth and the float path, and aarch64 instructions under qemu.
+.PHONY: bench-profiles bench-profiles-cross
+bench-profiles: check-db build-cpp
+	$(BUILD)/tests/bench/tofmat_bench_profiles --profile all --reps 11 --table $(DB)
+
+bench-profiles-cross: cross check-db
+	cmake -S . -B $(BENCH_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_BUILD_TESTS=OFF \
+	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake --build $(BENCH_DIR) -j$(JOBS) --target qemu_insn_count
+	tests/bench/profile_counts.sh $(QEMU_PLUGIN) $(CROSS)/tests/bench/tofmat_bench_profiles $(DB)
+
 bench-cross: cross check-db
 	cmake -S . -B $(BENCH_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_BUILD_TESTS=OFF \
 	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
