@@ -1,0 +1,141 @@
+// tofmatd's command line and configuration file (firmware/daemon/src/options.cpp):
+// the defaults a box runs with (the camera, never the simulator; the
+// simulator's data only beside an installed program), every flag reaching
+// its option, the file's keys with the command line winning, and every bad
+// input refused with status 2 (a usage error) and nothing returned.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "tofmat/daemon/options.hpp"
+
+namespace {
+
+using tofmat::daemon::CommandLine;
+using tofmat::daemon::parse_command_line;
+
+struct Parsed {
+  std::optional<CommandLine> cl;
+  int exit_code = -1;
+};
+
+Parsed parse(std::vector<std::string> args) {
+  args.insert(args.begin(), "tofmatd");
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  Parsed p;
+  p.cl = parse_command_line(static_cast<int>(argv.size()), argv.data(), p.exit_code);
+  return p;
+}
+
+std::filesystem::path temp_file(const std::string& name, const std::string& text) {
+  const auto path = std::filesystem::temp_directory_path() / ("tofmat_test_options_" + name);
+  std::ofstream(path) << text;
+  return path;
+}
+
+void expect_usage_error(std::vector<std::string> args) {
+  const auto p = parse(args);
+  EXPECT_FALSE(p.cl.has_value());
+  EXPECT_EQ(p.exit_code, 2) << args.back();
+}
+
+TEST(Options, TheDefaultsAreTheCameraAndTheServicesSocket) {
+  const auto p = parse({"--table", "t.tmx"});
+  ASSERT_TRUE(p.cl.has_value());
+  const auto& o = p.cl->daemon;
+  EXPECT_EQ(o.source, "kinect");  // never the simulator by default
+  EXPECT_EQ(o.table, "t.tmx");
+  EXPECT_EQ(o.server.socket_path, "/run/tofmat/tofmatd.sock");
+  EXPECT_EQ(o.server.socket_mode, 0660u);
+  EXPECT_TRUE(o.server.tcp.empty());
+  EXPECT_EQ(o.profile.name, "handheld");
+  EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFixed);
+  EXPECT_EQ(o.queue_frames, 2u);
+  EXPECT_EQ(p.cl->log_level, "info");
+  // This test program is not installed: no simulator data beside it, and no
+  // path of the build machine compiled in.
+  EXPECT_EQ(o.source_options.sim_data_dir, "");
+}
+
+TEST(Options, EveryFlagReachesItsOption) {
+  const auto token = temp_file("token", "0123456789abcdef-secret\n");
+  const auto p = parse({"--table", "t.tmx", "--source", "sim:static,material=cork", "--profile", "sorting",
+                        "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600", "--tcp",
+                        "127.0.0.1:7020", "--token-file", token.string(), "--roi", "10,20,60,70", "--candidates",
+                        "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--queue-frames", "4",
+                        "--max-clients", "9", "--sim-data", "/opt/sim", "--log-level", "debug"});
+  std::filesystem::remove(token);
+  ASSERT_TRUE(p.cl.has_value());
+  const auto& o = p.cl->daemon;
+  EXPECT_EQ(o.source, "sim:static,material=cork");
+  EXPECT_EQ(o.profile.name, "sorting");
+  EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFloat);
+  EXPECT_EQ(o.server.socket_path, "/tmp/s.sock");
+  EXPECT_EQ(o.server.socket_mode, 0600u);
+  EXPECT_EQ(o.server.tcp, "127.0.0.1:7020");
+  EXPECT_EQ(o.server.token, "0123456789abcdef-secret");
+  EXPECT_EQ(o.profile.roi.x0, 10);
+  EXPECT_EQ(o.profile.roi.y1, 70);
+  EXPECT_EQ(o.profile.candidates, (std::vector<std::string>{"pvc", "epvc"}));
+  EXPECT_EQ(o.profile.top_k, 3);
+  EXPECT_EQ(o.profile.burst, 12);
+  EXPECT_EQ(o.profile.smooth, 5);
+  EXPECT_EQ(o.queue_frames, 4u);
+  EXPECT_EQ(o.server.max_clients, 9u);
+  EXPECT_EQ(o.source_options.sim_data_dir, "/opt/sim");
+  EXPECT_EQ(p.cl->log_level, "debug");
+}
+
+TEST(Options, TheConfigurationFileHasTheFlagsKeysAndTheCommandLineWins) {
+  const auto cfg = temp_file("cfg.toml", "table = \"/usr/share/t.tmx\"\nprofile = \"segmentation\"\nsmooth = 7\n"
+                                         "candidates = [\"cork\", \"paper\"]\nlog-level = \"warn\"\n");
+  const auto from_file = parse({"--config", cfg.string()});
+  const auto overridden = parse({"--config", cfg.string(), "--profile", "sorting"});
+  std::filesystem::remove(cfg);
+  ASSERT_TRUE(from_file.cl.has_value());
+  EXPECT_EQ(from_file.cl->daemon.table, "/usr/share/t.tmx");
+  EXPECT_EQ(from_file.cl->daemon.profile.name, "segmentation");
+  EXPECT_EQ(from_file.cl->daemon.profile.smooth, 7);
+  EXPECT_EQ(from_file.cl->daemon.profile.candidates, (std::vector<std::string>{"cork", "paper"}));
+  EXPECT_EQ(from_file.cl->log_level, "warn");
+  EXPECT_EQ(from_file.cl->daemon.source, "kinect");  // the file does not name one: still the camera
+  ASSERT_TRUE(overridden.cl.has_value());
+  EXPECT_EQ(overridden.cl->daemon.profile.name, "sorting");
+}
+
+TEST(Options, HelpAndVersionExitWithZero) {
+  for (const char* flag : {"--help", "--version"}) {
+    const auto p = parse({flag});
+    EXPECT_FALSE(p.cl.has_value());
+    EXPECT_EQ(p.exit_code, 0) << flag;
+  }
+}
+
+TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
+  const auto short_token = temp_file("short_token", "too short\n");
+  expect_usage_error({});                                                      // no table
+  expect_usage_error({"--table", "t", "--no-such-flag"});                      // unknown flag
+  expect_usage_error({"--table", "t", "stray"});                               // stray argument
+  expect_usage_error({"--table"});                                             // a flag without its value
+  expect_usage_error({"--table", "t", "--top-k", "many"});                     // not a number
+  expect_usage_error({"--table", "t", "--queue-frames", "0"});                 // out of range
+  expect_usage_error({"--table", "t", "--max-clients", "5000"});               // out of range
+  expect_usage_error({"--table", "t", "--log-level", "chatty"});               // not a level
+  expect_usage_error({"--table", "t", "--backend", "gpu"});                    // not a backend
+  expect_usage_error({"--table", "t", "--roi", "1,2,3"});                      // three numbers
+  expect_usage_error({"--table", "t", "--roi", "1;2;3;4"});                    // wrong separators
+  expect_usage_error({"--table", "t", "--socket-mode", "0999"});               // not octal
+  expect_usage_error({"--table", "t", "--socket-mode", "01777"});              // beyond 0777
+  expect_usage_error({"--table", "t", "--tcp", "127.0.0.1:7020"});             // TCP without a token
+  expect_usage_error({"--table", "t", "--token-file", short_token.string()});  // a token under 16 characters
+  expect_usage_error({"--table", "t", "--token-file", "/nonexistent/token"});  // a token file not there
+  expect_usage_error({"--config", "/nonexistent/tofmatd.toml"});               // a config file not there
+  std::filesystem::remove(short_token);
+}
+
+}  // namespace
