@@ -13,8 +13,8 @@ SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 
 # Debian 12 packages: compilers and build tools, GoogleTest, zlib (CRC-32),
 # clang and its runtime for libFuzzer, libusb-1.0 (the Kinect driver); for
-# tofmatd: spdlog (logging), CLI11 (flags and config file), OpenCV imgproc
-# (label-map cleaning).
+# tofmatd: spdlog (logging), CLI11 (flags and config file); OpenCV imgproc for
+# the tests (the float reference of the segmentation's integer smoothing).
 APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev \
                 libspdlog-dev libcli11-dev libopencv-imgproc-dev
 
@@ -93,7 +93,7 @@ fuzz: setup
 	done
 
 # Everything that runs on the box, for aarch64: tofmatd (with libusb, spdlog,
-# CLI11, OpenCV), the core, the driver, the protocol, the simulator source, and
+# CLI11), the core, the driver, the protocol, the simulator source, and
 # the GoogleTest suites (run under qemu-aarch64 by cross-test).
 cross: setup-cross
 	cmake -S . -B $(CROSS) -G Ninja -DCMAKE_TOOLCHAIN_FILE=cmake/aarch64-linux-gnu.cmake -DCMAKE_BUILD_TYPE=Release \

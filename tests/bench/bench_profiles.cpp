@@ -4,7 +4,7 @@
 // timing (it exits non-zero only on bad options or missing data).
 //
 //   tofmat_bench_profiles [--profile all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|
-//                                    smooth-box|smooth-median]
+//                                    smooth-box|smooth-majority]
 //                         [--reps R] [--kernel best|scalar] [--smooth N] [--no-truth]
 //                         [--table DIR|FILE.tmx] [--sim-data DIR] [--candidates a,b,c]
 //
@@ -34,10 +34,10 @@
 //                 600, 900 and 1200 mm: 3 frames (noise seeds differ)
 //   unpack-full, decode-full  (for the segmentation breakdown) the full-frame
 //                 unpack alone, and it followed by decode_frame_fixed
-//   smooth-box, smooth-median  segmentation's smoothing alone: its features'
-//                 box filters (with the conversions around them, without
-//                 bin_indices) and the label map's median (OpenCV), on frames
-//                 decoded and labelled beforehand
+//   smooth-box, smooth-majority  segmentation's smoothing alone: its
+//                 features' box mean and the label map's majority filter
+//                 (frame_smoothing.hpp, the whole frame as one band), on
+//                 frames decoded and labelled beforehand
 // The table: the real database (TOFMAT_DB_DIR, loaded as tofmatd loads a
 // folder: load_table_file, bins 600..1200 mm) unless --table says otherwise;
 // profiles with the daemon's default configuration (ProfileConfig{}: every
@@ -58,8 +58,6 @@
 // stages, and the error against the simulator's truth and against the float
 // reference (Backend::kFloat) where one exists; then the segmentation
 // profile's steps.
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -78,6 +76,7 @@
 #include "tofmat/core/exemplar_table.hpp"
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/fixed_kernel.hpp"
+#include "tofmat/core/frame_smoothing.hpp"
 #include "tofmat/daemon/daemon.hpp"
 #include "tofmat/daemon/frame.hpp"
 #include "tofmat/daemon/profile.hpp"
@@ -114,18 +113,19 @@ struct Options {
   std::string profile = "all", kernel = "best", table = TOFMAT_DB_DIR, sim_data = TOFMAT_SIM_DATA_DIR;
   long reps = -1;  // -1: 1 for one profile, 7 for all
   int smooth = -1;  // -1: the profile's default
+  int threads = 1;  // segmentation: threads sharing each frame (one core unless told)
   bool truth = true;
   std::vector<std::string> candidates;
 };
 
 const std::vector<std::string> kProfiles{"all",          "handheld",    "sorting",    "sorting-idle", "segmentation",
-                                         "unpack-full", "decode-full", "smooth-box", "smooth-median"};
+                                         "unpack-full", "decode-full", "smooth-box", "smooth-majority"};
 
 [[noreturn]] void usage(const char* why) {
   std::fprintf(stderr,
                "error: %s\nusage: tofmat_bench_profiles [--profile "
-               "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-median]\n"
-               "                             [--reps R] [--kernel best|scalar] [--smooth N] [--no-truth]\n"
+               "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
+               "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
                "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c]\n",
                why);
   std::exit(2);
@@ -163,6 +163,9 @@ Options parse(int argc, char** argv) {
     } else if (a == "--smooth") {
       o.smooth = static_cast<int>(std::strtol(v.c_str(), &end, 10));
       if (*end != '\0') usage("--smooth takes an odd number of pixels");
+    } else if (a == "--threads") {
+      o.threads = static_cast<int>(std::strtol(v.c_str(), &end, 10));
+      if (*end != '\0' || o.threads < 0) usage("--threads takes a count >= 0 (0: every core)");
     } else if (a == "--table") {
       o.table = v;
     } else if (a == "--sim-data") {
@@ -410,52 +413,33 @@ struct Steps {
   }
 };
 
-// The segmentation profile's smoothing alone (segmentation_profile.cpp: its
-// smooth_features() without the bins, and the label map's median), on the
-// decoded frames and smooth = 1 label maps of the packets, made beforehand.
+// The segmentation profile's smoothing alone, with the classes it runs
+// (frame_smoothing.hpp) on one band, the whole frame: the features' box mean,
+// and the label map's majority filter, on the decoded frames and smooth = 1
+// label maps of the packets, made beforehand.
 struct Smoothing {
   int side = 9;
+  int classes = 1;
   std::vector<FixedDecodedFrame> decoded;
   std::vector<std::vector<std::uint8_t>> maps;
-  // (not brace-initialised: cv::Mat{a, b, c} is a 3 x 1 matrix of those values)
-  cv::Mat f0 = cv::Mat(kHeight, kWidth, CV_32F), f1 = cv::Mat(kHeight, kWidth, CV_32F),
-          valid = cv::Mat(kHeight, kWidth, CV_32F);
   std::vector<std::int32_t> q0 = std::vector<std::int32_t>(kPixels), q1 = std::vector<std::int32_t>(kPixels);
+  std::vector<std::uint8_t> cleaned = std::vector<std::uint8_t>(kPixels);
 
   void box_pass() {
+    tofmat::BoxMeanFilter box(kWidth, kHeight, side);
     for (const FixedDecodedFrame& fr : decoded) {
-      for (std::size_t i = 0; i < kPixels; ++i) {
-        const bool ok = fr.flags[i] == 0;
-        const int at = static_cast<int>(i);
-        f0.at<float>(at) = ok ? static_cast<float>(fr.features_q16[0][i] / 65536.0) : 0.0f;
-        f1.at<float>(at) = ok ? static_cast<float>(fr.features_q16[1][i] / 65536.0) : 0.0f;
-        valid.at<float>(at) = ok ? 1.0f : 0.0f;
-      }
-      const cv::Size k(side, side);
-      cv::boxFilter(f0, f0, -1, k, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-      cv::boxFilter(f1, f1, -1, k, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-      cv::boxFilter(valid, valid, -1, k, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-      for (std::size_t i = 0; i < kPixels; ++i) {
-        if (fr.flags[i] != 0) continue;
-        const int at = static_cast<int>(i);
-        const float n = valid.at<float>(at);
-        q0[i] = static_cast<std::int32_t>(std::lround(static_cast<double>(f0.at<float>(at) / n) * 65536.0));
-        q1[i] = static_cast<std::int32_t>(std::lround(static_cast<double>(f1.at<float>(at) / n) * 65536.0));
-      }
+      box.apply(fr.features_q16[0].data(), fr.features_q16[1].data(), fr.flags.data(), 0, kHeight, q0.data(),
+                q1.data());
       g_sink = g_sink + static_cast<std::uint64_t>(q0[kPixels / 2]);
     }
   }
-  // (as the profile: a copy of the map filtered back into a map; here a
-  // scratch one, so that every pass filters the same maps)
-  void median_pass() {
-    for (std::vector<std::uint8_t>& m : maps) {
-      scratch.assign(m.begin(), m.end());
-      cv::Mat labels(kHeight, kWidth, CV_8U, scratch.data());
-      cv::medianBlur(labels.clone(), labels, side);
-      g_sink = g_sink + scratch[kPixels / 2];
+  void majority_pass() {
+    tofmat::MajorityFilter majority(kWidth, kHeight, side, classes);
+    for (const std::vector<std::uint8_t>& m : maps) {
+      majority.apply(m.data(), 0, kHeight, cleaned.data());
+      g_sink = g_sink + cleaned[kPixels / 2];
     }
   }
-  std::vector<std::uint8_t> scratch;
 };
 
 ProfileConfig config_of(const Options& o, const std::string& profile, Backend backend, bool& kernel_applied) {
@@ -464,6 +448,7 @@ ProfileConfig config_of(const Options& o, const std::string& profile, Backend ba
   c.backend = backend;
   c.candidates = o.candidates;
   if (o.smooth > 0) c.smooth = o.smooth;
+  c.threads = o.threads;
   kernel_applied = set_profile_kernel(c, fixed_kernel(o.kernel));
   return c;
 }
@@ -473,6 +458,7 @@ Smoothing smoothing_of(const Options& o, const Packets& ps, const std::shared_pt
   bool applied = false;
   ProfileConfig c = config_of(o, "segmentation", Backend::kFixed, applied);
   sm.side = c.smooth > 1 ? c.smooth : 9;
+  sm.classes = static_cast<int>(c.candidates.empty() ? table->materials().size() : c.candidates.size());
   c.smooth = 1;
   Run run(table, c);
   run.with_truth = false;
@@ -495,12 +481,12 @@ int run_single(const Options& o) {
   const FixedKernel k = fixed_kernel(o.kernel);
   const std::size_t units = ps.packets.size();
   std::string process_kernel = "best";
-  if (o.profile == "smooth-box" || o.profile == "smooth-median") {
+  if (o.profile == "smooth-box" || o.profile == "smooth-majority") {
     Smoothing sm = smoothing_of(o, ps, load_table_file(o.table));
     const bool box = o.profile == "smooth-box";
-    box ? sm.box_pass() : sm.median_pass();  // warm-up
-    for (long r = 0; r < reps; ++r) box ? sm.box_pass() : sm.median_pass();
-    process_kernel = "OpenCV";
+    box ? sm.box_pass() : sm.majority_pass();  // warm-up
+    for (long r = 0; r < reps; ++r) box ? sm.box_pass() : sm.majority_pass();
+    process_kernel = "frame_smoothing";
   } else if (o.profile == "unpack-full" || o.profile == "decode-full") {
     Steps s;
     const bool decode = o.profile == "decode-full";
@@ -705,16 +691,30 @@ int run_all(const Options& o) {
       so.smooth = smooth;
       Run r(table, config_of(so, "segmentation", Backend::kFixed, applied));
       r.with_truth = truth;
-      step("unpack + process (smooth " + std::to_string(smooth) + (smooth == 1 ? ": no box filters, no median" : "") +
+      step("unpack + process (smooth " + std::to_string(smooth) + (smooth == 1 ? ": no box mean, no majority" : "") +
                (truth ? ", with truth: accuracy()" : ", no truth") + ") + encode",
            [&] { r.pass(ps, "segmentation"); });
     }
   }
   Smoothing sm = smoothing_of(o, ps, table);
-  step("smoothing alone: features to float, 3 box filters " + std::to_string(sm.side) + "x" + std::to_string(sm.side) +
-           ", back to Q16 (no bins)",
+  step("smoothing alone: box mean " + std::to_string(sm.side) + "x" + std::to_string(sm.side) +
+           " of the two features (integers)",
        [&] { sm.box_pass(); });
-  step("smoothing alone: median " + std::to_string(sm.side) + " of the label map", [&] { sm.median_pass(); });
+  step("smoothing alone: majority " + std::to_string(sm.side) + "x" + std::to_string(sm.side) + " of the label map",
+       [&] { sm.majority_pass(); });
+  {
+    // The frame split over two threads against one, side by side in this run
+    // (wall time; this machine's cores may be shared with other work).
+    for (const int threads : {1, 2}) {
+      Options so = o;
+      so.threads = threads;
+      Run r(table, config_of(so, "segmentation", Backend::kFixed, applied));
+      r.with_truth = false;
+      step("unpack + process (smooth " + std::to_string(r.config.smooth) + ", no truth) + encode, " +
+               std::to_string(threads) + (threads == 1 ? " thread" : " threads (wall time)"),
+           [&] { r.pass(ps, "segmentation"); });
+    }
+  }
   std::printf("\n");
   for (const auto& n : notes) std::printf("- %s\n", n.c_str());
   std::printf("- the profiles run FixedKernel::kBest internally%s\n",

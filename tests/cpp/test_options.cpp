@@ -67,7 +67,7 @@ TEST(Options, EveryFlagReachesItsOption) {
   const auto p = parse({"--table", "t.tmx", "--source", "sim:static,material=cork", "--profile", "sorting",
                         "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600", "--tcp",
                         "127.0.0.1:7020", "--token-file", token.string(), "--roi", "10,20,60,70", "--candidates",
-                        "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--queue-frames", "4",
+                        "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--threads", "3", "--queue-frames", "4",
                         "--max-clients", "9", "--sim-data", "/opt/sim", "--log-level", "debug"});
   std::filesystem::remove(token);
   ASSERT_TRUE(p.cl.has_value());
@@ -85,6 +85,7 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.profile.top_k, 3);
   EXPECT_EQ(o.profile.burst, 12);
   EXPECT_EQ(o.profile.smooth, 5);
+  EXPECT_EQ(o.profile.threads, 3);
   EXPECT_EQ(o.queue_frames, 4u);
   EXPECT_EQ(o.server.max_clients, 9u);
   EXPECT_EQ(o.source_options.sim_data_dir, "/opt/sim");
@@ -125,6 +126,7 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   expect_usage_error({"--table", "t", "--top-k", "many"});                     // not a number
   expect_usage_error({"--table", "t", "--queue-frames", "0"});                 // out of range
   expect_usage_error({"--table", "t", "--max-clients", "5000"});               // out of range
+  expect_usage_error({"--table", "t", "--threads", "-1"});                     // out of range
   expect_usage_error({"--table", "t", "--log-level", "chatty"});               // not a level
   expect_usage_error({"--table", "t", "--backend", "gpu"});                    // not a backend
   expect_usage_error({"--table", "t", "--roi", "1,2,3"});                      // three numbers

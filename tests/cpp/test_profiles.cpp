@@ -518,7 +518,7 @@ TEST_P(SegmentationSmoothing, LabelMapOfTheWholeFrameWithEachRegionsMaterial) {
   RawFrame f = make_frame(42, scene.patches, noise);
   f.truth = regions_truth(scene);
   // A few dead pixels (no signal) scattered inside every region: they have no
-  // label of their own, and the median filter gives them their neighbours'.
+  // label of their own, and the majority filter gives them their neighbours'.
   std::set<std::size_t> dead;
   for (const auto& p : scene.patches)
     for (int k = 0; k < 6; ++k) {
@@ -575,6 +575,37 @@ TEST_P(SegmentationSmoothing, LabelMapOfTheWholeFrameWithEachRegionsMaterial) {
   ASSERT_TRUE(m.truth_accuracy);
   EXPECT_DOUBLE_EQ(*m.truth_accuracy, static_cast<double>(right) / static_cast<double>(target_pixels));
   EXPECT_GT(*m.truth_accuracy, 0.95);
+}
+
+TEST(Segmentation, TheSameLabelMapWhateverTheThreads) {
+  // Bands of rows on 1, 2, 3 and 7 threads (7 does not divide 424): every
+  // step's windows reach across the bands' edges, so any seam would show.
+  const auto table = real_table();
+  const RegionsScene scene = regions_scene(*table);
+  RawFrame f = make_frame(5, scene.patches, 3.0);
+  std::vector<std::vector<std::uint8_t>> maps;
+  for (int threads : {1, 2, 3, 7}) {
+    ProfileConfig c = config_of("segmentation");
+    c.candidates = scene.materials;
+    c.threads = threads;
+    auto profile = make_profile(c, table);
+    EventLog log;
+    profile->process(f, log.emitter());
+    profile->process(f, log.emitter());  // (the second frame reuses every buffer)
+    ASSERT_EQ(log.maps.size(), 2u);
+    EXPECT_EQ(log.maps[1].labels, log.maps[0].labels) << threads << " threads";
+    maps.push_back(log.maps[0].labels);
+  }
+  for (std::size_t k = 1; k < maps.size(); ++k) EXPECT_EQ(maps[k], maps[0]) << "split " << k;
+}
+
+TEST(Segmentation, RefusesThreadsOutOfRange) {
+  const auto table = real_table();
+  ProfileConfig c = config_of("segmentation");
+  for (int threads : {-1, 65}) {
+    c.threads = threads;
+    EXPECT_THROW(make_profile(c, table), std::invalid_argument) << threads;
+  }
 }
 
 TEST(Segmentation, NoTruthAccuracyWithoutTruthAndTheFullFrameAsDepthImage) {

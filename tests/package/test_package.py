@@ -87,8 +87,9 @@ def test_both_packages_hold_the_same_files_for_their_architecture(deb_amd64: Pat
     assert amd["Version"] == arm["Version"] == tofmat.__version__
     for fields in (amd, arm):
         depends = fields["Depends"]
-        for library in ("libusb-1.0-0", "libspdlog1.10", "libopencv-imgproc406", "libc6", "adduser"):
+        for library in ("libusb-1.0-0", "libspdlog1.10", "libc6", "adduser"):
             assert library in depends, depends
+        assert "opencv" not in depends, depends  # (the box's smoothing is its own integer code)
     files = contents(deb_amd64)
     assert files.keys() == contents(deb_arm64).keys()
     for path in ("/usr/sbin/tofmatd", "/etc/tofmat/tofmatd.toml", "/lib/systemd/system/tofmatd.service",

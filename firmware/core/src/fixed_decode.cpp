@@ -99,21 +99,6 @@ FixedDecodeTables::FixedDecodeTables(const std::vector<float>& p0_rad, std::size
 
 namespace {
 
-// Sizes every plane for `pixels` (keeping the buffers of a reused frame) and
-// clears the flags (the kernels OR saturation into them); every other plane
-// is written whole by the kernels and the finishing stage.
-void size_fixed(FixedDecodedFrame& out, std::size_t pixels) {
-  out.pixels = pixels;
-  for (std::size_t g = 0; g < 3; ++g) {
-    out.phase_turns[g].resize(pixels);
-    out.amplitude_q8[g].resize(pixels);
-    out.depth_q16[g].resize(pixels);
-  }
-  out.combined_q8.resize(pixels);
-  for (auto& f : out.features_q16) f.resize(pixels);
-  out.flags.assign(pixels, 0);
-}
-
 std::uint32_t q8_counts(double v) {
   if (!(v > 0.0)) return 0;
   return static_cast<std::uint32_t>(std::min(std::ceil(v * 256.0), 4294967295.0));
@@ -121,20 +106,6 @@ std::uint32_t q8_counts(double v) {
 std::int64_t q16_mm(double v) {
   if (!(v >= 0.0)) return -1;  // NaN or negative: nothing passes
   return static_cast<std::int64_t>(std::min(std::floor(v * 65536.0), 9.0e18));
-}
-
-FixedPlanes planes(FixedDecodedFrame& f, std::size_t at) {
-  FixedPlanes p;
-  for (std::size_t g = 0; g < 3; ++g) {
-    p.phase[g] = f.phase_turns[g].data() + at;
-    p.amp[g] = f.amplitude_q8[g].data() + at;
-    p.depth[g] = f.depth_q16[g].data() + at;
-  }
-  p.flags = f.flags.data() + at;
-  p.combined = f.combined_q8.data() + at;
-  p.features[0] = f.features_q16[0].data() + at;
-  p.features[1] = f.features_q16[1].data() + at;
-  return p;
 }
 
 }  // namespace
@@ -207,6 +178,35 @@ void phase_amplitude(FixedKernel kernel, const std::int16_t* m0, const std::int1
 
 }  // namespace
 
+// (Every plane other than the flags is written whole by the kernels and the
+// finishing stage; decode_pixels_fixed clears the flags it ORs into.)
+void size_fixed_frame(FixedDecodedFrame& out, std::size_t pixels) {
+  out.pixels = pixels;
+  for (std::size_t g = 0; g < 3; ++g) {
+    out.phase_turns[g].resize(pixels);
+    out.amplitude_q8[g].resize(pixels);
+    out.depth_q16[g].resize(pixels);
+  }
+  out.combined_q8.resize(pixels);
+  for (auto& f : out.features_q16) f.resize(pixels);
+  out.flags.assign(pixels, 0);
+}
+
+FixedPlanes planes_of(FixedDecodedFrame& f, std::size_t at) {
+  if (at > f.pixels || f.flags.size() != f.pixels) throw std::invalid_argument("planes beyond the frame");
+  FixedPlanes p;
+  for (std::size_t g = 0; g < 3; ++g) {
+    p.phase[g] = f.phase_turns[g].data() + at;
+    p.amp[g] = f.amplitude_q8[g].data() + at;
+    p.depth[g] = f.depth_q16[g].data() + at;
+  }
+  p.flags = f.flags.data() + at;
+  p.combined = f.combined_q8.data() + at;
+  p.features[0] = f.features_q16[0].data() + at;
+  p.features[1] = f.features_q16[1].data() + at;
+  return p;
+}
+
 void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& t, std::size_t first, std::size_t n,
                          const FixedThresholds& th, const FixedPlanes& out, FixedKernel kernel) {
   if (first > t.pixels || n > t.pixels - first) throw std::invalid_argument("pixels beyond the frame");
@@ -221,8 +221,8 @@ void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& t, st
 
 void decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, FixedDecodedFrame& out,
                         const DecodeOptions& options, FixedKernel kernel) {
-  size_fixed(out, t.pixels);
-  decode_pixels_fixed(raw, t, 0, t.pixels, fixed_thresholds(options), planes(out, 0), kernel);
+  size_fixed_frame(out, t.pixels);
+  decode_pixels_fixed(raw, t, 0, t.pixels, fixed_thresholds(options), planes_of(out, 0), kernel);
 }
 
 FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& t, const DecodeOptions& options,
@@ -242,7 +242,7 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
   if (t.pixels != n) throw std::invalid_argument("decode tables are for a frame of another size");
   const std::size_t rw = static_cast<std::size_t>(r.x1 - r.x0);
   FixedDecodedFrame out;
-  size_fixed(out, rw * static_cast<std::size_t>(r.y1 - r.y0));
+  size_fixed_frame(out, rw * static_cast<std::size_t>(r.y1 - r.y0));
   for (int y = r.y0; y < r.y1; ++y) {  // a row of the region is contiguous in every plane
     const std::size_t src = static_cast<std::size_t>(y) * static_cast<std::size_t>(width) + static_cast<std::size_t>(r.x0);
     const std::size_t dst = static_cast<std::size_t>(y - r.y0) * rw;
@@ -252,7 +252,7 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
                       out.amplitude_q8[g].data() + dst, out.flags.data() + dst);
     }
   }
-  finish_pixels(kernel, planes(out, 0), out.pixels, fixed_thresholds(options));
+  finish_pixels(kernel, planes_of(out, 0), out.pixels, fixed_thresholds(options));
   return out;
 }
 

@@ -169,18 +169,24 @@ std::size_t PixelClassifier::classify(const std::int32_t* bin, const std::int32_
   return classified;
 }
 
+std::size_t PixelClassifier::classify_range(const std::int32_t* combined_q8, const std::uint8_t* flags,
+                                            const std::int32_t* f0, const std::int32_t* f1, std::size_t n,
+                                            std::uint8_t* labels, FixedKernel kernel) const {
+  std::size_t classified = 0;
+  for (std::size_t at = 0; at < n; at += kChunk) {
+    const std::size_t m = std::min(kChunk, n - at);
+    classified += classify_chunk(combined_q8 + at, flags + at, nullptr, f0 + at, f1 + at, m, labels + at, kernel);
+  }
+  return classified;
+}
+
 std::size_t PixelClassifier::classify(const FixedDecodedFrame& f, std::uint8_t* labels, FixedKernel kernel) const {
   if (f.combined_q8.size() != f.pixels || f.flags.size() != f.pixels || f.features_q16[0].size() != f.pixels ||
       f.features_q16[1].size() != f.pixels) {
     throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
   }
-  std::size_t classified = 0;
-  for (std::size_t at = 0; at < f.pixels; at += kChunk) {
-    const std::size_t m = std::min(kChunk, f.pixels - at);
-    classified += classify_chunk(f.combined_q8.data() + at, f.flags.data() + at, nullptr, f.features_q16[0].data() + at,
-                                 f.features_q16[1].data() + at, m, labels + at, kernel);
-  }
-  return classified;
+  return classify_range(f.combined_q8.data(), f.flags.data(), f.features_q16[0].data(), f.features_q16[1].data(),
+                        f.pixels, labels, kernel);
 }
 
 std::size_t PixelClassifier::classify_frame(const std::int16_t* raw, const FixedDecodeTables& tables,

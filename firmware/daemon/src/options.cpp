@@ -72,6 +72,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
   app.add_option("--burst", o.profile.burst, "sorting: frames per trigger")->capture_default_str();
   app.add_option("--smooth", o.profile.smooth, "segmentation: window side (odd pixels)")->capture_default_str();
+  app.add_option("--threads", o.profile.threads, "segmentation: threads sharing each frame (0: every core)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
   app.add_option("--queue-frames", o.queue_frames, "frames waiting for processing before the oldest is dropped")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));

@@ -2,18 +2,20 @@
 // labelled from one position (m = 1: the two Eq. (10) features at the bin of
 // the pixel's own depth) among a short candidate list. The features are
 // averaged over a small window of valid pixels first (a single pixel's
-// features are a few mm noisy) and the label map is cleaned with a median
-// filter (OpenCV). Runs on the fixed-point decode and the per-pixel
-// classifier (PixelClassifier: AVX2 or scalar, the same labels).
-#include <opencv2/imgproc.hpp>
-
+// features are a few mm noisy) and the label map is cleaned with a majority
+// filter, both in integers (frame_smoothing.hpp). Runs on the fixed-point
+// decode and the per-pixel classifier (PixelClassifier: AVX2, NEON or
+// scalar, the same labels). The frame is split into bands of rows over the
+// configured threads; every step gives the same values whatever the split.
+#include <algorithm>
 #include <array>
 #include <cmath>
 
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/fixed_decode.hpp"
-#include "tofmat/core/fixed_depth_bins.hpp"
+#include "tofmat/core/frame_smoothing.hpp"
 #include "tofmat/core/pixel_classifier.hpp"
+#include "tofmat/daemon/band_workers.hpp"
 #include "tofmat/daemon/region_matcher.hpp"
 
 namespace tofmat::daemon {
@@ -28,30 +30,23 @@ class SegmentationProfile : public Profile {
         table_(std::move(table)),
         compact_(*table_, candidate_indices(*table_, c.candidates)),
         pixels_(compact_, table_->bins()),
-        bin_(kPixels),
-        q16_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)},
-        f0_(kHeight, kWidth, CV_32F),
-        f1_(kHeight, kWidth, CV_32F),
-        valid_(kHeight, kWidth, CV_32F) {
+        thresholds_(fixed_thresholds(DecodeOptions{})),
+        workers_(std::min(BandWorkers::bands_for(c.threads), kHeight)),
+        mean_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)},
+        unclean_(kPixels) {
     for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
+    for (int b = 0; b < workers_.bands(); ++b) {
+      box_.emplace_back(kWidth, kHeight, config_.smooth);
+      majority_.emplace_back(kWidth, kHeight, config_.smooth, static_cast<int>(names_.size()));
+    }
   }
 
   std::optional<PixelRegion> input_region() const override { return PixelRegion{0, 0, kWidth, kHeight}; }
 
   void process(const RawFrame& frame, const Emitter& emit) override {
-    // Into the same buffers every frame (a fresh full-frame decode costs more
-    // in page faults than in arithmetic).
-    decode_frame_fixed(frame.raw.data(), frame.calibration->fixed_tables, frame_);
     protocol::LabelMapEvent e;
     e.labels.resize(kPixels);
-    if (config_.smooth > 1) {
-      smooth_features();
-      pixels_.classify(bin_.data(), q16_[0].data(), q16_[1].data(), kPixels, e.labels.data());
-      cv::Mat labels(kHeight, kWidth, CV_8U, e.labels.data());  // (a view: the filter writes through)
-      cv::medianBlur(labels.clone(), labels, config_.smooth);
-    } else {
-      pixels_.classify(frame_, e.labels.data());
-    }
+    label(frame, e.labels.data());
     e.frame = frame.sequence;
     e.timestamp_ns = frame.arrival_ns;
     e.width = kWidth;
@@ -71,35 +66,41 @@ class SegmentationProfile : public Profile {
   void reset() override {}
 
  private:
-  // The features averaged over a smooth x smooth window of valid pixels
-  // (OpenCV box filters, in place in planes allocated once), back in Q16 mm,
-  // and each pixel's bin (-1 where the pixel is invalid or out of the bins).
-  void smooth_features() {
-    cv::Mat& f0 = f0_;
-    cv::Mat& f1 = f1_;
-    cv::Mat& valid = valid_;
-    for (std::size_t i = 0; i < kPixels; ++i) {
-      const bool ok = frame_.flags[i] == 0;
-      const int at = static_cast<int>(i);
-      f0.at<float>(at) = ok ? static_cast<float>(frame_.features_q16[0][i] / 65536.0) : 0.0f;
-      f1.at<float>(at) = ok ? static_cast<float>(frame_.features_q16[1][i] / 65536.0) : 0.0f;
-      valid.at<float>(at) = ok ? 1.0f : 0.0f;
-    }
-    const cv::Size k(config_.smooth, config_.smooth);
-    cv::boxFilter(f0, f0, -1, k, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    cv::boxFilter(f1, f1, -1, k, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    cv::boxFilter(valid, valid, -1, k, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
-    bin_indices(FixedKernel::kBest, frame_.combined_q8.data(), frame_.flags.data(), kPixels, pixels_.binning(),
-                bin_.data());
-    for (std::size_t i = 0; i < kPixels; ++i) {
-      // (A pixel with a bin is valid, so its own window counts it: n >= 1.)
-      if (bin_[i] < 0) continue;
-      const int at = static_cast<int>(i);
-      const float n = valid.at<float>(at);
-      // |mean| <= the largest |feature| (9375 mm): Q16 fits int32.
-      q16_[0][i] = static_cast<std::int32_t>(std::lround(static_cast<double>(f0.at<float>(at) / n) * 65536.0));
-      q16_[1][i] = static_cast<std::int32_t>(std::lround(static_cast<double>(f1.at<float>(at) / n) * 65536.0));
-    }
+  // Rows [y0, y1) of band b.
+  std::pair<int, int> rows(int b) const {
+    return {b * kHeight / workers_.bands(), (b + 1) * kHeight / workers_.bands()};
+  }
+  static std::size_t at(int y) { return static_cast<std::size_t>(y) * static_cast<std::size_t>(kWidth); }
+
+  // Decode (into the same buffers every frame: a fresh full-frame decode
+  // costs more in page faults than in arithmetic), features smoothed, each
+  // pixel classified, the label map cleaned: each step over every band
+  // before the next, since the windows reach into the neighbouring bands.
+  void label(const RawFrame& frame, std::uint8_t* labels) {
+    size_fixed_frame(frame_, kPixels);  // (no allocation once sized; restores a frame an exception left lent)
+    workers_.run([&](int b) {
+      const auto [y0, y1] = rows(b);
+      decode_pixels_fixed(frame.raw.data(), frame.calibration->fixed_tables, at(y0), at(y1) - at(y0), thresholds_,
+                          planes_of(frame_, at(y0)));
+    });
+    const bool smooth = config_.smooth > 1;
+    workers_.run([&](int b) {
+      const auto [y0, y1] = rows(b);
+      const std::int32_t* f0 = frame_.features_q16[0].data();
+      const std::int32_t* f1 = frame_.features_q16[1].data();
+      if (smooth) {
+        box_[static_cast<std::size_t>(b)].apply(f0, f1, frame_.flags.data(), y0, y1, mean_[0].data(), mean_[1].data());
+        f0 = mean_[0].data();
+        f1 = mean_[1].data();
+      }
+      pixels_.classify_range(frame_.combined_q8.data() + at(y0), frame_.flags.data() + at(y0), f0 + at(y0),
+                             f1 + at(y0), at(y1) - at(y0), (smooth ? unclean_.data() : labels) + at(y0));
+    });
+    if (!smooth) return;
+    workers_.run([&](int b) {
+      const auto [y0, y1] = rows(b);
+      majority_[static_cast<std::size_t>(b)].apply(unclean_.data(), y0, y1, labels);
+    });
   }
 
  private:
@@ -119,10 +120,13 @@ class SegmentationProfile : public Profile {
   std::shared_ptr<const ExemplarTable> table_;
   CompactTable compact_;
   PixelClassifier pixels_;
+  FixedThresholds thresholds_;
+  BandWorkers workers_;
   FixedDecodedFrame frame_;
-  std::vector<std::int32_t> bin_;
-  std::array<std::vector<std::int32_t>, 2> q16_;
-  cv::Mat f0_, f1_, valid_;  // the smoothing's planes
+  std::vector<BoxMeanFilter> box_;         // per band
+  std::vector<MajorityFilter> majority_;   // per band
+  std::array<std::vector<std::int32_t>, 2> mean_;  // the smoothed features (Q16 mm)
+  std::vector<std::uint8_t> unclean_;              // the labels before the majority filter
   std::vector<std::string> names_;
 };
 

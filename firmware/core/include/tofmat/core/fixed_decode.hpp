@@ -105,6 +105,12 @@ void finish_pixels_scalar(const FixedPlanes& planes, std::size_t n, const FixedT
 // tiled consumer (PixelClassifier::classify_frame) keeps in cache.
 void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& tables, std::size_t first, std::size_t n,
                          const FixedThresholds& th, const FixedPlanes& out, FixedKernel kernel = FixedKernel::kBest);
+// Sizes every plane of `out` for `pixels` (a reused frame keeps its buffers),
+// and the planes of `frame` from pixel `first` on (throws
+// std::invalid_argument beyond the frame): for a consumer that decodes a
+// frame in pieces (rows split over threads) with decode_pixels_fixed.
+void size_fixed_frame(FixedDecodedFrame& out, std::size_t pixels);
+FixedPlanes planes_of(FixedDecodedFrame& frame, std::size_t first);
 #if defined(__x86_64__)
 void finish_pixels_avx2(const FixedPlanes& planes, std::size_t n, const FixedThresholds& th);  // AVX2 CPUs only
 #endif

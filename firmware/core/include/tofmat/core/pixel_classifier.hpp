@@ -48,6 +48,11 @@ class PixelClassifier {
   std::size_t classify(const std::int32_t* bin, const std::int32_t* f0_q16, const std::int32_t* f1_q16, std::size_t n,
                        std::uint8_t* labels, FixedKernel kernel = FixedKernel::kBest) const;
 
+  // The same from planes of n pixels (a piece of a decoded frame: its
+  // combined depth, flags and two features, or features smoothed beforehand).
+  std::size_t classify_range(const std::int32_t* combined_q8, const std::uint8_t* flags, const std::int32_t* f0_q16,
+                             const std::int32_t* f1_q16, std::size_t n, std::uint8_t* labels,
+                             FixedKernel kernel = FixedKernel::kBest) const;
   // Decode, features and classification of a whole raw frame (9 x
   // tables.pixels samples) in one pass over tiles that stay in cache: only the
   // labels reach memory (the segmentation's hot path). The same labels as

@@ -4,7 +4,8 @@
 //   handheld      ROI at the centre, depth-bin accumulation, partial matching
 //                 every frame, reset when the target leaves or jumps
 //   segmentation  the full frame, one position (m = 1), per-pixel labels of
-//                 a short candidate list, cleaned with OpenCV
+//                 a short candidate list, smoothed and cleaned in integers,
+//                 the frame split over `threads`
 //   sorting       nothing until a trigger; then a burst of frames over the
 //                 belt ROI, accumulated and classified once
 #pragma once
@@ -33,7 +34,8 @@ struct ProfileConfig {
   int burst = 8;                        // sorting: frames per trigger
   double min_valid_fraction = 0.5;      // handheld/sorting: a target fills the ROI
   double jump_mm = 150.0;               // handheld: a depth jump between frames is a new target
-  int smooth = 9;                       // segmentation: box filter side for the features, median for labels
+  int smooth = 9;                       // segmentation: window side of the features' mean and the labels' majority
+  int threads = 0;                      // segmentation: threads sharing each frame (0: every core)
 };
 
 // Throws std::invalid_argument naming what is wrong (unknown profile,
