@@ -77,6 +77,8 @@
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/fixed_kernel.hpp"
 #include "tofmat/core/frame_smoothing.hpp"
+#include "tofmat/core/pixel_classifier.hpp"
+#include "tofmat/core/compact_table.hpp"
 #include "tofmat/daemon/daemon.hpp"
 #include "tofmat/daemon/frame.hpp"
 #include "tofmat/daemon/profile.hpp"
@@ -695,6 +697,40 @@ int run_all(const Options& o) {
                (truth ? ", with truth: accuracy()" : ", no truth") + ") + encode",
            [&] { r.pass(ps, "segmentation"); });
     }
+  }
+  {
+    // The full frame from the packet to the labels without smoothing, as
+    // "unpack + process (smooth 1 ...)" but without the daemon's event: once
+    // whole-frame stage by stage (the unpack writes every sample, the decode
+    // reads them back), once band by band (8 rows unpacked, decoded and
+    // classified while their samples are still in the cache).
+    const PixelClassifier pc(CompactTable(*table, {}), table->bins());
+    const FixedThresholds th = fixed_thresholds(DecodeOptions{});
+    std::vector<std::int16_t> raw(9 * kPixels);
+    std::vector<std::uint8_t> labels(kPixels);
+    FixedDecodedFrame fr;
+    size_fixed_frame(fr, kPixels);
+    step("unpack, decode, classify (no smoothing, no event): stage by stage over the whole frame", [&] {
+      for (const Packet& p : ps.packets) {
+        kinect::unpack_depth_packet_region(p.bytes.data(), raw.data(), PixelRegion{0, 0, kWidth, kHeight});
+        decode_pixels_fixed(raw.data(), ps.calibration->fixed_tables, 0, kPixels, th, planes_of(fr, 0));
+        pc.classify(fr, labels.data());
+        g_sink = g_sink + labels[kPixels / 2];
+      }
+    });
+    step("unpack, decode, classify (no smoothing, no event): band by band, 8 rows", [&] {
+      for (const Packet& p : ps.packets) {
+        for (int y = 0; y < kHeight; y += 8) {
+          const int y1 = std::min(y + 8, kHeight);
+          const std::size_t at = static_cast<std::size_t>(y) * kWidth, n = static_cast<std::size_t>(y1 - y) * kWidth;
+          kinect::unpack_depth_packet_region(p.bytes.data(), raw.data(), PixelRegion{0, y, kWidth, y1});
+          const FixedPlanes band = planes_of(fr, at);
+          decode_pixels_fixed(raw.data(), ps.calibration->fixed_tables, at, n, th, band);
+          pc.classify_range(band.combined, band.flags, band.features[0], band.features[1], n, labels.data() + at);
+        }
+        g_sink = g_sink + labels[kPixels / 2];
+      }
+    });
   }
   Smoothing sm = smoothing_of(o, ps, table);
   step("smoothing alone: box mean " + std::to_string(sm.side) + "x" + std::to_string(sm.side) +

@@ -53,8 +53,8 @@ std::int32_t brute_mean(const Features& f, const std::vector<std::int32_t>& plan
       s += static_cast<std::int64_t>(std::floor((plane[i] + 128.0) / 256.0));
       ++n;
     }
-  return static_cast<std::int32_t>(std::floor((256.0 * static_cast<double>(s) + static_cast<double>(n / 2)) /
-                                              static_cast<double>(n)));
+  const double mean = std::floor((256.0 * static_cast<double>(s) + static_cast<double>(n / 2)) / static_cast<double>(n));
+  return static_cast<std::int32_t>(std::clamp(mean, static_cast<double>(INT32_MIN + 1), static_cast<double>(INT32_MAX)));
 }
 
 void expect_box_means(const Features& f, int side, const std::vector<std::int32_t>& o0,
@@ -115,15 +115,16 @@ TEST(BoxMeanFilter, AFullFrameAtTheExtremesWithTheWidestWindow) {
 }
 
 TEST(BoxMeanFilter, OutOfRangeInputStaysDefined) {
-  // Values beyond the decode's range are clamped at 2^14 mm, never overflow.
+  // Values beyond the decode's range never overflow: the Q8 values fit 24
+  // bits, and the mean saturates short of kFixedInvalid.
   Features f{5, 5, std::vector<std::int32_t>(25, INT32_MAX), std::vector<std::int32_t>(25, INT32_MIN + 1),
              std::vector<std::uint8_t>(25, 0)};
   std::vector<std::int32_t> o0(25), o1(25);
   BoxMeanFilter box(5, 5, 15);
   box.apply(f.f0.data(), f.f1.data(), f.flags.data(), 0, 5, o0.data(), o1.data());
   for (std::size_t i = 0; i < 25; ++i) {
-    EXPECT_EQ(o0[i], 1 << 30) << i;  // 2^22 in Q8 is 2^30 in Q16
-    EXPECT_EQ(o1[i], -(1 << 30)) << i;
+    EXPECT_EQ(o0[i], INT32_MAX) << i;      // 2^23 in Q8 would be 2^31 in Q16
+    EXPECT_EQ(o1[i], INT32_MIN + 1) << i;  // -2^31 would be kFixedInvalid
   }
 }
 
@@ -136,6 +137,29 @@ TEST(BoxMeanFilter, BandsGiveWhatTheWholeFrameGives) {
     band.apply(f.f0.data(), f.f1.data(), f.flags.data(), y0, y1, b0.data(), b1.data());
   EXPECT_EQ(b0, w0);
   EXPECT_EQ(b1, w1);
+}
+
+TEST(BoxMeanFilter, TheKernelsAgreeBitForBit) {
+  // Widths that are not a multiple of four (the vector kernel's tail), random
+  // values over the whole int32 range as well as the decode's, every side.
+  for (auto [w, h] : {std::pair{512, 60}, std::pair{37, 23}, std::pair{3, 17}}) {
+    for (const bool wild : {false, true}) {
+      Features f = random_features(w, h, 0.2, static_cast<std::uint32_t>(w + h + wild));
+      if (wild) {
+        std::mt19937 rng(7);
+        for (std::size_t i = 0; i < f.f0.size(); ++i) f.f0[i] = static_cast<std::int32_t>(rng()), f.f1[i] = -f.f0[i] / 3;
+      }
+      for (int side : {1, 5, 9, 15}) {
+        std::vector<std::int32_t> a0(f.f0.size()), a1(f.f0.size()), b0(f.f0.size()), b1(f.f0.size());
+        BoxMeanFilter s(w, h, side), v(w, h, side);
+        s.apply(f.f0.data(), f.f1.data(), f.flags.data(), 0, h, a0.data(), a1.data(), tofmat::FixedKernel::kScalar);
+        v.apply(f.f0.data(), f.f1.data(), f.flags.data(), 0, h, b0.data(), b1.data(), tofmat::FixedKernel::kBest);
+        ASSERT_EQ(a0, b0) << w << "x" << h << " side " << side << (wild ? " wild" : "");
+        ASSERT_EQ(a1, b1) << w << "x" << h << " side " << side << (wild ? " wild" : "");
+        if (wild && w == 37 && side == 5) expect_box_means(f, side, a0, a1);  // (the definition holds there too)
+      }
+    }
+  }
 }
 
 TEST(BoxMeanFilter, RefusesBadSidesAndBands) {
@@ -189,17 +213,18 @@ std::vector<std::uint8_t> random_labels(int w, int h, int classes, double unlabe
 
 TEST(MajorityFilter, EveryLabelIsItsWindowsMajority) {
   for (int classes : {1, 2, 5, 15, 16, 17, 40, 254, 255})
-    for (int side : {1, 3, 9, 15}) {
-      const int w = 41, h = 29;
-      const auto l = random_labels(w, h, classes, 0.1, static_cast<std::uint32_t>(classes * 100 + side));
-      std::vector<std::uint8_t> out(l.size(), 77);
-      MajorityFilter mf(w, h, side, classes);
-      mf.apply(l.data(), 0, h, out.data());
-      for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
-          ASSERT_EQ(out[static_cast<std::size_t>(y * w + x)], brute_majority(l, w, h, x, y, side, classes))
-              << "classes " << classes << " side " << side << " at " << x << "," << y;
-    }
+    for (int side : {1, 3, 9, 15})
+      // (frames narrower and lower than the window too: its edges overlap)
+      for (auto [w, h] : {std::pair{41, 29}, std::pair{3, 20}, std::pair{10, 4}, std::pair{16, 16}}) {
+        const auto l = random_labels(w, h, classes, 0.1, static_cast<std::uint32_t>(classes * 100 + side + w));
+        std::vector<std::uint8_t> out(l.size(), 77);
+        MajorityFilter mf(w, h, side, classes);
+        mf.apply(l.data(), 0, h, out.data());
+        for (int y = 0; y < h; ++y)
+          for (int x = 0; x < w; ++x)
+            ASSERT_EQ(out[static_cast<std::size_t>(y * w + x)], brute_majority(l, w, h, x, y, side, classes))
+                << "classes " << classes << " side " << side << " " << w << "x" << h << " at " << x << "," << y;
+      }
 }
 
 TEST(MajorityFilter, CleansIsolatedPixelsAndKeepsEdges) {

@@ -159,6 +159,8 @@ namespace {
 void finish_pixels(FixedKernel kernel, const FixedPlanes& p, std::size_t n, const FixedThresholds& th) {
 #if defined(__x86_64__)
   if (kernel == FixedKernel::kBest && cpu_has_avx2()) return finish_pixels_avx2(p, n, th);
+#elif defined(__aarch64__)
+  if (kernel == FixedKernel::kBest) return finish_pixels_neon(p, n, th);
 #endif
   (void)kernel;
   finish_pixels_scalar(p, n, th);
@@ -189,7 +191,7 @@ void size_fixed_frame(FixedDecodedFrame& out, std::size_t pixels) {
   }
   out.combined_q8.resize(pixels);
   for (auto& f : out.features_q16) f.resize(pixels);
-  out.flags.assign(pixels, 0);
+  out.flags.resize(pixels);
 }
 
 FixedPlanes planes_of(FixedDecodedFrame& f, std::size_t at) {

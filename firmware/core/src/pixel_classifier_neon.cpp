@@ -15,8 +15,9 @@ namespace {
 
 constexpr std::size_t kMaxSlots = 256;
 
-// s for the four slots at `s` (each a packed pair): (d0^2 + d1^2) << doubled | absent.
-template <bool OneValid>
+// s for the four slots at `s` (each a packed pair): (d0^2 + d1^2) << doubled
+// | absent (the absent mask only at bins that need it: elsewhere it is 0).
+template <bool OneValid, bool Absent>
 inline int32x4_t sums4(const PixelClassifier::Layout& t, std::size_t s, int16x8_t q) {
   const int16x8_t e = vreinterpretq_s16_s32(vld1q_s32(t.pairs.data() + s));
   int16x8_t d = vmaxq_s16(vqsubq_s16(q, e), vdupq_n_s16(-32767));  // clamp(q - e, +-32767)
@@ -25,28 +26,38 @@ inline int32x4_t sums4(const PixelClassifier::Layout& t, std::size_t s, int16x8_
   const int32x4_t hi = vmull_high_s16(d, d);                          // of slots 2, 3
   int32x4_t sum = vpaddq_s32(lo, hi);                                  // <= 2 * 32767^2 < 2^31
   if constexpr (OneValid) sum = vshlq_s32(sum, vld1q_s32(t.doubled.data() + s));
-  return vorrq_s32(sum, vld1q_s32(t.absent.data() + s));
+  if constexpr (Absent) sum = vorrq_s32(sum, vld1q_s32(t.absent.data() + s));
+  return sum;
 }
 
-template <bool OneValid>
+// Quads: the slots / 4 of the table when known at compile time (the loops
+// unroll and the sums stay in registers), 0 for any.
+template <bool OneValid, std::size_t Quads>
 std::size_t classify(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q, std::size_t n,
                      std::uint8_t* labels) {
-  const std::size_t quads = t.slots / 4;
+  const std::size_t quads = Quads != 0 ? Quads : t.slots / 4;
   // Each slot's rank (the inverse of slot_of), 255 for none: the label of a
   // slot holding the least sum, the lowest of them by vminvq.
   std::array<std::uint8_t, kMaxSlots> rank_of{};
   for (std::size_t r = 0; r < t.slots; ++r) rank_of[t.slot_of[r]] = static_cast<std::uint8_t>(r);
   std::size_t classified = 0;
-  int32x4_t s[kMaxSlots / 4];
+  int32x4_t s[Quads != 0 ? Quads : kMaxSlots / 4];
   for (std::size_t i = 0; i < n; ++i) {
     labels[i] = PixelClassifier::kUnclassified;
     if (bin[i] < 0) continue;
     const int16x8_t qv = vreinterpretq_s16_s32(vdupq_n_s32(q[i]));
     const std::size_t base = static_cast<std::size_t>(bin[i]) * t.slots;
     int32x4_t m = vdupq_n_s32(0x7FFFFFFF);
-    for (std::size_t k = 0; k < quads; ++k) {
-      s[k] = sums4<OneValid>(t, base + 4 * k, qv);
-      m = vminq_s32(m, s[k]);
+    if (t.needs_absent[static_cast<std::size_t>(bin[i])]) {
+      for (std::size_t k = 0; k < quads; ++k) {
+        s[k] = sums4<OneValid, true>(t, base + 4 * k, qv);
+        m = vminq_s32(m, s[k]);
+      }
+    } else {
+      for (std::size_t k = 0; k < quads; ++k) {
+        s[k] = sums4<OneValid, false>(t, base + 4 * k, qv);
+        m = vminq_s32(m, s[k]);
+      }
     }
     const std::int32_t least = vminvq_s32(m);
     if (least == 0x7FFFFFFF) continue;  // no candidate has a value here
@@ -68,11 +79,23 @@ std::size_t classify(const PixelClassifier::Layout& t, const std::int32_t* bin, 
   return classified;
 }
 
+template <bool OneValid>
+std::size_t classify_quads(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
+                           std::size_t n, std::uint8_t* labels) {
+  switch (t.slots / 4) {  // up to 32 candidates unrolled
+    case 2: return classify<OneValid, 2>(t, bin, q, n, labels);
+    case 4: return classify<OneValid, 4>(t, bin, q, n, labels);
+    case 6: return classify<OneValid, 6>(t, bin, q, n, labels);
+    case 8: return classify<OneValid, 8>(t, bin, q, n, labels);
+    default: return classify<OneValid, 0>(t, bin, q, n, labels);
+  }
+}
+
 }  // namespace
 
 std::size_t classify_pixels_neon(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
                                  std::size_t n, std::uint8_t* labels) {
-  return t.one_valid ? classify<true>(t, bin, q, n, labels) : classify<false>(t, bin, q, n, labels);
+  return t.one_valid ? classify_quads<true>(t, bin, q, n, labels) : classify_quads<false>(t, bin, q, n, labels);
 }
 
 void quantise_features_neon(const std::int32_t* f0, const std::int32_t* f1, std::size_t n, int shift, std::int32_t* q) {

@@ -106,12 +106,18 @@ class SegmentationProfile : public Profile {
  private:
   // Of the pixels that show a target, the fraction labelled with its material.
   double accuracy(const FrameTruth& t, const std::vector<std::uint8_t>& labels) const {
+    // Each truth material's label (kNoLabel: not a candidate, never right),
+    // once a frame: then an integer comparison per pixel.
+    std::vector<std::uint8_t> label_of(t.materials.size(), protocol::kNoLabel);
+    for (std::size_t m = 0; m < t.materials.size(); ++m)
+      for (std::size_t k = 0; k < names_.size(); ++k)
+        if (names_[k] == t.materials[m]) label_of[m] = static_cast<std::uint8_t>(k);
     std::size_t total = 0, right = 0;
     for (std::size_t i = 0; i < kPixels; ++i) {
-      if (t.target[i] < 0 || static_cast<std::size_t>(t.target[i]) >= t.materials.size()) continue;
+      const auto m = static_cast<std::size_t>(t.target[i]);  // (-1 -> beyond every index)
+      if (m >= label_of.size()) continue;
       ++total;
-      if (labels[i] != protocol::kNoLabel && names_[labels[i]] == t.materials[static_cast<std::size_t>(t.target[i])])
-        ++right;
+      right += labels[i] == label_of[m] && label_of[m] != protocol::kNoLabel;
     }
     return total ? static_cast<double>(right) / static_cast<double>(total) : 0.0;
   }

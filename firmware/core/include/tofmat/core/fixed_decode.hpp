@@ -114,6 +114,9 @@ FixedPlanes planes_of(FixedDecodedFrame& frame, std::size_t first);
 #if defined(__x86_64__)
 void finish_pixels_avx2(const FixedPlanes& planes, std::size_t n, const FixedThresholds& th);  // AVX2 CPUs only
 #endif
+#if defined(__aarch64__)
+void finish_pixels_neon(const FixedPlanes& planes, std::size_t n, const FixedThresholds& th);
+#endif
 
 // The CORDIC's constants, shared by both kernels.
 namespace fixed_decode_detail {

@@ -10,15 +10,19 @@
 #include <cstdint>
 #include <vector>
 
+#include "tofmat/core/fixed_kernel.hpp"
+
 namespace tofmat {
 
 // The mean of a pixel's two Eq. (10) features over the valid pixels (flag 0)
 // of the side x side window centred on it, clipped at the frame's edges.
 // Definition (docs/numerics.md): each valid feature is first rounded to Q8 mm,
-// v8 = (v16 + 128) >> 8 (|feature| < 2^14 mm, so a 15 x 15 window's sum fits
-// int32); for a valid pixel with sum S (Q8) over n valid pixels, the mean is
-// round(256 S / n) in Q16 mm, halves away from zero. Pixels whose flag is not
-// 0 get kFixedInvalid.
+// v8 = (v16 + 128) >> 8 (|v8| <= 2^23, so a 15 x 15 window's sum S fits
+// int32 whatever the input); for a valid pixel with S over n valid pixels,
+// the mean is floor((256 S + floor(n / 2)) / n) in Q16 mm (round half up),
+// clamped to [INT32_MIN + 1, INT32_MAX] (only inputs beyond the decode's
+// range reach the clamp). Pixels whose flag is not 0 get kFixedInvalid. A
+// scalar and a NEON kernel (aarch64) give the same integers bit for bit.
 class BoxMeanFilter {
  public:
   // side: odd, in [1, 15]. Throws std::invalid_argument otherwise or on a
@@ -28,10 +32,9 @@ class BoxMeanFilter {
   // rows [y0, y1) are written). Throws std::invalid_argument on a band
   // outside the frame.
   void apply(const std::int32_t* f0, const std::int32_t* f1, const std::uint8_t* flags, int y0, int y1,
-             std::int32_t* out0, std::int32_t* out1);
+             std::int32_t* out0, std::int32_t* out1, FixedKernel kernel = FixedKernel::kBest);
 
  private:
-  void add_row(const std::int32_t* f0, const std::int32_t* f1, const std::uint8_t* flags, int y, int sign);
   int width_, height_, radius_;
   std::vector<std::int32_t> col0_, col1_, coln_;  // per column: the window's rows summed
   std::vector<std::uint32_t> pre0_, pre1_, pren_;  // their prefix sums along the row, padded
@@ -57,13 +60,14 @@ class MajorityFilter {
   void apply(const std::uint8_t* labels, int y0, int y1, std::uint8_t* out);
 
  private:
-  void add_row(const std::uint8_t* labels, int y, int sign);
+  void slide(const std::uint8_t* labels, int y_in, int y_out);
   template <std::size_t C>
   void apply_chunks(const std::uint8_t* labels, int y0, int y1, std::uint8_t* out);
   int width_, height_, radius_, classes_;
-  std::size_t lanes_;                  // classes + 1 (the slot where non-labels go) rounded up to 16
+  std::size_t lanes_;                  // classes + 1 rounded up to 16; the last lane counts non-labels
   std::vector<std::uint8_t> columns_;  // per column, lanes_ counts of its window's rows
   std::vector<std::uint8_t> keep_;     // 0xFF in the lanes of real classes, 0 in the others
+  std::vector<int> cols_;              // per column x: the columns its window holds (clipped)
 };
 
 }  // namespace tofmat
