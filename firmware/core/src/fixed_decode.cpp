@@ -194,6 +194,20 @@ void size_fixed_frame(FixedDecodedFrame& out, std::size_t pixels) {
   out.flags.resize(pixels);
 }
 
+FixedPlanes planes_from(const FixedPlanes& p, std::size_t at) {
+  FixedPlanes rest = p;
+  for (std::size_t g = 0; g < 3; ++g) {
+    rest.phase[g] += at;
+    rest.amp[g] += at;
+    rest.depth[g] += at;
+  }
+  rest.flags += at;
+  rest.combined += at;
+  rest.features[0] += at;
+  rest.features[1] += at;
+  return rest;
+}
+
 FixedPlanes planes_of(FixedDecodedFrame& f, std::size_t at) {
   if (at > f.pixels || f.flags.size() != f.pixels) throw std::invalid_argument("planes beyond the frame");
   FixedPlanes p;

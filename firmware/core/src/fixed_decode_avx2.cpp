@@ -230,19 +230,7 @@ __attribute__((target("avx2"))) void finish_pixels_avx2(const FixedPlanes& p, st
     std::memcpy(p.flags + i, &f_lo, 4);
     std::memcpy(p.flags + i + 4, &f_hi, 4);
   }
-  if (i < n) {
-    FixedPlanes rest = p;
-    for (std::size_t g = 0; g < 3; ++g) {
-      rest.phase[g] += i;
-      rest.amp[g] += i;
-      rest.depth[g] += i;
-    }
-    rest.flags += i;
-    rest.combined += i;
-    rest.features[0] += i;
-    rest.features[1] += i;
-    finish_pixels_scalar(rest, n - i, th);
-  }
+  if (i < n) finish_pixels_scalar(planes_from(p, i), n - i, th);  // the tail
 }
 
 }  // namespace tofmat

@@ -166,19 +166,7 @@ void finish_pixels_neon(const FixedPlanes& p, std::size_t n, const FixedThreshol
     f4 = vget_lane_u32(vreinterpret_u32_u8(fb), 0);
     std::memcpy(p.flags + i, &f4, sizeof f4);
   }
-  if (i < n) {
-    FixedPlanes rest = p;
-    for (std::size_t g = 0; g < 3; ++g) {
-      rest.phase[g] += i;
-      rest.amp[g] += i;
-      rest.depth[g] += i;
-    }
-    rest.flags += i;
-    rest.combined += i;
-    rest.features[0] += i;
-    rest.features[1] += i;
-    finish_pixels_scalar(rest, n - i, th);
-  }
+  if (i < n) finish_pixels_scalar(planes_from(p, i), n - i, th);  // the tail
 }
 
 }  // namespace tofmat

@@ -111,6 +111,8 @@ void decode_pixels_fixed(const std::int16_t* raw, const FixedDecodeTables& table
 // frame in pieces (rows split over threads) with decode_pixels_fixed.
 void size_fixed_frame(FixedDecodedFrame& out, std::size_t pixels);
 FixedPlanes planes_of(FixedDecodedFrame& frame, std::size_t first);
+// The same planes from pixel `first` on (a kernel's scalar tail).
+FixedPlanes planes_from(const FixedPlanes& planes, std::size_t first);
 #if defined(__x86_64__)
 void finish_pixels_avx2(const FixedPlanes& planes, std::size_t n, const FixedThresholds& th);  // AVX2 CPUs only
 #endif
