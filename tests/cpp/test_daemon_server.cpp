@@ -7,7 +7,9 @@
 #include <stdlib.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
+#include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
 
 #include <atomic>
@@ -16,6 +18,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
@@ -538,6 +541,114 @@ TEST_F(ServerTest, RepliesAreNeverDroppedAClientThatPilesThemUpIsClosed) {
   EXPECT_TRUE(other.request("server_status").contains("clients"));  // the other one is served
 }
 
+// Publishes a label event every 33 ms (the camera's rate) for `frames`
+// frames, each stamped with the time it was published.
+std::thread publisher(Server& server, int frames) {
+  return std::thread([&server, frames] {
+    for (int f = 1; f <= frames; ++f) {
+      LabelEvent e;
+      e.frame = static_cast<std::uint64_t>(f);
+      e.timestamp_ns = monotonic_ns();
+      e.profile = "handheld";
+      e.state = "tracking";
+      e.material = "cork";
+      server.publish("labels", encode_label(e));
+      std::this_thread::sleep_for(std::chrono::milliseconds(33));
+    }
+  });
+}
+
+// What a subscriber got over `ms`: events and the worst publish-to-read latency.
+struct Received {
+  int events = 0;
+  double worst_ms = 0.0;
+};
+Received receive_labels(Raw& good, int ms) {
+  Received got;
+  const auto deadline = Clock::now() + std::chrono::milliseconds(ms);
+  while (Clock::now() < deadline) {
+    auto m = good.read(Raw::ms_left(deadline));
+    if (!m || m->type != MessageType::kEvent) continue;
+    const LabelEvent e = decode_label(*m);
+    ++got.events;
+    got.worst_ms = std::max(got.worst_ms, static_cast<double>(monotonic_ns() - e.timestamp_ns) / 1e6);
+  }
+  return got;
+}
+
+TEST_F(ServerTest, AClientPipeliningRequestsWithoutReadingDelaysNobody) {
+  // A client that sends requests as fast as it can and never reads a reply
+  // (issue 16, case 1): every other subscriber still gets each event at the
+  // camera's rate, and the flooder is closed once its unread replies pile up.
+  start();
+  Raw good(socket_path());
+  good.handshake();
+  good.request(2, "subscribe", {{"streams", {"labels"}}});
+  ASSERT_TRUE(good.read_reply().ok);
+  Raw flood(socket_path());
+  flood.handshake();
+  std::atomic<bool> flooding{true};
+  std::atomic<std::uint64_t> sent{0};
+  std::thread flooder([&] {
+    Request r;
+    r.cmd = "server_status";
+    Bytes burst;
+    for (int k = 0; k < 64; ++k) {
+      r.id = static_cast<std::uint32_t>(k + 10);
+      const Bytes one = encode(encode_request(r));
+      burst.insert(burst.end(), one.begin(), one.end());
+    }
+    try {
+      while (flooding) {
+        flood.send_bytes(burst);
+        sent += 64;
+      }
+    } catch (const std::exception&) {
+      // closed by the server (or the send timed out against a full socket): the flood ends
+    }
+  });
+  constexpr int kFrames = 60;  // 2 s
+  std::thread pub = publisher(*server_, kFrames);
+  const Received got = receive_labels(good, 2500);
+  pub.join();
+  flooding = false;
+  flooder.join();
+  EXPECT_GT(sent.load(), 1000u) << "the flood did not get going";
+  EXPECT_GE(got.events, kFrames - 2) << "events lost while the flood ran";
+  EXPECT_LT(got.worst_ms, 250.0) << "an event waited behind the flood";
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; })) << "the flooder is still connected";
+  EXPECT_TRUE(flood.closed_within());
+}
+
+TEST_F(ServerTest, ClientsConnectingInALoopCostTheLogAFewLines) {
+  // Two log lines per connection and per refusal, before; now a burst per
+  // kind and interval, then one summary line (issue 16, case 7).
+  struct Counting : spdlog::sinks::base_sink<std::mutex> {
+    std::atomic<int> lines{0};
+    void sink_it_(const spdlog::details::log_msg&) override { ++lines; }
+    void flush_() override {}
+  };
+  auto sink = std::make_shared<Counting>();
+  auto logger = std::make_shared<spdlog::logger>("count", sink);
+  auto previous = spdlog::default_logger();
+  spdlog::set_default_logger(logger);
+  spdlog::set_level(spdlog::level::info);
+  start();
+  for (int k = 0; k < 300; ++k) {
+    Raw r(socket_path());
+    r.close();
+  }
+  // (Every connection the server saw is closed again: none is left open.)
+  EXPECT_TRUE(wait_for([&] { return counter("accepted") >= 64 && counter("clients") == 0; }));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_EQ(counter("clients"), 0u);
+  stop_server();
+  spdlog::set_default_logger(previous);
+  spdlog::set_level(spdlog::level::err);
+  EXPECT_LE(sink->lines.load(), 30) << "300 connections logged line by line";
+  EXPECT_GE(sink->lines.load(), 2);  // (but not silently: the first ones are there)
+}
+
 TEST_F(ServerTest, LongErrorFromTheHandlerStillReachesTheClient) {
   // A handler's error text over kMaxTextBytes (the daemon's load_table quotes
   // the path, up to kMaxTextBytes itself) is cut, at a UTF-8 boundary, so the
@@ -582,6 +693,67 @@ TEST_F(ServerTest, MaxClientsRefusesTheNextConnection) {
   EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
   Client c(socket_path());
   EXPECT_EQ(c.request("echo")["cmd"], "echo");
+}
+
+// A socket file at `path` with nothing listening on it (a daemon that died).
+void stale_socket(const std::string& path) {
+  Fd fd = listen_unix(path, 0660);  // (bound, then closed: the file stays)
+}
+
+ino_t inode_of(const std::string& path) {
+  struct stat st {};
+  return ::lstat(path.c_str(), &st) == 0 ? st.st_ino : 0;
+}
+
+TEST_F(ServerTest, ALiveSocketIsNeverTakenOver) {
+  start();
+  const ino_t live = inode_of(socket_path());
+  ServerOptions second = options();
+  second.tcp.clear();
+  EXPECT_THROW(Server(second, answer), SocketError);
+  EXPECT_EQ(inode_of(socket_path()), live);
+  Client c(socket_path());  // the first daemon still serves
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+}
+
+TEST_F(ServerTest, AStaleSocketOfOursIsReplaced) {
+  stale_socket(socket_path());
+  start();
+  Client c(socket_path());
+  EXPECT_EQ(c.request("echo")["cmd"], "echo");
+}
+
+TEST_F(ServerTest, AnotherUsersSocketIsNotReplaced) {
+  // (Making a file another user's takes root; CI runs as root.)
+  if (::geteuid() != 0) GTEST_SKIP() << "needs root to give a file to another user";
+  stale_socket(socket_path());
+  ASSERT_EQ(::chown(socket_path().c_str(), 12345, 12345), 0);
+  const ino_t theirs = inode_of(socket_path());
+  ServerOptions o = options();
+  o.tcp.clear();
+  try {
+    Server s(o, answer);
+    ADD_FAILURE() << "took over another user's socket";
+  } catch (const SocketError& e) {
+    EXPECT_NE(std::string(e.what()).find("another user"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(inode_of(socket_path()), theirs);
+}
+
+TEST_F(ServerTest, StoppingRemovesOnlyItsOwnSocket) {
+  start();
+  // Another daemon replaced the path meanwhile (as a stale-socket check
+  // gone wrong would): stopping this one must leave that socket alone.
+  ASSERT_EQ(::unlink(socket_path().c_str()), 0);
+  Fd other = listen_unix(socket_path(), 0660);
+  const ino_t theirs = inode_of(socket_path());
+  stop_server();
+  EXPECT_EQ(inode_of(socket_path()), theirs);
+  // Its own socket it does remove.
+  ::unlink(socket_path().c_str());
+  start();
+  stop_server();
+  EXPECT_EQ(inode_of(socket_path()), 0u);
 }
 
 TEST_F(ServerTest, OptionsThatCannotWork) {

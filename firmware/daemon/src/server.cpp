@@ -3,6 +3,7 @@
 #include <poll.h>
 #include <sys/eventfd.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -17,6 +18,15 @@ using Bytes = std::shared_ptr<const std::vector<std::uint8_t>>;
 constexpr std::size_t kInboxLimit = 256;
 constexpr std::size_t kMaxSubscriptions = 16;
 constexpr std::size_t kMaxQueuedMessages = 1024;
+// Fairness: per connection and poll round, at most one read of kReadChunk
+// bytes and kRequestsPerRound requests handled; the rest waits for the next
+// round, after every other client's turn. A connection holding a chunk of
+// unparsed bytes is not read from until it is worked off (memory per client
+// stays bounded), and one that lets more than kMaxQueuedReplies replies pile
+// up unread is closed.
+constexpr std::size_t kReadChunk = 64 * 1024;
+constexpr std::size_t kRequestsPerRound = 32;
+constexpr std::size_t kMaxQueuedReplies = 256;
 
 // Compares without leaking where the first difference is.
 bool same_token(const std::string& a, const std::string& b) {
@@ -48,15 +58,22 @@ struct Server::Connection {
   };
   std::deque<Queued> out;
   std::size_t out_offset = 0, out_bytes = 0;
+  std::size_t replies = 0;  // queued messages that are not events
   std::set<std::string> streams;
   std::uint64_t dropped = 0;
   bool dead = false;
+  bool more = false;  // requests may be left to handle from an earlier read
 };
 
 Server::Server(ServerOptions options, Handler handler) : options_(std::move(options)), handler_(std::move(handler)) {
   wake_fd_ = protocol::Fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
   if (!wake_fd_) throw protocol::SocketError("eventfd failed", errno);
-  if (!options_.socket_path.empty()) unix_ = protocol::listen_unix(options_.socket_path, options_.socket_mode);
+  if (!options_.socket_path.empty()) {
+    unix_ = protocol::listen_unix(options_.socket_path, options_.socket_mode);
+    // The file we bound, to remove it at the end only if it is still this one.
+    struct stat st {};
+    if (::lstat(options_.socket_path.c_str(), &st) == 0) socket_file_ = {st.st_dev, st.st_ino};
+  }
   if (!options_.tcp.empty()) {
     if (options_.token.empty())
       throw std::invalid_argument("TCP needs a token (token_file): without one anybody on the network could connect");
@@ -73,7 +90,11 @@ Server::Server(ServerOptions options, Handler handler) : options_(std::move(opti
 }
 
 Server::~Server() {
-  if (unix_ && !options_.socket_path.empty()) ::unlink(options_.socket_path.c_str());
+  // (Another daemon may have replaced the path since: its socket stays.)
+  struct stat st {};
+  if (unix_ && !options_.socket_path.empty() && ::lstat(options_.socket_path.c_str(), &st) == 0 &&
+      std::make_pair(st.st_dev, st.st_ino) == socket_file_)
+    ::unlink(options_.socket_path.c_str());
 }
 
 void Server::wake() {
@@ -107,13 +128,26 @@ void Server::refresh_subscriptions() {
   subscribed_ = std::move(all);
 }
 
+void Server::note(const char* kind, spdlog::level::level_enum level, const std::string& text) {
+  std::uint64_t held_back = 0;
+  if (!log_limiter_.allow(kind, protocol::monotonic_ns(), held_back)) {
+    log_suppressed_ = log_limiter_.total_suppressed();
+    return;
+  }
+  if (held_back > 0) {
+    spdlog::log(level, "{} ({} more like it in the last interval not logged)", text, held_back);
+  } else {
+    spdlog::log(level, "{}", text);
+  }
+}
+
 void Server::accept_from(int listener, bool tcp) {
   for (;;) {
     protocol::Fd fd(::accept4(listener, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));
     if (!fd) return;  // EAGAIN: nothing more waiting (or a transient error)
     if (connections_.size() >= options_.max_clients) {
       ++rejected_;
-      spdlog::warn("refusing a client: {} connected already", connections_.size());
+      note("refuse", spdlog::level::warn, "refusing a client: " + std::to_string(connections_.size()) + " connected already");
       continue;  // closes it
     }
     auto c = std::make_unique<Connection>();
@@ -127,7 +161,7 @@ void Server::accept_from(int listener, bool tcp) {
     h.auth_required = tcp;
     enqueue(*c, encoded(protocol::encode_hello(h)), false);
     ++accepted_;
-    spdlog::info("client {} connected ({})", c->id, tcp ? "tcp" : "unix");
+    note("connect", spdlog::level::info, "client " + std::to_string(c->id) + " connected (" + (tcp ? "tcp" : "unix") + ")");
     connections_.emplace(c->id, std::move(c));
   }
   clients_ = connections_.size();
@@ -146,16 +180,23 @@ void Server::enqueue(Connection& c, Bytes bytes, bool event) {
         ++dropped_events_;
         return;
       }
-      spdlog::warn("client {}: does not read its replies; closing it", c.id);
+      note("unread", spdlog::level::warn, "client " + std::to_string(c.id) + ": does not read its replies; closing it");
       c.dead = true;
       return;
     }
     c.out_bytes -= c.out[victim].bytes->size();
-    c.out.erase(c.out.begin() + static_cast<std::ptrdiff_t>(victim));
+    c.out.erase(c.out.begin() + static_cast<std::ptrdiff_t>(victim));  // (an event: replies unchanged)
     ++c.dropped;
     ++dropped_events_;
   }
+  if (!event && c.replies >= kMaxQueuedReplies) {
+    note("unread", spdlog::level::warn,
+         "client " + std::to_string(c.id) + ": " + std::to_string(c.replies) + " replies unread; closing it");
+    c.dead = true;
+    return;
+  }
   c.out_bytes += bytes->size();
+  if (!event) ++c.replies;
   c.out.push_back({std::move(bytes), event});
 }
 
@@ -196,7 +237,7 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       const std::string token = args.contains("token") && args["token"].is_string() ? args["token"].get<std::string>() : "";
       if (!same_token(token, options_.token)) {
         ++auth_failures_;
-        spdlog::warn("client {}: wrong or missing token", c.id);
+        note("auth", spdlog::level::warn, "client " + std::to_string(c.id) + ": wrong or missing token");
         return refuse(protocol::codes::kAuth, "a TCP client must send the daemon's token", true);
       }
     }
@@ -233,37 +274,54 @@ void Server::handle(Connection& c, const protocol::Message& m) {
     r.result = status();
     return reply(c, r);
   }
-  reply(c, handler_(req));
+  // (The daemon's handler reports its own errors as replies; anything that
+  // still escapes it is this request's failure, not the server thread's end.)
+  protocol::Reply answer;
+  try {
+    answer = handler_(req);
+  } catch (const std::exception& e) {
+    note("handler", spdlog::level::err, "client " + std::to_string(c.id) + ": \"" + req.cmd + "\" failed: " + e.what());
+    return refuse(protocol::codes::kFailed, std::string("the command failed: ") + e.what(), false);
+  }
+  reply(c, answer);
 }
 
-void Server::read_from(Connection& c) {
-  std::uint8_t buf[65536];
-  for (;;) {
-    const ssize_t n = ::recv(c.fd.get(), buf, sizeof buf, 0);
-    if (n == 0) {
-      c.dead = true;
-      return;
+void Server::read_from(Connection& c, bool readable) {
+  // Requests already read come first, then (if there is room) one read.
+  std::size_t handled = 0;
+  const auto work = [&] {
+    while (handled < kRequestsPerRound && !c.closing && !c.dead) {
+      auto m = c.reader.next();
+      if (!m) return;
+      ++handled;
+      handle(c, *m);
     }
-    if (n < 0) {
-      if (errno == EAGAIN || errno == EWOULDBLOCK) return;
-      if (errno == EINTR) continue;
-      c.dead = true;
-      return;
-    }
-    if (c.closing) continue;  // the answer is on its way; ignore the rest
-    try {
-      c.reader.feed(buf, static_cast<std::size_t>(n));
-      while (auto m = c.reader.next()) {
-        handle(c, *m);
-        if (c.closing) break;
+  };
+  try {
+    work();
+    if (readable && !c.dead && handled < kRequestsPerRound && c.reader.buffered() < kReadChunk) {
+      std::uint8_t buf[kReadChunk];
+      ssize_t n;
+      do {
+        n = ::recv(c.fd.get(), buf, sizeof buf, 0);
+      } while (n < 0 && errno == EINTR);
+      if (n == 0 || (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK)) {
+        c.dead = true;
+        return;
       }
-    } catch (const protocol::ProtocolError& e) {
-      ++protocol_errors_;
-      spdlog::warn("client {}: {}; closing it", c.id, e.what());
-      c.dead = true;
-      return;
+      // (After a refused hello the answer is on its way: the rest is ignored.)
+      if (n > 0 && !c.closing) {
+        c.reader.feed(buf, static_cast<std::size_t>(n));
+        work();
+      }
     }
+  } catch (const protocol::ProtocolError& e) {
+    ++protocol_errors_;
+    note("protocol", spdlog::level::warn, "client " + std::to_string(c.id) + ": " + e.what() + "; closing it");
+    c.dead = true;
   }
+  // The budget ran out: more whole requests may be waiting in the reader.
+  c.more = !c.dead && !c.closing && handled == kRequestsPerRound;
 }
 
 void Server::write_to(Connection& c) {
@@ -279,6 +337,7 @@ void Server::write_to(Connection& c) {
     c.out_offset += static_cast<std::size_t>(n);
     if (c.out_offset == front.size()) {
       c.out_bytes -= front.size();
+      if (!c.out.front().event) --c.replies;
       c.out.pop_front();
       c.out_offset = 0;
     }
@@ -306,11 +365,16 @@ void Server::run(const std::atomic<bool>& stop) {
     if (unix_) fds.push_back({unix_.get(), POLLIN, 0});
     if (tcp_) fds.push_back({tcp_.get(), POLLIN, 0});
     const std::size_t first_client = fds.size();
+    bool more = false;
     for (auto& [id, c] : connections_) {
-      fds.push_back({c->fd.get(), static_cast<short>(POLLIN | (c->out.empty() ? 0 : POLLOUT)), 0});
+      // Not read from while it holds a chunk of unparsed bytes or is closing.
+      const bool read = !c->closing && c->reader.buffered() < kReadChunk;
+      fds.push_back({c->fd.get(), static_cast<short>((read ? POLLIN : 0) | (c->out.empty() ? 0 : POLLOUT)), 0});
       ids.push_back(id);
+      more = more || c->more;
     }
-    const int r = ::poll(fds.data(), fds.size(), 200);
+    // (Requests left over from the last round: another round at once.)
+    const int r = ::poll(fds.data(), fds.size(), more ? 0 : 200);
     if (r < 0 && errno != EINTR) throw protocol::SocketError("poll failed", errno);
     if (fds[0].revents & POLLIN) {
       std::uint64_t v;
@@ -324,9 +388,13 @@ void Server::run(const std::atomic<bool>& stop) {
       auto it = connections_.find(ids[i - first_client]);
       if (it == connections_.end()) continue;
       Connection& c = *it->second;
-      if (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) read_from(c);
-      if (!c.ready && now - c.accepted_ns > static_cast<std::uint64_t>(options_.hello_timeout_ms) * 1'000'000ull) {
-        spdlog::warn("client {}: no hello within {} ms; closing it", c.id, options_.hello_timeout_ms);
+      const bool readable = (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) != 0;
+      if (!c.dead && (readable || c.more)) read_from(c, readable);
+      if (!c.ready && !c.dead &&
+          now - c.accepted_ns > static_cast<std::uint64_t>(options_.hello_timeout_ms) * 1'000'000ull) {
+        note("hello", spdlog::level::warn,
+             "client " + std::to_string(c.id) + ": no hello within " + std::to_string(options_.hello_timeout_ms) +
+                 " ms; closing it");
         c.dead = true;
       }
     }
@@ -341,7 +409,8 @@ void Server::run(const std::atomic<bool>& stop) {
         ++it;
         continue;
       }
-      spdlog::info("client {} disconnected ({} events dropped for it)", c.id, c.dropped);
+      note("disconnect", spdlog::level::info,
+           "client " + std::to_string(c.id) + " disconnected (" + std::to_string(c.dropped) + " events dropped for it)");
       it = connections_.erase(it);
       changed = true;
     }
@@ -356,7 +425,8 @@ nlohmann::json Server::status() const {
           {"rejected", rejected_.load()},
           {"protocol_errors", protocol_errors_.load()},
           {"auth_failures", auth_failures_.load()},
-          {"dropped_events", dropped_events_.load() + inbox_dropped_.load()}};
+          {"dropped_events", dropped_events_.load() + inbox_dropped_.load()},
+          {"log_suppressed", log_suppressed_.load()}};
 }
 
 }  // namespace tofmat::daemon

@@ -111,10 +111,19 @@ Fd listen_unix(const std::string& path, unsigned mode) {
   if (::lstat(path.c_str(), &st) == 0) {
     if (!S_ISSOCK(st.st_mode))
       throw SocketError("\"" + path + "\" exists and is not a socket; not replacing it", EEXIST);
-    // A socket file: replace it only if no daemon answers on it.
+    // A socket file: replace it only when it is ours and nothing listens on
+    // it (ECONNREFUSED). Any other answer (a connection, a full backlog, no
+    // permission) may be a live daemon, perhaps another user's: left alone.
+    if (st.st_uid != ::geteuid())
+      throw SocketError("\"" + path + "\" is a socket of another user (uid " + std::to_string(st.st_uid) +
+                            "); not replacing it",
+                        EEXIST);
     Fd probe(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
-    if (probe && ::connect(probe.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) == 0)
+    if (!probe) fail("socket(AF_UNIX)");
+    if (::connect(probe.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) == 0)
       throw SocketError("another daemon is listening on \"" + path + "\"", EADDRINUSE);
+    if (errno != ECONNREFUSED)
+      throw SocketError("cannot tell whether a daemon listens on \"" + path + "\"; not replacing it", errno);
     ::unlink(path.c_str());
   }
   Fd fd(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));

@@ -7,7 +7,10 @@
 // replies are never dropped, a client that lets them pile up is closed), and
 // never slows the pipeline or the other clients. A malformed message, a
 // failed handshake or a hello that does not come in time closes that
-// connection only.
+// connection only. Serving is fair: each poll round a connection gets one
+// bounded read and a bounded number of requests handled, so a client that
+// pipelines requests without end delays nobody else's events; lines about
+// clients are rate-limited per kind.
 #pragma once
 #include <atomic>
 #include <functional>
@@ -19,7 +22,9 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <spdlog/common.h>
 
+#include "tofmat/daemon/log_limiter.hpp"
 #include "tofmat/protocol/messages.hpp"
 #include "tofmat/protocol/socket.hpp"
 
@@ -59,7 +64,9 @@ class Server {
  private:
   struct Connection;
   void accept_from(int listener, bool tcp);
-  void read_from(Connection& c);
+  void read_from(Connection& c, bool readable);
+  // A line about a client, rate-limited per kind (LogLimiter).
+  void note(const char* kind, spdlog::level::level_enum level, const std::string& text);
   void handle(Connection& c, const protocol::Message& m);
   void reply(Connection& c, const protocol::Reply& r);
   void enqueue(Connection& c, std::shared_ptr<const std::vector<std::uint8_t>> bytes, bool event);
@@ -69,6 +76,7 @@ class Server {
   ServerOptions options_;
   Handler handler_;
   protocol::Fd unix_, tcp_, wake_fd_;
+  std::pair<std::uint64_t, std::uint64_t> socket_file_{0, 0};  // (device, inode) of the socket file bound
   std::uint16_t tcp_port_ = 0;
   std::map<std::uint64_t, std::unique_ptr<Connection>> connections_;  // server thread only
   std::uint64_t next_id_ = 1;
@@ -80,6 +88,8 @@ class Server {
   std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, dropped_events_{0},
       inbox_dropped_{0};
   std::atomic<std::size_t> clients_{0};
+  LogLimiter log_limiter_;  // server thread only
+  std::atomic<std::uint64_t> log_suppressed_{0};
 };
 
 }  // namespace tofmat::daemon
