@@ -105,7 +105,7 @@ class DepthImage:
 
 @dataclass(frozen=True)
 class DeviceEvent:
-    state: str  # opening, streaming, disconnected, stopped
+    state: str  # opening, streaming, disconnected, stopped, failed
     message: str
     timestamp_ns: int
 
@@ -251,8 +251,9 @@ class Client:
         self._call("set_candidates", {"materials": list(materials or [])})
 
     def load_table(self, path: str | os.PathLike[str]) -> list[str]:
-        """Makes the daemon load another table file (a path on the daemon's machine)."""
-        materials: list[str] = self._call("load_table", {"path": str(Path(path).resolve())})["materials"]
+        """Makes the daemon load another table: a name inside the daemon's table directory
+        (`--table-dir`, by default the folder of its `--table`), or an absolute path inside it."""
+        materials: list[str] = self._call("load_table", {"path": os.fspath(path)})["materials"]
         return materials
 
     def trigger(self, burst: int | None = None) -> int:

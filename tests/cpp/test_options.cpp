@@ -109,6 +109,29 @@ TEST(Options, TheConfigurationFileHasTheFlagsKeysAndTheCommandLineWins) {
   EXPECT_EQ(overridden.cl->daemon.profile.name, "sorting");
 }
 
+TEST(Options, TheConfigurationFileIsStrictAndBounded) {
+  // (issue 16, case 6) A misspelt key, a line that is not a key, a file over
+  // 64 KiB, a folder: each a usage error naming the problem; nothing is read
+  // from a file that is not a regular one.
+  const auto typo = temp_file("typo.toml", "table = \"t.tmx\"\nsmooht = 5\n");
+  const auto garbage = temp_file("garbage.toml", "table = \"t.tmx\"\nthis is not a setting\n");
+  const auto big = temp_file("big.toml", "table = \"t.tmx\"\n# " + std::string(70 * 1024, 'x') + "\n");
+  for (const auto& f : {typo, garbage, big}) {
+    SCOPED_TRACE(f.string());
+    const auto p = parse({"--config", f.string()});
+    EXPECT_FALSE(p.cl.has_value());
+    EXPECT_EQ(p.exit_code, 2);
+  }
+  const auto folder = std::filesystem::temp_directory_path();
+  EXPECT_EQ(parse({"--config=" + folder.string()}).exit_code, 2);
+  // The same keys spelt right are taken.
+  const auto right = temp_file("right.toml", "table = \"t.tmx\"\nsmooth = 5\n");
+  const auto ok = parse({"--config", right.string()});
+  ASSERT_TRUE(ok.cl.has_value());
+  EXPECT_EQ(ok.cl->daemon.profile.smooth, 5);
+  for (const auto& f : {typo, garbage, big, right}) std::filesystem::remove(f);
+}
+
 TEST(Options, HelpAndVersionExitWithZero) {
   for (const char* flag : {"--help", "--version"}) {
     const auto p = parse({flag});
@@ -127,6 +150,7 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   expect_usage_error({"--table", "t", "--queue-frames", "0"});                 // out of range
   expect_usage_error({"--table", "t", "--max-clients", "5000"});               // out of range
   expect_usage_error({"--table", "t", "--threads", "-1"});                     // out of range
+  expect_usage_error({"--config", "/dev/zero"});                               // not a regular file (endless)
   expect_usage_error({"--table", "t", "--log-level", "chatty"});               // not a level
   expect_usage_error({"--table", "t", "--backend", "gpu"});                    // not a backend
   expect_usage_error({"--table", "t", "--roi", "1,2,3"});                      // three numbers

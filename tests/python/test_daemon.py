@@ -9,6 +9,7 @@ a hung test.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import signal
 import socket
@@ -318,7 +319,7 @@ def test_sighup_with_a_corrupt_table_keeps_the_old_one(start: Callable[..., Daem
 # --- commands and profiles --------------------------------------------------------------------
 
 
-def test_commands_refuse_bad_input_and_keep_serving(start: Callable[..., Daemon], tmp_path: Path) -> None:
+def test_commands_refuse_bad_input_and_keep_serving(start: Callable[..., Daemon], tmp_path: Path, sim_table: Path) -> None:
     d = start(sweep(["cork"]))
     with d.client() as c:
         with pytest.raises(tofmat.CommandError) as e:
@@ -337,9 +338,9 @@ def test_commands_refuse_bad_input_and_keep_serving(start: Callable[..., Daemon]
         with pytest.raises(tofmat.CommandError) as e:
             c._call("dance")
         assert e.value.code == "unknown_command"
-        (tmp_path / "junk.tmx").write_bytes(b"\0" * 100)
+        (sim_table.parent / "junk.tmx").write_bytes(b"\0" * 100)  # (in the table directory)
         with pytest.raises(tofmat.CommandError) as e:
-            c.load_table(tmp_path / "junk.tmx")
+            c.load_table("junk.tmx")
         assert e.value.code == "failed"
         with pytest.raises(ValueError):
             c.subscribe("everything")
@@ -480,6 +481,71 @@ def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_tab
                         str(sim_table), "--socket", str(tmp_path / "s")], capture_output=True, text=True,
                        timeout=30)  # fmt: skip
     assert p.returncode != 0 and "shorter than its header" in p.stderr
+
+
+def test_load_table_reads_only_regular_files_inside_the_table_directory(start: Callable[..., Daemon], tmp_path: Path,
+                                                                         sim_table: Path) -> None:  # fmt: skip
+    # issue 16, cases 2 and 3. The table directory is the folder of --table (sim_table's own folder).
+    tables = tmp_path / "tables"
+    tables.mkdir()
+    (tables / "sim.tmx").write_bytes(sim_table.read_bytes())
+    secret = tmp_path / "secret.tmx"
+    secret.write_bytes(sim_table.read_bytes())
+    (tables / "link.tmx").symlink_to(secret)
+    os.mkfifo(tables / "fifo.tmx")
+    many = tables / "many"
+    many.mkdir()
+    for i in range(256):
+        np.save(many / f"m{i:03}.npy", np.zeros((2, 4), np.float32))
+    d = start("sim:static,material=cork,realtime=0", table=tables / "sim.tmx")
+    with d.client() as c:
+        # Outside the directory: the same refusal whether the file exists or not.
+        texts = []
+        for name in (str(secret), str(tmp_path / "nothing.tmx"), "../secret.tmx", "../nothing.tmx", "link.tmx", "/etc/shadow"):
+            with pytest.raises(tofmat.CommandError) as e:
+                c.load_table(name)
+            assert e.value.code == "invalid_argument" and "not in the table directory" in str(e.value), str(e.value)
+            texts.append(str(e.value).replace(name, "NAME"))
+        assert len(set(texts)) == 1, texts
+        # A FIFO is refused at once (it would block a plain open for ever), and the daemon serves on.
+        t0 = time.monotonic()
+        with pytest.raises(tofmat.CommandError) as e:
+            c.load_table("fifo.tmx")
+        assert e.value.code == "failed" and "regular file" in str(e.value) and time.monotonic() - t0 < 2.0
+        # 256 materials: more than a label map can index, refused before any file is read.
+        with pytest.raises(tofmat.CommandError) as e:
+            c.load_table("many")
+        assert "at most 255" in str(e.value)
+        assert sorted(c.load_table("sim.tmx")) == sorted(MATERIALS)  # inside: loads
+
+
+def test_a_corrupt_recording_fails_the_source_not_the_daemon(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    # issue 16, case 4: each corruption is an error in status (device state "failed", with the
+    # reason) and in the log; the daemon keeps serving and stops cleanly (the fixture checks exit 0).
+    rec = tmp_path / "good.tmrec"
+    p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", "sim:static,material=acryl,depth=800,realtime=0",
+                        "-o", str(rec), "--frames", "3"], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    data = rec.read_bytes()
+    header, frame = 8 + 12 + 3 * 512 * 424 * 4, 20 + 9 * 512 * 424 * 2
+    marker = bytearray(data)
+    marker[header + frame : header + frame + 4] = b"XXXX"  # the second frame's marker
+    late = bytearray(data)
+    late[header + frame + 12 : header + frame + 20] = (10**15).to_bytes(8, "little")  # its time: 11 days on
+    cases = {"marker": (bytes(marker), "bad marker"), "time": (bytes(late), "not within 10 s"),
+             "empty": (data[:header], "holds no frame")}  # fmt: skip
+    for name, (content, reason) in cases.items():
+        path = tmp_path / f"{name}.tmrec"
+        path.write_bytes(content)
+        d = start(f"replay:{path},loop=1,pace=1", name=name)
+        with d.client() as c:
+            deadline = time.monotonic() + 30
+            while (s := c.status())["device"]["state"] != "failed":
+                assert time.monotonic() < deadline, f"{name}: {s['device']}"
+                time.sleep(0.05)
+            assert reason in s["device"]["message"], s["device"]
+        assert d.proc.poll() is None, f"{name}: tofmatd exited\n{d.log.read_text()}"
+        assert reason in d.log.read_text()
 
 
 def _one_replay_loop(binary: Path, recording: Path, table: Path, tmp_path: Path, profile: str) -> list[Any]:

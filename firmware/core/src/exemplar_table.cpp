@@ -80,7 +80,14 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
   }
   std::sort(files.begin(), files.end());
   if (files.empty()) throw IoError("no .npy files in " + dir.string());
-  if (files.size() > kMaxMaterials) throw std::invalid_argument("too many .npy files in " + dir.string());
+  if (files.size() > kMaxMaterials)
+    throw std::invalid_argument(std::to_string(files.size()) + " .npy files in " + dir.string() + ": a table holds at most " +
+                                std::to_string(kMaxMaterials) + " materials");
+  std::uintmax_t total = 0;
+  for (const auto& f : files) total += std::filesystem::file_size(f, ec);
+  if (total > kMaxTableFolderBytes)
+    throw std::invalid_argument(dir.string() + ": its .npy files hold " + std::to_string(total >> 20) + " MiB, more than " +
+                                std::to_string(kMaxTableFolderBytes >> 20) + " MiB");
 
   std::vector<std::string> names;
   std::vector<float> values;

@@ -28,7 +28,9 @@ struct Fd {
 }  // namespace
 
 std::vector<std::uint8_t> read_file_bounded(const std::filesystem::path& path, std::size_t max_bytes) {
-  Fd f{::open(path.c_str(), O_RDONLY | O_CLOEXEC)};
+  // O_NONBLOCK: opening a FIFO (or a device) returns at once instead of
+  // waiting for a writer; it is then refused as not a regular file.
+  Fd f{::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY)};
   if (f.fd < 0) io_fail("cannot open", path, errno);
   struct stat st {};
   if (::fstat(f.fd, &st) != 0) io_fail("cannot stat", path, errno);

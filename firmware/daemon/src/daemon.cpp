@@ -1,5 +1,8 @@
 #include "tofmat/daemon/daemon.hpp"
 
+#include <signal.h>
+#include <unistd.h>
+
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
@@ -29,7 +32,24 @@ std::shared_ptr<const ExemplarTable> load_table_file(const std::string& path) {
   return std::make_shared<const ExemplarTable>(load_table(path));
 }
 
+// A client's table name resolved inside `dir` (symlinks followed), or a
+// refusal that says the same whether or not the file exists.
+std::string table_in(const std::string& dir, const std::string& name) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path base = fs::weakly_canonical(dir, ec);
+  const fs::path wanted = fs::path(name).is_absolute() ? fs::path(name) : base / name;
+  const fs::path real = fs::weakly_canonical(wanted, ec);
+  const auto [end, rest] = std::mismatch(base.begin(), base.end(), real.begin(), real.end());
+  if (ec || name.empty() || end != base.end() || rest == real.end())
+    throw std::invalid_argument("table \"" + name + "\" is not in the table directory " + base.string() +
+                                " (load_table reads only from there: --table-dir)");
+  return real.string();
+}
+
 Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
+  if (options_.table_dir.empty())
+    options_.table_dir = std::filesystem::absolute(options_.table).lexically_normal().parent_path().string();
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
   options_.server.server_name = kVersion;
@@ -52,14 +72,23 @@ Daemon::~Daemon() { stop(); }
 
 void Daemon::start() {
   started_ns_ = protocol::monotonic_ns();
+  // Every thread reports what ends it. Without a server or a pipeline the
+  // daemon is of no use: it fails (exit status 1, so systemd restarts it).
+  // A source that fails leaves the daemon serving status, which says why.
   server_thread_ = std::thread([this] {
     try {
       server_->run(stop_);
     } catch (const std::exception& e) {
-      spdlog::critical("server stopped: {}", e.what());
+      fail("the server stopped: " + std::string(e.what()));
     }
   });
-  pipeline_thread_ = std::thread([this] { pipeline_->run(stop_); });
+  pipeline_thread_ = std::thread([this] {
+    try {
+      pipeline_->run(stop_);
+    } catch (const std::exception& e) {
+      fail("processing stopped: " + std::string(e.what()));
+    }
+  });
   source_thread_ = std::thread([this] {
     SourceCallbacks cb;
     cb.region = [this] { return pipeline_->wanted_region(); };
@@ -84,12 +113,23 @@ void Daemon::start() {
                 {"timestamp_ns", protocol::monotonic_ns()}};
       server_->publish("device", m);
     };
-    source_->run(cb, stop_);
+    try {
+      source_->run(cb, stop_);
+    } catch (const std::exception& e) {
+      spdlog::error("the source stopped: {}", e.what());
+      cb.state(DeviceState::kFailed, e.what());
+    }
   });
   spdlog::info("{} serving: source {}, profile {}, table {}", kVersion, source_->describe(), options_.profile.name,
                options_.table);
   if (source_->simulated())
     spdlog::warn("the source is SIMULATED: its labels are not a camera's (every label and status say so)");
+}
+
+void Daemon::fail(const std::string& why) {
+  spdlog::critical("{}", why);
+  failed_ = true;
+  ::kill(::getpid(), SIGTERM);  // main's sigwait takes it: a clean stop, then exit status 1
 }
 
 void Daemon::stop() {
@@ -151,7 +191,7 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
     } else if (req.cmd == "set_candidates") {
       pipeline_->set_candidates(protocol::get_string_list(a, "materials", protocol::kMaxMaterials, protocol::kMaxNameBytes));
     } else if (req.cmd == "load_table") {
-      const std::string path = protocol::get_string(a, "path", protocol::kMaxTextBytes);
+      const std::string path = table_in(options_.table_dir, protocol::get_string(a, "path", protocol::kMaxTextBytes));
       std::shared_ptr<const ExemplarTable> table;
       try {
         table = load_table_file(path);

@@ -17,6 +17,7 @@ const char* device_state_name(DeviceState s) {
     case DeviceState::kStreaming: return "streaming";
     case DeviceState::kDisconnected: return "disconnected";
     case DeviceState::kStopped: return "stopped";
+    case DeviceState::kFailed: return "failed";
   }
   return "unknown";
 }

@@ -40,11 +40,12 @@ int main(int argc, char** argv) {
       daemon->reload_table();
       continue;
     }
-    spdlog::info("{}: stopping", sig == SIGTERM ? "SIGTERM" : "SIGINT");
+    spdlog::info("{}: stopping", daemon->failed() ? "a thread failed" : sig == SIGTERM ? "SIGTERM" : "SIGINT");
     break;
   }
   daemon->stop();
+  const bool failed = daemon->failed();
   daemon.reset();
   spdlog::info("stopped");
-  return 0;
+  return failed ? 1 : 0;
 }

@@ -44,6 +44,34 @@ std::string read_token(const std::string& path) {
   return token;
 }
 
+// The configuration file named on the command line (--config FILE or
+// --config=FILE), checked before CLI11 reads it: a regular file of at most
+// kMaxConfigBytes (a FIFO or /dev/zero would otherwise be read without end).
+constexpr std::uintmax_t kMaxConfigBytes = 64 * 1024;
+
+// Returns the path ("" for none).
+std::string check_config_file(int argc, char** argv) {
+  namespace fs = std::filesystem;
+  std::string named;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    std::string path;
+    if (a == "--config" && i + 1 < argc) path = argv[i + 1];
+    else if (a.rfind("--config=", 0) == 0) path = a.substr(9);
+    else continue;
+    named = path;
+    std::error_code ec;
+    const auto st = fs::status(path, ec);
+    if (ec || !fs::exists(st)) continue;  // (CLI11 says it is not readable)
+    if (!fs::is_regular_file(st)) throw CLI::ValidationError("--config", "\"" + path + "\" is not a regular file");
+    const auto size = fs::file_size(path, ec);
+    if (ec || size > kMaxConfigBytes)
+      throw CLI::ValidationError("--config", "\"" + path + "\" is larger than " + std::to_string(kMaxConfigBytes / 1024) +
+                                                 " KiB: not a tofmatd configuration");
+  }
+  return named;
+}
+
 }  // namespace
 
 std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_code) {
@@ -56,11 +84,16 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
 
   CLI::App app{"tofmatd: material labels from a Time-of-Flight camera, served over a socket"};
   app.set_version_flag("--version", "tofmatd 0.1.0");
-  app.set_config("--config", "", "configuration file (TOML/INI, the long flags as keys)");
+  app.set_config("--config", "", "configuration file (TOML/INI, the long flags as keys; at most 64 KiB)");
+  // A key that is not a flag is an error (a misspelling would otherwise be
+  // ignored and its setting silently not applied).
+  app.allow_config_extras(CLI::config_extras_mode::error);
   app.add_option("--source", o.source, "kinect[:SERIAL] (the camera) | sim[:SCENE[,key=value...]] | replay:FILE[,loop=0|1][,pace=0|1]")
       ->capture_default_str();
   app.add_option("--profile", profile, "handheld | segmentation | sorting")->capture_default_str();
   app.add_option("--table", o.table, "exemplar table (.tmx, or a folder of <material>.npy)")->required();
+  app.add_option("--table-dir", o.table_dir,
+                 "folder a client's load_table may read from (default: the folder holding --table)");
   app.add_option("--socket", o.server.socket_path, "Unix socket path (\"\" for none)")->capture_default_str();
   app.add_option("--socket-mode", socket_mode, "permissions of the Unix socket (octal)")->capture_default_str();
   app.add_option("--tcp", tcp, "also listen on HOST:PORT (needs --token-file; use 127.0.0.1 unless you mean it)");
@@ -85,7 +118,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--log-level", cl.log_level, "trace | debug | info | warn | error")
       ->capture_default_str()
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
+  std::string config_file;
   try {
+    config_file = check_config_file(argc, argv);
     app.parse(argc, argv);
     o.profile.name = profile;
     o.profile.backend = parse_backend(backend);
@@ -98,6 +133,11 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     const unsigned long mode = std::stoul(socket_mode, &used, 8);
     if (used != socket_mode.size() || mode > 0777) throw CLI::ValidationError("--socket-mode", "expected octal like 0660");
     o.server.socket_mode = static_cast<unsigned>(mode);
+  } catch (const CLI::ConfigError& e) {
+    // (CLI11's text names the key, not the file: say which file.)
+    app.exit(CLI::ConfigError("configuration file \"" + config_file + "\": " + e.what()));
+    exit_code = 2;
+    return std::nullopt;
   } catch (const CLI::ParseError& e) {
     // --help and --version are CLI11's "errors" with status 0; every other is
     // a usage error: status 2 (CLI11's own codes are 100 and up).

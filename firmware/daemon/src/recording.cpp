@@ -13,6 +13,8 @@
 namespace tofmat::daemon {
 namespace {
 
+constexpr std::uint64_t kMaxFrameGapNs = 10'000'000'000ull;  // a replay's longest pause between frames
+
 static_assert(sizeof(float) == 4, "recordings store IEEE float32");
 
 void put_u32(std::ostream& out, std::uint32_t v) {
@@ -155,16 +157,28 @@ class ReplaySource : public Source {
     callbacks.state(DeviceState::kStreaming, describe());
     const auto start = std::chrono::steady_clock::now();
     std::uint64_t base_ns = 0, last_ns = 0;
+    std::uint64_t previous_offset = 0, in_pass = 0;  // (this pass through the file)
     while (!stop.load()) {
       auto f = reader_.next();
       if (!f) {
         if (!loop_) break;
+        // (A file without a frame would loop without end, doing nothing.)
+        if (in_pass == 0) throw FormatError("recording \"" + path_ + "\" holds no frame to loop over");
         reader_.rewind();
         base_ns = last_ns + 33'333'333;  // keep the pace across the loop
+        previous_offset = in_pass = 0;
         std::lock_guard<std::mutex> lock(mutex_);
         ++loops_;
         continue;
       }
+      // Frames are in time order, at most kMaxFrameGapNs apart: a corrupt time
+      // would otherwise make a paced replay wait for years (or rush).
+      if (f->offset_ns < previous_offset || f->offset_ns - previous_offset > kMaxFrameGapNs)
+        throw FormatError("recording \"" + path_ + "\" frame " + std::to_string(in_pass) + ": its time (" +
+                          std::to_string(f->offset_ns) + " ns) is not within 10 s after the previous frame's (" +
+                          std::to_string(previous_offset) + " ns)");
+      previous_offset = f->offset_ns;
+      ++in_pass;
       last_ns = base_ns + f->offset_ns;
       // Paced: as recorded (the stop flag is looked at every 100 ms of a long pause).
       if (paced_) {

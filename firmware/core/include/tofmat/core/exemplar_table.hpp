@@ -13,7 +13,12 @@
 
 namespace tofmat {
 
-inline constexpr std::size_t kMaxMaterials = 4096;
+// At most 255 materials: the protocol's limit (a label map's uint8 index, 255
+// = none), so that every table that loads can be served.
+inline constexpr std::size_t kMaxMaterials = 255;
+// A folder of .npy files is bounded in bytes (all files together, by their
+// sizes) before any is read.
+inline constexpr std::uintmax_t kMaxTableFolderBytes = 64u << 20;
 inline constexpr std::uint32_t kMaxRows = 16;
 inline constexpr std::size_t kMaxNameBytes = 64;
 

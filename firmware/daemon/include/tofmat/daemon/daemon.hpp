@@ -20,6 +20,9 @@ struct DaemonOptions {
   // labels, so the simulator is only ever a source asked for by name.
   std::string source = "kinect";
   std::string table;  // .tmx (or a folder of <material>.npy)
+  // Where a client's load_table may read from ("" = the folder holding
+  // `table`): names resolve inside it, and nothing outside it is opened.
+  std::string table_dir;
   ProfileConfig profile;
   ServerOptions server;
   SourceOptions source_options;
@@ -37,6 +40,8 @@ class Daemon {
   ~Daemon();
   void start();
   void stop();
+  // Whether a thread the daemon cannot do without (server, processing) ended on an error.
+  bool failed() const { return failed_; }
   // SIGHUP: the table file again (the current path); a table that does not
   // load or does not fit the profile is refused and the old one keeps serving.
   bool reload_table();
@@ -50,6 +55,8 @@ class Daemon {
   std::unique_ptr<Server> server_;
   std::unique_ptr<Source> source_;
   std::atomic<bool> stop_{false};
+  std::atomic<bool> failed_{false};
+  void fail(const std::string& why);
   std::thread source_thread_, pipeline_thread_, server_thread_;
   std::uint64_t started_ns_ = 0;
   mutable std::mutex state_mutex_;

@@ -17,7 +17,9 @@
 
 namespace tofmat::daemon {
 
-enum class DeviceState { kOpening, kStreaming, kDisconnected, kStopped };
+// kFailed: the source stopped on an error it cannot recover from (a corrupt
+// recording); the daemon keeps serving status, without frames.
+enum class DeviceState { kOpening, kStreaming, kDisconnected, kStopped, kFailed };
 const char* device_state_name(DeviceState s);
 
 struct SourceCallbacks {

@@ -1,0 +1,32 @@
+// libFuzzer target: tofmatd's configuration file (--config FILE, CLI11's
+// TOML/INI reader behind parse_command_line). Each input is written to a
+// file and parsed as the daemon would at start: any input ends in options or
+// a usage error, never a crash, a hang or unbounded memory.
+#include <unistd.h>
+
+#include <cstdint>
+#include <cstdio>
+#include <iostream>
+#include <string>
+
+#include "tofmat/daemon/options.hpp"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  static const std::string path = "/tmp/tofmat_fuzz_config_" + std::to_string(::getpid()) + ".toml";
+  static const bool quiet = [] {
+    std::cerr.setstate(std::ios::badbit);  // (usage errors would print one line per input)
+    std::cout.setstate(std::ios::badbit);
+    return true;
+  }();
+  (void)quiet;
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (f == nullptr) return 0;
+  std::fwrite(data, 1, size, f);
+  std::fclose(f);
+  std::string a0 = "tofmatd", a1 = "--config", a2 = path;
+  char* argv[] = {a0.data(), a1.data(), a2.data(), nullptr};
+  int exit_code = 0;
+  const auto cl = tofmat::daemon::parse_command_line(3, argv, exit_code);
+  if (!cl && exit_code != 0 && exit_code != 2) __builtin_trap();  // only options, --help/--version or a usage error
+  return 0;
+}
