@@ -624,6 +624,27 @@ TEST_F(ServerTest, AClientPipeliningRequestsWithoutReadingDelaysNobody) {
   EXPECT_TRUE(flood.closed_within());
 }
 
+TEST_F(ServerTest, TheLargestRequestIsServed) {
+  // A request of the largest size a client may send (kMaxMetaBytes of JSON)
+  // is longer than one read of the fair share: it completes over two rounds.
+  start();
+  Raw c(socket_path());
+  c.handshake();
+  Request r;
+  r.id = 7;
+  r.cmd = "server_status";  // (its reply is short: the test handler's echo would exceed the reply's own limit)
+  r.args = {{"pad", ""}};
+  const std::size_t empty = encode(encode_request(r)).size();
+  r.args["pad"] = std::string(kHeaderBytes + 4 + kMaxMetaBytes - empty, 'x');
+  const Bytes message = encode(encode_request(r));
+  ASSERT_GT(message.size(), 64u * 1024u);
+  ASSERT_EQ(message.size(), kHeaderBytes + 4 + kMaxMetaBytes);
+  c.send_bytes(message);
+  const Reply reply = c.read_reply();
+  EXPECT_TRUE(reply.ok) << reply.code << ": " << reply.error;
+  EXPECT_EQ(reply.id, 7u);
+}
+
 TEST_F(ServerTest, ClientsConnectingInALoopCostTheLogAFewLines) {
   // Two log lines per connection and per refusal, before; now a burst per
   // kind and interval, then one summary line (issue 16, case 7).

@@ -20,10 +20,10 @@ constexpr std::size_t kMaxSubscriptions = 16;
 constexpr std::size_t kMaxQueuedMessages = 1024;
 // Fairness: per connection and poll round, at most one read of kReadChunk
 // bytes and kRequestsPerRound requests handled; the rest waits for the next
-// round, after every other client's turn. A connection holding a chunk of
-// unparsed bytes is not read from until it is worked off (memory per client
-// stays bounded), and one that lets more than kMaxQueuedReplies replies pile
-// up unread is closed.
+// round, after every other client's turn. A connection is read from only
+// once the requests it already sent are handled, so it holds at most one
+// chunk and one partial request, and one that lets more than
+// kMaxQueuedReplies replies pile up unread is closed.
 constexpr std::size_t kReadChunk = 64 * 1024;
 constexpr std::size_t kRequestsPerRound = 32;
 constexpr std::size_t kMaxQueuedReplies = 256;
@@ -299,7 +299,7 @@ void Server::read_from(Connection& c, bool readable) {
   };
   try {
     work();
-    if (readable && !c.dead && handled < kRequestsPerRound && c.reader.buffered() < kReadChunk) {
+    if (readable && !c.dead && handled < kRequestsPerRound) {
       std::uint8_t buf[kReadChunk];
       ssize_t n;
       do {
@@ -367,9 +367,8 @@ void Server::run(const std::atomic<bool>& stop) {
     const std::size_t first_client = fds.size();
     bool more = false;
     for (auto& [id, c] : connections_) {
-      // Not read from while it holds a chunk of unparsed bytes or is closing.
-      const bool read = !c->closing && c->reader.buffered() < kReadChunk;
-      fds.push_back({c->fd.get(), static_cast<short>((read ? POLLIN : 0) | (c->out.empty() ? 0 : POLLOUT)), 0});
+      // (Not read from while closing: the answer is on its way.)
+      fds.push_back({c->fd.get(), static_cast<short>((c->closing ? 0 : POLLIN) | (c->out.empty() ? 0 : POLLOUT)), 0});
       ids.push_back(id);
       more = more || c->more;
     }
