@@ -84,7 +84,7 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
     throw std::invalid_argument(std::to_string(files.size()) + " .npy files in " + dir.string() + ": a table holds at most " +
                                 std::to_string(kMaxMaterials) + " materials");
   std::uintmax_t total = 0;
-  for (const auto& f : files) total += std::filesystem::file_size(f, ec);
+  for (const auto& f : files) total += std::filesystem::file_size(f);  // (throws if it cannot tell)
   if (total > kMaxTableFolderBytes)
     throw std::invalid_argument(dir.string() + ": its .npy files hold " + std::to_string(total >> 20) + " MiB, more than " +
                                 std::to_string(kMaxTableFolderBytes >> 20) + " MiB");

@@ -60,12 +60,10 @@ std::uint8_t horizontal_max(V16 v) {
   a = _mm_max_epu8(a, _mm_srli_si128(a, 2));
   a = _mm_max_epu8(a, _mm_srli_si128(a, 1));
   return static_cast<std::uint8_t>(_mm_cvtsi128_si32(a));
-#else
-  v = max16(v, __builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15, 0, 1, 2, 3, 4, 5, 6, 7));
-  v = max16(v, __builtin_shufflevector(v, v, 4, 5, 6, 7, 0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3));
-  v = max16(v, __builtin_shufflevector(v, v, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1));
-  v = max16(v, __builtin_shufflevector(v, v, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0));
-  return v[0];
+#else  // (other targets: lane by lane)
+  std::uint8_t m = 0;
+  for (int i = 0; i < 16; ++i) m = v[i] > m ? v[i] : m;
+  return m;
 #endif
 }
 

@@ -32,24 +32,27 @@ std::shared_ptr<const ExemplarTable> load_table_file(const std::string& path) {
   return std::make_shared<const ExemplarTable>(load_table(path));
 }
 
-// A client's table name resolved inside `dir` (symlinks followed), or a
-// refusal that says the same whether or not the file exists.
+// A client's table name resolved inside `dir` (canonical: the daemon made
+// it so at start), symlinks followed, or a refusal that says the same
+// whether or not the file exists; any doubt (a path that cannot be
+// resolved) is a refusal.
 std::string table_in(const std::string& dir, const std::string& name) {
   namespace fs = std::filesystem;
+  const fs::path base(dir);
   std::error_code ec;
-  const fs::path base = fs::weakly_canonical(dir, ec);
-  const fs::path wanted = fs::path(name).is_absolute() ? fs::path(name) : base / name;
-  const fs::path real = fs::weakly_canonical(wanted, ec);
+  const fs::path real = fs::weakly_canonical(fs::path(name).is_absolute() ? fs::path(name) : base / name, ec);
   const auto [end, rest] = std::mismatch(base.begin(), base.end(), real.begin(), real.end());
-  if (ec || name.empty() || end != base.end() || rest == real.end())
-    throw std::invalid_argument("table \"" + name + "\" is not in the table directory " + base.string() +
+  if (ec || name.empty() || base.empty() || end != base.end() || rest == real.end())
+    throw std::invalid_argument("table \"" + name + "\" is not in the table directory " + dir +
                                 " (load_table reads only from there: --table-dir)");
   return real.string();
 }
 
 Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
+  // The table directory, canonical once (load_table compares paths with it).
   if (options_.table_dir.empty())
     options_.table_dir = std::filesystem::absolute(options_.table).lexically_normal().parent_path().string();
+  options_.table_dir = std::filesystem::weakly_canonical(options_.table_dir).string();
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
   options_.server.server_name = kVersion;

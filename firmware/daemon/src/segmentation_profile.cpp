@@ -9,7 +9,6 @@
 // configured threads; every step gives the same values whatever the split.
 #include <algorithm>
 #include <array>
-#include <cmath>
 
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/fixed_decode.hpp"
@@ -35,7 +34,7 @@ class SegmentationProfile : public Profile {
         mean_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)},
         unclean_(kPixels) {
     for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
-    for (int b = 0; b < workers_.bands(); ++b) {
+    for (int b = 0; b < workers_.bands() && config_.smooth > 1; ++b) {
       box_.emplace_back(kWidth, kHeight, config_.smooth);
       majority_.emplace_back(kWidth, kHeight, config_.smooth, static_cast<int>(names_.size()));
     }
