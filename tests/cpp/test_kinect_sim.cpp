@@ -3,6 +3,8 @@
 // unpack -> float decode, with and without every kind of fault.
 #include <gtest/gtest.h>
 
+#include <atomic>
+
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -305,6 +307,38 @@ TEST(KinectSimCommands, DeviceThatNeverAnswersTimesOut) {
   } catch (const UsbError& e) {
     EXPECT_EQ(e.kind(), UsbErrorKind::kTimeout);
   }
+}
+
+TEST(KinectSimCommands, AStoppingCallerIsNotHeldUpByRetries) {
+  // DriverOptions::cancel set (the daemon stopping): the command that timed
+  // out is not tried again, and the sequence ends as cancelled.
+  Rig rig;
+  KinectFaults f;
+  f.lost_responses = 100;
+  rig.sim->set_faults(f);
+  std::atomic<bool> stopping{true};
+  kinect::DriverOptions o;
+  o.cancel = &stopping;
+  try {
+    rig.start(o);
+    FAIL() << "start succeeded without answers";
+  } catch (const UsbError& e) {
+    EXPECT_EQ(e.kind(), UsbErrorKind::kCancelled);
+    EXPECT_STREQ(kinect::usb_error_kind_name(e.kind()), "cancelled");
+  }
+  EXPECT_EQ(rig.dev->counters().retries, 0u);
+  EXPECT_EQ(rig.sim->command_log().size(), 1u);
+  // Not stopping: the same device is tried three times, then times out.
+  stopping = false;
+  Rig again;
+  again.sim->set_faults(f);
+  try {
+    again.start(o);
+    FAIL() << "start succeeded without answers";
+  } catch (const UsbError& e) {
+    EXPECT_EQ(e.kind(), UsbErrorKind::kTimeout);
+  }
+  EXPECT_EQ(again.dev->counters().retries, 2u);
 }
 
 TEST(KinectSimCommands, SecondDriverFindsTheDeviceBusy) {

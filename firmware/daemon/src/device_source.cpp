@@ -31,7 +31,10 @@ DeviceSource::DeviceSource(std::string description, OpenTransport open, TruthOf 
 
 void DeviceSource::stream(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) {
   callbacks.state(DeviceState::kOpening, "opening " + description_);
-  kinect::Kinect2Device device(open_());
+  // (A stop is not held up by retries, status polls or late completions.)
+  kinect::DriverOptions driver;
+  driver.cancel = &stop;
+  kinect::Kinect2Device device(open_(), driver);
   device.open();
   std::shared_ptr<const Calibration> calibration;
   const auto& identity = device.start([&](const kinect::DepthPacket& packet) {
@@ -83,6 +86,7 @@ void DeviceSource::run(const SourceCallbacks& callbacks, const std::atomic<bool>
     try {
       stream(callbacks, stop);
     } catch (const kinect::UsbError& e) {
+      if (stop.load()) break;  // (cancelled, or failed on the way out: not a device problem)
       const std::string message = std::string(kinect::usb_error_kind_name(e.kind())) + ": " + e.what();
       {
         std::lock_guard<std::mutex> lock(mutex_);

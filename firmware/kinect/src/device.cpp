@@ -1,5 +1,6 @@
 #include "tofmat/kinect/device.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <thread>
@@ -85,6 +86,7 @@ std::vector<std::uint8_t> Kinect2Device::transact(const Command& command) {
       // would make a long late response a USB overflow error.)
       late_.resize(kMaxResponseBytes);
       for (int k = 0; k < 8; ++k) {
+        check_cancel();
         const std::size_t n = t.bulk_read(kResponseInEndpoint, late_.data(), late_.size(), options_.timeout_ms);
         Completion c;
         try {
@@ -104,9 +106,14 @@ std::vector<std::uint8_t> Kinect2Device::transact(const Command& command) {
       throw UsbError(UsbErrorKind::kProtocol, "no completion for sequence " + std::to_string(seq));
     } catch (const UsbError& e) {
       if (e.kind() != UsbErrorKind::kTimeout || attempt >= options_.retries) throw;
+      check_cancel();
       ++counters_.retries;
     }
   }
+}
+
+void Kinect2Device::check_cancel() const {
+  if (options_.cancel && options_.cancel->load()) throw UsbError(UsbErrorKind::kCancelled, "stopping");
 }
 
 void Kinect2Device::wait_until_ready() {
@@ -119,7 +126,13 @@ void Kinect2Device::wait_until_ready() {
       throw UsbError(UsbErrorKind::kProtocol, e.what());
     }
     if (status & 1u) return;
-    std::this_thread::sleep_for(std::chrono::milliseconds(options_.status_poll_ms));
+    // (In slices: a stop is seen within 20 ms.)
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(options_.status_poll_ms);
+    while (std::chrono::steady_clock::now() < until) {
+      check_cancel();
+      std::this_thread::sleep_for(std::min<std::chrono::steady_clock::duration>(
+          std::chrono::milliseconds(20), until - std::chrono::steady_clock::now()));
+    }
   }
   throw UsbError(UsbErrorKind::kTimeout, "device not ready to stream after " + std::to_string(options_.status_polls) +
                                              " status polls");

@@ -12,6 +12,7 @@ const char* usb_error_kind_name(UsbErrorKind kind) {
     case UsbErrorKind::kStall: return "endpoint stalled";
     case UsbErrorKind::kProtocol: return "protocol error";
     case UsbErrorKind::kIo: return "I/O error";
+    case UsbErrorKind::kCancelled: return "cancelled";
   }
   return "?";
 }

@@ -5,6 +5,7 @@
 // to the frame handler from inside pump().
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -24,6 +25,10 @@ struct DriverOptions {
   unsigned status_poll_ms = 100;
   int iso_transfers = kIsoTransfers;
   int iso_packets = kIsoPacketsPerTransfer;
+  // Set (the daemon stopping): no command is tried again, no more status
+  // polls or late completions are waited for; the sequence ends with a
+  // UsbError(kCancelled) after at most the transfer under way (timeout_ms).
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // What the start-up sequence read from the device.
@@ -75,6 +80,7 @@ class Kinect2Device {
   std::vector<std::uint8_t> transact(const Command& command);
 
  private:
+  void check_cancel() const;  // throws UsbError(kCancelled) once options_.cancel is set
   void wait_until_ready();
   std::unique_ptr<UsbTransport> transport_;
   DriverOptions options_;

@@ -24,6 +24,7 @@ enum class UsbErrorKind {
   kStall,         // the endpoint stalled
   kProtocol,      // the device answered something the protocol does not allow
   kIo,            // anything else the USB stack reports
+  kCancelled,     // given up because the caller is stopping (DriverOptions::cancel)
 };
 const char* usb_error_kind_name(UsbErrorKind kind);
 
