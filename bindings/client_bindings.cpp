@@ -16,7 +16,7 @@ using protocol::ClientErrorKind;
 // Exception classes, created once: every one is a tofmat.ClientError and also
 // the built-in exception a Python programmer would catch for it.
 struct ClientExceptions {
-  pyb::object base, refused, timeout, version, auth, protocol, closed, command;
+  pyb::object base, refused, timeout, version, auth, protocol, closed, command, not_permitted;
 };
 ClientExceptions& exceptions() {
   static ClientExceptions* e = new ClientExceptions();  // lives as long as the interpreter
@@ -42,7 +42,7 @@ pyb::object make_class(pyb::module_& m, const char* name, pyb::tuple bases, cons
     case ClientErrorKind::kAuth: cls = e.auth; break;
     case ClientErrorKind::kProtocol: cls = e.protocol; break;
     case ClientErrorKind::kClosed: cls = e.closed; break;
-    case ClientErrorKind::kCommand: cls = e.command; break;
+    case ClientErrorKind::kCommand: cls = err.code() == protocol::codes::kPermission ? e.not_permitted : e.command; break;
   }
   pyb::object exc = cls(err.what());
   exc.attr("code") = err.code();
@@ -109,6 +109,7 @@ class PyConnection {
     d["server"] = client_->hello().server;
     d["capabilities"] = client_->hello().capabilities;
     d["auth_required"] = client_->hello().auth_required;
+    d["role"] = client_->role();
     return d;
   }
   bool connected() const { return client_ && client_->connected(); }
@@ -140,7 +141,11 @@ void register_client(pyb::module_& m) {
   e.closed = make_class(m, "ConnectionClosedError", pyb::make_tuple(e.base, builtins.attr("ConnectionError")),
                         "The connection to tofmatd went away (it stopped or restarted).");
   e.command = make_class(m, "CommandError", pyb::make_tuple(e.base),
-                         "tofmatd refused a command (attribute code: invalid_argument, unknown_command, failed).");
+                         "tofmatd refused a command (attribute code: invalid_argument, unknown_command, failed, permission).");
+  e.not_permitted = make_class(m, "NotPermittedError", pyb::make_tuple(e.command, builtins.attr("PermissionError")),
+                               "The command needs the control role and this connection may only read (code "
+                               "permission): on the Unix socket control is the daemon's user or its control group, "
+                               "on TCP the control token.");
 
   pyb::class_<PyConnection>(m, "ClientConnection", "A connection to tofmatd (use tofmat.Client).")
       .def(pyb::init<const std::string&, const std::string&, double>(), pyb::arg("address"), pyb::arg("token") = "",

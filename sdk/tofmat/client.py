@@ -31,6 +31,7 @@ from ._tofmat import (
     ConnectionClosedError,
     DaemonTimeoutError,
     DaemonUnavailableError,
+    NotPermittedError,
     ProtocolError,
     ProtocolVersionError,
 )
@@ -198,6 +199,14 @@ class Client:
     def hello(self) -> dict[str, Any]:
         return dict(self._connection().hello)
 
+    @property
+    def role(self) -> str:
+        """``"read"`` (subscribe, status) or ``"control"`` (also the commands that change what every
+        client gets: profile, ROI, candidates, trigger, reset, load_table). A control command on a
+        reading connection raises NotPermittedError."""
+        role: str = self._connection().hello["role"]
+        return role
+
     def _connection(self) -> _tofmat.ClientConnection:
         if self._conn is None:
             raise ConnectionClosedError("the client is closed")
@@ -344,6 +353,7 @@ __all__ = [
     "ConnectionClosedError",
     "DaemonTimeoutError",
     "DaemonUnavailableError",
+    "NotPermittedError",
     "DepthImage",
     "DeviceEvent",
     "Event",

@@ -39,7 +39,8 @@ using tofmat_test::Bytes;
 using Clock = std::chrono::steady_clock;
 
 constexpr int kPatienceMs = 5000;  // how long anything may take before it counts as not happening
-const std::string kToken = "0123456789abcdef-secret";
+const std::string kToken = "0123456789abcdef-secret";           // TCP: reads
+const std::string kControlToken = "fedcba9876543210-control";   // TCP: controls
 
 // A raw connection that speaks the framing by hand (or does not).
 class Raw {
@@ -178,6 +179,7 @@ class ServerTest : public ::testing::Test {
     o.socket_path = socket_path();
     o.tcp = "127.0.0.1:0";
     o.token = kToken;
+    o.control_token = kControlToken;
     o.server_name = "test-server";
     o.capabilities = {"labels", "status"};
     return o;
@@ -240,8 +242,9 @@ TEST_F(ServerTest, UnixClientCompletesTheHandshake) {
 
 TEST_F(ServerTest, TcpNeedsTheToken) {
   start();
-  Client good(tcp_address(), ClientOptions{kToken, kPatienceMs});
+  Client good(tcp_address(), ClientOptions{kControlToken, kPatienceMs});
   EXPECT_TRUE(good.hello().auth_required);
+  EXPECT_EQ(good.role(), "control");
   EXPECT_EQ(good.request("echo")["cmd"], "echo");
   const std::vector<std::string> wrong = {"", "0123456789abcdef-secreT", "0123456789abcdef-secre",
                                           kToken + "x", std::string(kToken.size(), '\0') + "a"};
@@ -252,7 +255,10 @@ TEST_F(ServerTest, TcpNeedsTheToken) {
               ClientErrorKind::kAuth);
     EXPECT_EQ(code, codes::kAuth);
   }
-  EXPECT_TRUE(wait_for([&] { return counter("auth_failures") == wrong.size(); }));
+  // (Each wrong token makes the address wait before the next is looked at:
+  // the later ones in this quick succession are refused unchecked.)
+  EXPECT_TRUE(wait_for([&] { return counter("auth_failures") + counter("auth_throttled") == wrong.size(); }));
+  EXPECT_GE(counter("auth_failures"), 1u);
   // The refused connections are closed by the server; the good one is untouched.
   EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
   EXPECT_EQ(good.request("echo")["cmd"], "echo");
@@ -320,7 +326,7 @@ TEST_F(ServerTest, OtherProtocolVersionIsRefused) {
 TEST_F(ServerTest, GarbageClosesOnlyThatConnection) {
   start();
   Client good(socket_path());
-  Client good_tcp(tcp_address(), ClientOptions{kToken, kPatienceMs});
+  Client good_tcp(tcp_address(), ClientOptions{kControlToken, kPatienceMs});
   const std::string http = "GET / HTTP/1.1\r\nHost: localhost\r\n\r\n";
   for (const std::string& address : {socket_path(), tcp_address()}) {
     SCOPED_TRACE(address);
@@ -663,8 +669,11 @@ TEST_F(ServerTest, ClientsConnectingInALoopCostTheLogAFewLines) {
     Raw r(socket_path());
     r.close();
   }
-  // (Every connection the server saw is closed again: none is left open.)
-  EXPECT_TRUE(wait_for([&] { return counter("accepted") >= 64 && counter("clients") == 0; }));
+  // (Every connection the server saw is closed again: none is left open.
+  // Those over this user's share of the slots were refused at once.)
+  EXPECT_TRUE(wait_for([&] { return counter("accepted") + counter("rejected") >= 64 && counter("clients") == 0; }))
+      << server_->status().dump();
+  EXPECT_GE(counter("accepted"), 16u);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_EQ(counter("clients"), 0u);
   stop_server();
@@ -805,3 +814,168 @@ TEST_F(ServerTest, OptionsThatCannotWork) {
 }
 
 }  // namespace
+
+// --- issue 16: roles, slots, idle clients, token guessing ------------------------------
+
+TEST_F(ServerTest, ReadingClientsMayNotControl) {
+  // The reading token gives a TCP client subscribe and status; a command that
+  // changes what every client gets is refused with "permission", the
+  // connection stays, and the handler never sees it (issue 16, case 8).
+  start();
+  Client reader(tcp_address(), ClientOptions{kToken, kPatienceMs});
+  EXPECT_EQ(reader.role(), "read");
+  Client controller(tcp_address(), ClientOptions{kControlToken, kPatienceMs});
+  EXPECT_EQ(controller.role(), "control");
+  Client local(socket_path());  // this process's own user: the daemon's owner
+  EXPECT_EQ(local.role(), "control");
+  for (const char* cmd : {"set_profile", "set_roi", "set_candidates", "trigger", "reset", "load_table", "echo"}) {
+    SCOPED_TRACE(cmd);
+    std::string code;
+    EXPECT_EQ(client_error_kind([&] { reader.request(cmd); }, &code), ClientErrorKind::kCommand);
+    EXPECT_EQ(code, codes::kPermission);
+    EXPECT_EQ(controller.request(cmd)["cmd"], cmd);  // (the test handler echoes)
+  }
+  EXPECT_EQ(reader.request("status")["cmd"], "status");  // reading commands reach the handler
+  EXPECT_EQ(reader.request("subscribe", {{"streams", {"labels"}}})["streams"], Json({"labels"}));
+  EXPECT_EQ(reader.request("server_status")["not_permitted"], 7);
+  EXPECT_EQ(local.request("echo")["cmd"], "echo");
+}
+
+TEST_F(ServerTest, TheControlTokenMustDifferFromTheReadingOne) {
+  ServerOptions o = options();
+  o.control_token = o.token;
+  EXPECT_THROW(Server(o, answer), std::invalid_argument);
+}
+
+TEST_F(ServerTest, AnIdleClientIsClosedASubscriberIsNot) {
+  // After hello, a connection that neither asks nor subscribes for the idle
+  // timeout is closed, so idle connections cannot hold every slot for ever
+  // (issue 16, case 7); one that asks or subscribes stays.
+  ServerOptions o = options();
+  o.idle_timeout_ms = 300;
+  start(o);
+  Raw idle(socket_path());
+  idle.handshake();
+  Raw asking(socket_path());
+  asking.handshake();
+  Raw subscriber(socket_path());
+  subscriber.handshake();
+  subscriber.request(2, "subscribe", {{"streams", {"device"}}});
+  ASSERT_TRUE(subscriber.read_reply().ok);
+  const auto t0 = Clock::now();
+  for (int k = 0; k < 8; ++k) {  // 800 ms: more than twice the timeout
+    asking.request(static_cast<std::uint32_t>(10 + k), "server_status");
+    ASSERT_TRUE(asking.read_reply().ok);
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(idle.closed_within(1000)) << "the idle client is still connected";
+  EXPECT_GE(std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - t0).count(), 300);
+  asking.request(30, "server_status");
+  const Reply r = asking.read_reply();
+  ASSERT_TRUE(r.ok);
+  EXPECT_EQ(r.result["clients"], 2);
+  EXPECT_EQ(r.result["idle_closed"], 1);
+  subscriber.request(31, "server_status");
+  EXPECT_TRUE(subscriber.read_reply().ok);
+}
+
+TEST_F(ServerTest, ASubscriberThatTakesNothingIsClosedAfterTheIdleTimeout) {
+  // A subscriber that stops reading loses its oldest events (bounded
+  // memory); one that takes nothing at all for the idle timeout gives its
+  // slot back.
+  ServerOptions o = options();
+  o.idle_timeout_ms = 300;
+  o.max_queue_bytes = 1u << 20;
+  start(o);
+  Raw stalled(socket_path());
+  stalled.handshake();
+  stalled.request(2, "subscribe", {{"streams", {"label_map"}}});
+  ASSERT_TRUE(stalled.read_reply().ok);
+  Client reading(socket_path());
+  reading.request("subscribe", {{"streams", {"label_map"}}});
+  // Label maps (217 KB each) until the stalled one's socket buffer is full and it is closed.
+  const auto deadline = Clock::now() + std::chrono::seconds(5);
+  std::uint64_t frame = 0;
+  while (counter("idle_closed") == 0 && Clock::now() < deadline) {
+    server_->publish("label_map", encode_label_map(label_map(++frame)));
+    while (reading.next_event(0)) {
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(counter("idle_closed"), 1u);
+  EXPECT_TRUE(wait_for([&] { return counter("clients") == 1; }));
+  // The one that reads is still served.
+  server_->publish("label_map", encode_label_map(label_map(++frame)));
+  bool got = false;
+  for (int k = 0; k < 100 && !got; ++k) {
+    auto m = reading.next_event(kPatienceMs);
+    got = m && decode_label_map(*m).frame == frame;
+  }
+  EXPECT_TRUE(got);
+}
+
+TEST_F(ServerTest, UnixAndTcpHaveTheirOwnSlotsAndEveryPeerItsShare) {
+  // Connections nobody authenticated fill only TCP's slots; one peer fills
+  // only its own share (issue 16, case 7).
+  ServerOptions o = options();
+  o.max_clients = 8;
+  o.max_tcp_clients = 3;
+  o.max_clients_per_peer = 4;
+  o.hello_timeout_ms = 60000;  // (they stay for the whole test)
+  start(o);
+  std::vector<std::unique_ptr<Raw>> unauthenticated;
+  for (int k = 0; k < 6; ++k) unauthenticated.push_back(std::make_unique<Raw>(tcp_address()));
+  EXPECT_TRUE(wait_for([&] { return counter("tcp_clients") == 3 && counter("rejected") == 3; }));
+  // The refused ones are closed at once; the Unix socket has all its slots.
+  int closed = 0;
+  for (auto& r : unauthenticated) {
+    auto m = r->read(500);
+    if (!m && r->closed_within(0)) ++closed;
+  }
+  EXPECT_EQ(closed, 3);
+  std::vector<std::unique_ptr<Client>> local;
+  for (int k = 0; k < 4; ++k) local.push_back(std::make_unique<Client>(socket_path()));
+  // The fifth from the same user is over its share (one peer: this process's uid).
+  EXPECT_EQ(client_error_kind([&] { Client c(socket_path()); }), ClientErrorKind::kClosed);
+  const Json s = local[0]->request("server_status");
+  EXPECT_EQ(s["unix_clients"], 4);
+  EXPECT_EQ(s["tcp_clients"], 3);
+  // Closing one gives its slot back.
+  local.pop_back();
+  EXPECT_TRUE(wait_for([&] { return counter("unix_clients") == 3; }));
+  Client again(socket_path());
+  EXPECT_EQ(again.request("echo")["cmd"], "echo");
+}
+
+TEST_F(ServerTest, WrongTokensMakeTheAddressWaitLongerEachTime) {
+  // Each wrong token doubles the time before the address's next token is
+  // looked at (issue 16, case 7): a guesser gets a handful of real tries,
+  // not thousands a second; the right token works again once the wait is over.
+  start();
+  const auto try_token = [&](const std::string& token) {
+    try {
+      Client c(tcp_address(), ClientOptions{token, kPatienceMs});
+      return std::string("ok");
+    } catch (const ClientError& e) {
+      return std::string(e.what());
+    }
+  };
+  const auto t0 = Clock::now();
+  int answered = 0;
+  while (Clock::now() - t0 < std::chrono::milliseconds(1000)) {
+    EXPECT_NE(try_token("wrong-token-0123456789"), "ok");
+    ++answered;
+  }
+  EXPECT_GT(answered, 20) << "refusals should come at once";
+  // 250 + 500 ms: at most three tokens looked at within the first second.
+  EXPECT_LE(counter("auth_failures"), 3u);
+  EXPECT_GE(counter("auth_failures"), 2u);
+  EXPECT_EQ(counter("auth_failures") + counter("auth_throttled"), static_cast<std::uint64_t>(answered));
+  // While the address waits, even the right token is refused, unchecked, saying how long.
+  const std::string refused = try_token(kToken);
+  EXPECT_NE(refused.find("too many wrong tokens"), std::string::npos) << refused;
+  // Once the wait is over (at most 1 s after the third failure) it works, and the slate is clean.
+  EXPECT_TRUE(wait_for([&] { return try_token(kToken) == "ok"; }, 3000));
+  EXPECT_NE(try_token("wrong-token-0123456789"), "ok");
+  EXPECT_TRUE(wait_for([&] { return try_token(kToken) == "ok"; }, 1000)) << "the first wait after a success is 250 ms";
+}

@@ -38,6 +38,15 @@ std::filesystem::path temp_file(const std::string& name, const std::string& text
   return path;
 }
 
+// A token file as tofmatd wants one: nobody but its owner (and group) may read it.
+std::filesystem::path token_file(const std::string& name, const std::string& text,
+                                 std::filesystem::perms perms = std::filesystem::perms::owner_read |
+                                                                std::filesystem::perms::owner_write) {
+  const auto path = temp_file(name, text);
+  std::filesystem::permissions(path, perms);
+  return path;
+}
+
 void expect_usage_error(std::vector<std::string> args) {
   const auto p = parse(args);
   EXPECT_FALSE(p.cl.has_value());
@@ -63,13 +72,18 @@ TEST(Options, TheDefaultsAreTheCameraAndTheServicesSocket) {
 }
 
 TEST(Options, EveryFlagReachesItsOption) {
-  const auto token = temp_file("token", "0123456789abcdef-secret\n");
+  const auto token = token_file("token", "  0123456789abcdef-secret \t\r\nsecond line\n");
+  const auto control = token_file("control_token", "control-0123456789abcdef\n",
+                                  std::filesystem::perms::owner_read | std::filesystem::perms::group_read);
   const auto p = parse({"--table", "t.tmx", "--source", "sim:static,material=cork", "--profile", "sorting",
                         "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600", "--tcp",
-                        "127.0.0.1:7020", "--token-file", token.string(), "--roi", "10,20,60,70", "--candidates",
+                        "127.0.0.1:7020", "--token-file", token.string(), "--control-token-file", control.string(),
+                        "--control-group", "root", "--max-tcp-clients", "5", "--max-clients-per-peer", "3",
+                        "--idle-timeout", "12", "--roi", "10,20,60,70", "--candidates",
                         "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--threads", "3", "--queue-frames", "4",
                         "--max-clients", "9", "--sim-data", "/opt/sim", "--log-level", "debug"});
   std::filesystem::remove(token);
+  std::filesystem::remove(control);
   ASSERT_TRUE(p.cl.has_value());
   const auto& o = p.cl->daemon;
   EXPECT_EQ(o.source, "sim:static,material=cork");
@@ -78,7 +92,12 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.server.socket_path, "/tmp/s.sock");
   EXPECT_EQ(o.server.socket_mode, 0600u);
   EXPECT_EQ(o.server.tcp, "127.0.0.1:7020");
-  EXPECT_EQ(o.server.token, "0123456789abcdef-secret");
+  EXPECT_EQ(o.server.token, "0123456789abcdef-secret");  // (the first line, without the blanks around it)
+  EXPECT_EQ(o.server.control_token, "control-0123456789abcdef");
+  EXPECT_EQ(o.server.control_gid, 0);
+  EXPECT_EQ(o.server.max_tcp_clients, 5u);
+  EXPECT_EQ(o.server.max_clients_per_peer, 3u);
+  EXPECT_EQ(o.server.idle_timeout_ms, 12000);
   EXPECT_EQ(o.profile.roi.x0, 10);
   EXPECT_EQ(o.profile.roi.y1, 70);
   EXPECT_EQ(o.profile.candidates, (std::vector<std::string>{"pvc", "epvc"}));
@@ -141,7 +160,7 @@ TEST(Options, HelpAndVersionExitWithZero) {
 }
 
 TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
-  const auto short_token = temp_file("short_token", "too short\n");
+  const auto short_token = token_file("short_token", "too short\n");
   expect_usage_error({});                                                      // no table
   expect_usage_error({"--table", "t", "--no-such-flag"});                      // unknown flag
   expect_usage_error({"--table", "t", "stray"});                               // stray argument
@@ -161,7 +180,49 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   expect_usage_error({"--table", "t", "--token-file", short_token.string()});  // a token under 16 characters
   expect_usage_error({"--table", "t", "--token-file", "/nonexistent/token"});  // a token file not there
   expect_usage_error({"--config", "/nonexistent/tofmatd.toml"});               // a config file not there
+  expect_usage_error({"--table", "t", "--idle-timeout", "-1"});                // out of range
+  expect_usage_error({"--table", "t", "--max-tcp-clients", "0"});              // out of range
+  expect_usage_error({"--table", "t", "--max-clients-per-peer", "0"});         // out of range
+  expect_usage_error({"--table", "t", "--control-group", "no-such-group-here"});  // no such group
   std::filesystem::remove(short_token);
+}
+
+TEST(Options, AccessThatWouldOpenTheBoxIsRefused) {
+  // (issue 16) Who may connect and control is never wider than asked for:
+  // a socket every user may use, a token other users can read, a token
+  // with nothing visible in it, a token that is not for TCP, one token for
+  // both roles: each a usage error with status 2.
+  namespace fs = std::filesystem;
+  const auto good = token_file("good_token", "0123456789abcdef-secret\n");
+  const auto readable = token_file("readable_token", "0123456789abcdef-secret\n",
+                                   fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+  const auto blank = token_file("blank_token", " \t  \r\n0123456789abcdef-secret\n");
+  const auto control_chars = token_file("control_char_token", "0123456789\x01" "abcdef-secret\n");
+  const auto empty = token_file("empty_token", "");
+  const std::vector<std::string> tcp = {"--table", "t", "--tcp", "127.0.0.1:7020"};
+  const auto with = [&](std::vector<std::string> more) {
+    std::vector<std::string> a = tcp;
+    a.insert(a.end(), more.begin(), more.end());
+    return a;
+  };
+  for (const char* mode : {"0666", "0664", "0670", "0770", "0661", "0700", "0760"}) {
+    SCOPED_TRACE(mode);
+    expect_usage_error({"--table", "t", "--socket-mode", mode});
+  }
+  for (const char* mode : {"0660", "0640", "0600", "0620"}) {
+    SCOPED_TRACE(mode);
+    EXPECT_TRUE(parse({"--table", "t", "--socket-mode", mode}).cl.has_value());
+  }
+  expect_usage_error(with({"--token-file", readable.string()}));
+  expect_usage_error(with({"--token-file", blank.string()}));
+  expect_usage_error(with({"--token-file", control_chars.string()}));
+  expect_usage_error(with({"--token-file", empty.string()}));
+  expect_usage_error(with({"--token-file", "/dev/zero"}));  // not a regular file
+  expect_usage_error(with({"--token-file", good.string(), "--control-token-file", good.string()}));  // one token, two roles
+  expect_usage_error({"--table", "t", "--token-file", good.string()});                               // no TCP to use it
+  expect_usage_error({"--table", "t", "--control-token-file", good.string()});
+  EXPECT_TRUE(parse(with({"--token-file", good.string()})).cl.has_value());
+  for (const auto& f : {good, readable, blank, control_chars, empty}) fs::remove(f);
 }
 
 }  // namespace

@@ -8,12 +8,18 @@ mis-configured CI run cannot pass silently.
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 import pytest
 
 import tofmat
+from tofmat.client import daemon_binary, sim_data_dir
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_DB_DIR = REPO.parent / "shared" / "data" / "tanaka2017_kinect2_db"
@@ -70,3 +76,60 @@ def real_tmx(real_table: tofmat.ExemplarTable, tmp_path_factory: pytest.TempPath
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(20170721)
+
+
+# --- tofmatd: the simulated camera's table, and daemons started and stopped per test ---------
+
+SIM_TABLE_MATERIALS = ["cork", "paper", "acryl", "pvc", "wood", "plaster", "mdf", "polystyrene"]
+
+
+@pytest.fixture(scope="session")
+def sim_table(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The simulated camera's own table of a few materials (tofmat sim table)."""
+    from tofmat.sim import Renderer, load_device, load_library
+    from tofmat.sim.table import database_bins, simulated_table
+
+    r = Renderer(load_device(), load_library(), 1)
+    t = simulated_table(r, SIM_TABLE_MATERIALS, database_bins())
+    path = tmp_path_factory.mktemp("simtable") / "sim.tmx"
+    t.save(str(path))
+    return path
+
+
+class Daemon:
+    def __init__(self, proc: subprocess.Popen[bytes], socket_path: Path, log: Path) -> None:
+        self.proc, self.socket, self.log = proc, socket_path, log
+
+    def client(self, **kw: Any) -> tofmat.Client:
+        deadline = time.monotonic() + 30.0
+        while True:
+            assert self.proc.poll() is None, f"tofmatd exited: {self.log.read_text()}"
+            try:
+                return tofmat.Client(self.socket, **kw)
+            except tofmat.DaemonUnavailableError:
+                assert time.monotonic() < deadline, "tofmatd did not listen within 30 s"
+                time.sleep(0.05)
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            self.proc.wait(20)
+        return self.proc.returncode
+
+
+@pytest.fixture
+def start(tmp_path: Path, sim_table: Path) -> Iterator[Callable[..., Daemon]]:
+    started: list[Daemon] = []
+
+    def _start(source: str, *args: str, table: Path | None = None, name: str = "d",
+               socket_dir: Path | None = None) -> Daemon:
+        sock, log = (socket_dir or tmp_path) / f"{name}.sock", tmp_path / f"{name}.log"
+        cmd = [str(daemon_binary()), "--source", source, "--table", str(table or sim_table), "--socket", str(sock),
+               "--sim-data", str(sim_data_dir()), *args]  # fmt: skip
+        d = Daemon(subprocess.Popen(cmd, stdout=log.open("wb"), stderr=subprocess.STDOUT), sock, log)
+        started.append(d)
+        return d
+
+    yield _start
+    for d in started:
+        assert d.stop() == 0, f"tofmatd did not stop cleanly:\n{d.log.read_text()}"

@@ -9,6 +9,7 @@ a hung test.
 from __future__ import annotations
 
 import json
+import re
 import os
 import shutil
 import signal
@@ -26,58 +27,9 @@ import pytest
 
 import tofmat
 from tofmat.client import DeviceEvent, Label, LabelMap, daemon_binary, sim_data_dir
-from tofmat.sim import Renderer, load_device, load_library
-from tofmat.sim.table import database_bins, simulated_table
 
-MATERIALS = ["cork", "paper", "acryl", "pvc", "wood", "plaster", "mdf", "polystyrene"]
-
-
-@pytest.fixture(scope="session")
-def sim_table(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The simulated camera's own table of a few materials (tofmat sim table)."""
-    r = Renderer(load_device(), load_library(), 1)
-    t = simulated_table(r, MATERIALS, database_bins())
-    path = tmp_path_factory.mktemp("simtable") / "sim.tmx"
-    t.save(str(path))
-    return path
-
-
-class Daemon:
-    def __init__(self, proc: subprocess.Popen[bytes], socket_path: Path, log: Path) -> None:
-        self.proc, self.socket, self.log = proc, socket_path, log
-
-    def client(self, **kw: Any) -> tofmat.Client:
-        deadline = time.monotonic() + 30.0
-        while True:
-            assert self.proc.poll() is None, f"tofmatd exited: {self.log.read_text()}"
-            try:
-                return tofmat.Client(self.socket, **kw)
-            except tofmat.DaemonUnavailableError:
-                assert time.monotonic() < deadline, "tofmatd did not listen within 30 s"
-                time.sleep(0.05)
-
-    def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            self.proc.wait(20)
-        return self.proc.returncode
-
-
-@pytest.fixture
-def start(tmp_path: Path, sim_table: Path) -> Iterator[Callable[..., Daemon]]:
-    started: list[Daemon] = []
-
-    def _start(source: str, *args: str, table: Path | None = None, name: str = "d") -> Daemon:
-        sock, log = tmp_path / f"{name}.sock", tmp_path / f"{name}.log"
-        cmd = [str(daemon_binary()), "--source", source, "--table", str(table or sim_table), "--socket", str(sock),
-               "--sim-data", str(sim_data_dir()), *args]  # fmt: skip
-        d = Daemon(subprocess.Popen(cmd, stdout=log.open("wb"), stderr=subprocess.STDOUT), sock, log)
-        started.append(d)
-        return d
-
-    yield _start
-    for d in started:
-        assert d.stop() == 0, f"tofmatd did not stop cleanly:\n{d.log.read_text()}"
+from conftest import SIM_TABLE_MATERIALS as MATERIALS
+from conftest import Daemon
 
 
 def sweep(materials: list[str], frames: int = 30, gap: int = 6, extra: str = "") -> str:
@@ -249,6 +201,7 @@ def free_port() -> int:
 def test_tcp_needs_the_token(start: Callable[..., Daemon], tmp_path: Path) -> None:
     token = "s3cret-token-0123456789"
     (tmp_path / "token").write_text(token + "\n")
+    (tmp_path / "token").chmod(0o600)
     port = free_port()
     d = start(sweep(["cork"]), "--tcp", f"127.0.0.1:{port}", "--token-file", str(tmp_path / "token"))
     with d.client() as local:  # the Unix socket needs none
@@ -256,11 +209,17 @@ def test_tcp_needs_the_token(start: Callable[..., Daemon], tmp_path: Path) -> No
     address = f"127.0.0.1:{port}"
     with pytest.raises(tofmat.AuthenticationError):
         tofmat.Client(address)
-    with pytest.raises(tofmat.AuthenticationError):
+    # The address waits before its next token is looked at (250 ms after one wrong token, then 500 ms).
+    with pytest.raises(tofmat.AuthenticationError, match="too many wrong tokens"):
+        tofmat.Client(address, token=token)
+    time.sleep(0.3)
+    with pytest.raises(tofmat.AuthenticationError, match="must send the daemon's token"):
         tofmat.Client(address, token="wrong-token-0123456789")
+    time.sleep(0.6)
     with tofmat.Client(address, token=token) as c:
-        assert c.hello["auth_required"] is True
-        assert c.status()["clients"]["auth_failures"] == 2
+        assert c.hello["auth_required"] is True and c.role == "read"
+        clients = c.status()["clients"]
+        assert clients["auth_failures"] == 2 and clients["auth_throttled"] == 1
 
 
 def test_tcp_without_a_token_file_is_refused_at_start(tmp_path: Path, sim_table: Path) -> None:
@@ -661,6 +620,23 @@ def test_the_shipped_example_config_parses(start: Callable[..., Daemon]) -> None
     with d.client() as c:
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["source"].startswith("simulated")
+
+
+def test_every_flag_is_in_the_man_pages_and_the_example_config() -> None:
+    # The references a user reads (tofmatd(8), tofmatd.toml(5), the shipped example) name every
+    # flag tofmatd has; --help is the program's own list.
+    repo = Path(__file__).resolve().parents[2]
+    out = subprocess.run([str(daemon_binary()), "--help"], capture_output=True, text=True, timeout=30).stdout
+    flags = set(re.findall(r"--([a-z][a-z0-9-]+)", out)) - {"help", "version"}
+    assert {"control-group", "idle-timeout", "max-clients-per-peer", "control-token-file"} <= flags
+    man8 = (repo / "docs" / "man" / "tofmatd.8").read_text().replace("\\-", "-")
+    man5 = (repo / "docs" / "man" / "tofmatd.toml.5").read_text().replace("\\-", "-")
+    example = (repo / "firmware" / "daemon" / "tofmatd.toml").read_text()
+    for flag in sorted(flags):
+        assert f"--{flag}" in man8, f"--{flag} is not in tofmatd(8)"
+        if flag != "config":
+            assert f".B {flag}\n" in man5, f"{flag} is not a key in tofmatd.toml(5)"
+            assert re.search(rf"^#? ?{flag} = ", example, re.M), f"{flag} is not in the example config"
 
 
 def test_watch_and_status_on_the_command_line(start: Callable[..., Daemon]) -> None:

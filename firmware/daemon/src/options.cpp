@@ -1,6 +1,15 @@
 #include "tofmat/daemon/options.hpp"
 
+#include <fcntl.h>
+#include <grp.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 
 #include <filesystem>
 #include <fstream>
@@ -34,14 +43,54 @@ PixelRegion parse_roi(const std::string& text) {
   return r;
 }
 
-std::string read_token(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw CLI::ValidationError("--token-file", "cannot read \"" + path + "\"");
-  std::string token;
-  std::getline(in, token);
-  while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
-  if (token.size() < 16) throw CLI::ValidationError("--token-file", "the token must be at least 16 characters");
+// A token file: a regular file (opened without blocking: a FIFO is refused,
+// not waited on) of at most kMaxTokenFileBytes that no other user may read,
+// whose first line, without the blanks around it, is the token: at least 16
+// characters, none of them a control character.
+constexpr std::size_t kMaxTokenFileBytes = 4096;
+
+std::string read_token(const std::string& flag, const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
+  if (fd < 0) throw CLI::ValidationError(flag, "cannot read \"" + path + "\": " + std::strerror(errno));
+  struct stat st {};
+  std::string text;
+  const bool ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_size <= static_cast<off_t>(kMaxTokenFileBytes);
+  if (ok) {
+    text.resize(kMaxTokenFileBytes);
+    const ssize_t n = ::read(fd, text.data(), text.size());
+    text.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+  }
+  ::close(fd);
+  if (!ok)
+    throw CLI::ValidationError(flag, "\"" + path + "\" is not a regular file of at most " +
+                                         std::to_string(kMaxTokenFileBytes) + " bytes");
+  if ((st.st_mode & 0007) != 0)
+    throw CLI::ValidationError(flag, "\"" + path + "\" can be read or written by other users (mode " +
+                                         [&] {
+                                           char m[8];
+                                           std::snprintf(m, sizeof m, "%04o", static_cast<unsigned>(st.st_mode & 07777));
+                                           return std::string(m);
+                                         }() +
+                                         "): chmod o-rwx it");
+  std::string token = text.substr(0, text.find('\n'));
+  const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
+  while (!token.empty() && blank(token.back())) token.pop_back();
+  token.erase(0, token.find_first_not_of(" \t\r"));
+  if (token.empty()) throw CLI::ValidationError(flag, "\"" + path + "\": the token's line has no visible character");
+  for (const char c : token)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f)
+      throw CLI::ValidationError(flag, "\"" + path + "\": the token holds a control character");
+  if (token.size() < 16) throw CLI::ValidationError(flag, "the token must be at least 16 characters");
   return token;
+}
+
+long group_id(const std::string& name) {
+  std::vector<char> buf(16384);
+  group gr{};
+  group* found = nullptr;
+  if (::getgrnam_r(name.c_str(), &gr, buf.data(), buf.size(), &found) != 0 || !found)
+    throw CLI::ValidationError("--control-group", "no group \"" + name + "\" on this system");
+  return static_cast<long>(found->gr_gid);
 }
 
 // The configuration file named on the command line (--config FILE or
@@ -79,7 +128,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   DaemonOptions& o = cl.daemon;
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
   o.source_options.sim_data_dir = installed_sim_data_dir();
-  std::string profile = o.profile.name, backend = "fixed", roi, tcp, token_file, socket_mode = "0660";
+  std::string profile = o.profile.name, backend = "fixed", roi, tcp, token_file, control_token_file, control_group,
+      socket_mode = "0660";
+  int idle_timeout_s = o.server.idle_timeout_ms / 1000;
   std::vector<std::string> candidates;
 
   CLI::App app{"tofmatd: material labels from a Time-of-Flight camera, served over a socket"};
@@ -95,9 +146,27 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--table-dir", o.table_dir,
                  "folder a client's load_table may read from (default: the folder holding --table)");
   app.add_option("--socket", o.server.socket_path, "Unix socket path (\"\" for none)")->capture_default_str();
-  app.add_option("--socket-mode", socket_mode, "permissions of the Unix socket (octal)")->capture_default_str();
+  app.add_option("--socket-mode", socket_mode, "permissions of the Unix socket (octal, at most 0660)")->capture_default_str();
+  app.add_option("--control-group", control_group,
+                 "Unix clients in this group may control (profile, ROI, candidates, trigger, reset, load_table); "
+                 "the daemon's user and root always may, everyone else reads only");
   app.add_option("--tcp", tcp, "also listen on HOST:PORT (needs --token-file; use 127.0.0.1 unless you mean it)");
-  app.add_option("--token-file", token_file, "file whose first line is the TCP clients' shared secret");
+  app.add_option("--token-file", token_file,
+                 "file (mode 0600 or 0640) whose first line is the TCP clients' shared secret: it reads only");
+  app.add_option("--control-token-file", control_token_file,
+                 "file whose first line is the TCP secret that also controls (default: no TCP client controls)");
+  app.add_option("--max-tcp-clients", o.server.max_tcp_clients, "TCP connections at once")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1024));
+  app.add_option("--max-clients-per-peer", o.server.max_clients_per_peer,
+                 "connections at once from one user (Unix) or address (TCP)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1024));
+  app.add_option("--idle-timeout", idle_timeout_s,
+                 "seconds after which a client that neither asks nor subscribes, or takes nothing it is sent, is "
+                 "closed (0: never)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 86400));
   app.add_option("--backend", backend, "fixed (integer path, NEON on aarch64) | float (reference)")
       ->capture_default_str();
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
@@ -111,7 +180,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--queue-frames", o.queue_frames, "frames waiting for processing before the oldest is dropped")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
-  app.add_option("--max-clients", o.server.max_clients, "connections at once")->capture_default_str()->check(CLI::Range(1, 1024));
+  app.add_option("--max-clients", o.server.max_clients, "Unix connections at once")->capture_default_str()->check(CLI::Range(1, 1024));
   app.add_option("--sim-data", o.source_options.sim_data_dir,
                  "simulator device profiles and material libraries (default: installed beside tofmatd)")
       ->capture_default_str();
@@ -127,11 +196,27 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.profile.candidates = candidates;
     if (!roi.empty()) o.profile.roi = parse_roi(roi);
     o.server.tcp = tcp;
-    if (!token_file.empty()) o.server.token = read_token(token_file);
+    if (tcp.empty() && !token_file.empty())
+      throw CLI::ValidationError("--token-file", "a token is for TCP clients: give --tcp too, or leave the token out");
+    if (tcp.empty() && !control_token_file.empty())
+      throw CLI::ValidationError("--control-token-file", "a token is for TCP clients: give --tcp too");
     if (!tcp.empty() && token_file.empty()) throw CLI::ValidationError("--tcp", "TCP needs --token-file");
+    if (!token_file.empty()) o.server.token = read_token("--token-file", token_file);
+    if (!control_token_file.empty()) {
+      o.server.control_token = read_token("--control-token-file", control_token_file);
+      if (o.server.control_token == o.server.token)
+        throw CLI::ValidationError("--control-token-file", "the control token must differ from --token-file's");
+    }
+    if (!control_group.empty()) o.server.control_gid = group_id(control_group);
+    o.server.idle_timeout_ms = idle_timeout_s * 1000;
     std::size_t used = 0;
-    const unsigned long mode = std::stoul(socket_mode, &used, 8);
+    const unsigned long mode = socket_mode.empty() ? 01000 : std::stoul(socket_mode, &used, 8);
     if (used != socket_mode.size() || mode > 0777) throw CLI::ValidationError("--socket-mode", "expected octal like 0660");
+    // Anyone who can connect may read the labels: that is the group's
+    // business, never every user's (and nobody executes a socket).
+    if ((mode & ~0660ul) != 0)
+      throw CLI::ValidationError("--socket-mode", "\"" + socket_mode +
+                                                      "\" is wider than 0660: give access through the socket's group");
     o.server.socket_mode = static_cast<unsigned>(mode);
   } catch (const CLI::ConfigError& e) {
     // (CLI11's text names the key, not the file: say which file.)

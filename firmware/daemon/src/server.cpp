@@ -28,11 +28,16 @@ constexpr std::size_t kReadChunk = 64 * 1024;
 constexpr std::size_t kRequestsPerRound = 32;
 constexpr std::size_t kMaxQueuedReplies = 256;
 
-// Compares without leaking where the first difference is.
-bool same_token(const std::string& a, const std::string& b) {
-  unsigned char diff = a.size() == b.size() ? 0 : 1;
-  for (std::size_t i = 0; i < a.size(); ++i) diff |= static_cast<unsigned char>(a[i] ^ (i < b.size() ? b[i] : 0));
-  return diff == 0 && !a.empty();
+AccessOptions access_options(const ServerOptions& o) {
+  AccessOptions a;
+  a.max_unix = o.max_clients;
+  a.max_tcp = o.max_tcp_clients;
+  a.max_per_peer = o.max_clients_per_peer;
+  a.read_token = o.token;
+  a.control_token = o.control_token;
+  a.control_gid = o.control_gid;
+  a.owner_uid = ::geteuid();
+  return a;
 }
 
 Bytes encoded(const protocol::Message& m) { return std::make_shared<const std::vector<std::uint8_t>>(protocol::encode(m)); }
@@ -48,9 +53,13 @@ struct Server::Connection {
   std::uint64_t id = 0;
   protocol::Fd fd;
   bool tcp = false;
+  Peer peer;
+  Role role = Role::kRead;  // Unix: from the peer at accept; TCP: from the token at hello
   bool ready = false;    // hello done
   bool closing = false;  // close once the queue is written (a refused hello's reply)
   std::uint64_t accepted_ns = 0;
+  std::uint64_t last_request_ns = 0;   // the last request handled (hello included)
+  std::uint64_t last_progress_ns = 0;  // the last time its queue was empty or a send took bytes
   protocol::MessageReader reader{protocol::kMaxRequestPayloadBytes};
   struct Queued {
     Bytes bytes;
@@ -65,7 +74,8 @@ struct Server::Connection {
   bool more = false;  // requests may be left to handle from an earlier read
 };
 
-Server::Server(ServerOptions options, Handler handler) : options_(std::move(options)), handler_(std::move(handler)) {
+Server::Server(ServerOptions options, Handler handler)
+    : options_(std::move(options)), handler_(std::move(handler)), access_(access_options(options_)) {
   wake_fd_ = protocol::Fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
   if (!wake_fd_) throw protocol::SocketError("eventfd failed", errno);
   if (!options_.socket_path.empty()) {
@@ -83,8 +93,14 @@ Server::Server(ServerOptions options, Handler handler) : options_(std::move(opti
     const bool any_port = spec.size() >= 2 && spec.compare(spec.size() - 2, 2, ":0") == 0;
     const auto a = protocol::parse_address(any_port ? spec.substr(0, spec.size() - 1) + "1" : spec);
     if (!a.tcp) throw std::invalid_argument("tcp must be HOST:PORT, got \"" + options_.tcp + "\"");
+    if (!options_.control_token.empty() && options_.control_token == options_.token)
+      throw std::invalid_argument("the control token must differ from the reading token");
     tcp_ = protocol::listen_tcp(a.host, any_port ? 0 : a.port);
     tcp_port_ = protocol::local_port(tcp_.get());
+    if (a.host != "localhost" && a.host.rfind("127.", 0) != 0)
+      spdlog::warn("TCP listens on {}: reachable from the network, where the token is all that stands between the "
+                   "box and anyone (use 127.0.0.1 and a tunnel unless you mean it)",
+                   options_.tcp);
   }
   if (!unix_ && !tcp_) throw std::invalid_argument("no socket to listen on (give a socket path or tcp)");
 }
@@ -145,26 +161,38 @@ void Server::accept_from(int listener, bool tcp) {
   for (;;) {
     protocol::Fd fd(::accept4(listener, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));
     if (!fd) return;  // EAGAIN: nothing more waiting (or a transient error)
-    if (connections_.size() >= options_.max_clients) {
+    Peer peer;
+    try {
+      peer = peer_of(fd.get(), tcp);
+    } catch (const std::exception& e) {  // (gone already)
       ++rejected_;
-      note("refuse", spdlog::level::warn, "refusing a client: " + std::to_string(connections_.size()) + " connected already");
+      note("refuse", spdlog::level::warn, std::string("refusing a client: ") + e.what());
+      continue;
+    }
+    if (const std::string why = access_.admit(peer); !why.empty()) {
+      ++rejected_;
+      note("refuse", spdlog::level::warn, "refusing a client: " + why);
       continue;  // closes it
     }
     auto c = std::make_unique<Connection>();
     c->id = next_id_++;
     c->fd = std::move(fd);
     c->tcp = tcp;
-    c->accepted_ns = protocol::monotonic_ns();
+    c->peer = std::move(peer);
+    c->role = tcp ? Role::kRead : access_.unix_role(c->peer);
+    c->accepted_ns = c->last_request_ns = c->last_progress_ns = protocol::monotonic_ns();
     protocol::Hello h;
     h.server = options_.server_name;
     h.capabilities = options_.capabilities;
     h.auth_required = tcp;
     enqueue(*c, encoded(protocol::encode_hello(h)), false);
     ++accepted_;
-    note("connect", spdlog::level::info, "client " + std::to_string(c->id) + " connected (" + (tcp ? "tcp" : "unix") + ")");
+    note("connect", spdlog::level::info, "client " + std::to_string(c->id) + " connected (" + c->peer.key() + ")");
     connections_.emplace(c->id, std::move(c));
   }
   clients_ = connections_.size();
+  unix_clients_ = access_.unix_clients();
+  tcp_clients_ = access_.tcp_clients();
 }
 
 void Server::enqueue(Connection& c, Bytes bytes, bool event) {
@@ -195,6 +223,7 @@ void Server::enqueue(Connection& c, Bytes bytes, bool event) {
     c.dead = true;
     return;
   }
+  if (c.out.empty()) c.last_progress_ns = protocol::monotonic_ns();  // (the wait for the client starts now)
   c.out_bytes += bytes->size();
   if (!event) ++c.replies;
   c.out.push_back({std::move(bytes), event});
@@ -235,15 +264,35 @@ void Server::handle(Connection& c, const protocol::Message& m) {
                     "this daemon speaks protocol version " + std::to_string(protocol::kProtocolVersion), true);
     if (c.tcp) {
       const std::string token = args.contains("token") && args["token"].is_string() ? args["token"].get<std::string>() : "";
-      if (!same_token(token, options_.token)) {
-        ++auth_failures_;
-        note("auth", spdlog::level::warn, "client " + std::to_string(c.id) + ": wrong or missing token");
-        return refuse(protocol::codes::kAuth, "a TCP client must send the daemon's token", true);
+      std::uint64_t wait_ms = 0;
+      switch (access_.check_token(c.peer.address, token, protocol::monotonic_ns(), wait_ms)) {
+        case ClientAccess::Verdict::kThrottled:
+          ++auth_throttled_;
+          return refuse(protocol::codes::kAuth,
+                        "too many wrong tokens from " + c.peer.address + ": the next is looked at in " +
+                            std::to_string(wait_ms) + " ms",
+                        true);
+        case ClientAccess::Verdict::kWrong:
+          ++auth_failures_;
+          note("auth", spdlog::level::warn, "client " + std::to_string(c.id) + " (" + c.peer.key() + "): wrong or missing token");
+          return refuse(protocol::codes::kAuth, "a TCP client must send the daemon's token", true);
+        case ClientAccess::Verdict::kControl: c.role = Role::kControl; break;
+        case ClientAccess::Verdict::kRead: c.role = Role::kRead; break;
       }
     }
     c.ready = true;
-    r.result = {{"protocol", protocol::kProtocolVersion}, {"client_id", c.id}};
+    r.result = {{"protocol", protocol::kProtocolVersion}, {"client_id", c.id}, {"role", role_name(c.role)}};
     return reply(c, r);
+  }
+  if (c.role != Role::kControl && !is_reading_command(req.cmd)) {
+    ++not_permitted_;
+    note("permission", spdlog::level::warn,
+         "client " + std::to_string(c.id) + " (" + c.peer.key() + "): \"" + req.cmd + "\" refused, it may only read");
+    return refuse(protocol::codes::kPermission,
+                  "\"" + req.cmd + "\" needs the control role (" +
+                      (c.tcp ? "the control token" : "the daemon's user or its control group") +
+                      "); this connection may only read",
+                  false);
   }
   if (req.cmd == "hello") return refuse(protocol::codes::kInvalidArgument, "hello was already done", false);
   if (req.cmd == "subscribe" || req.cmd == "unsubscribe") {
@@ -294,6 +343,7 @@ void Server::read_from(Connection& c, bool readable) {
       auto m = c.reader.next();
       if (!m) return;
       ++handled;
+      c.last_request_ns = protocol::monotonic_ns();
       handle(c, *m);
     }
   };
@@ -335,6 +385,7 @@ void Server::write_to(Connection& c) {
       return;
     }
     c.out_offset += static_cast<std::size_t>(n);
+    c.last_progress_ns = protocol::monotonic_ns();
     if (c.out_offset == front.size()) {
       c.out_bytes -= front.size();
       if (!c.out.front().event) --c.replies;
@@ -396,6 +447,20 @@ void Server::run(const std::atomic<bool>& stop) {
                  " ms; closing it");
         c.dead = true;
       }
+      if (c.ready && !c.dead && !c.closing && options_.idle_timeout_ms > 0) {
+        const std::uint64_t idle_ns = static_cast<std::uint64_t>(options_.idle_timeout_ms) * 1'000'000ull;
+        // (Both times may be later than `now`, taken before this round's reads.)
+        const bool asks_nothing = c.streams.empty() && now > c.last_request_ns + idle_ns;
+        const bool takes_nothing = !c.out.empty() && now > c.last_progress_ns + idle_ns;
+        if (asks_nothing || takes_nothing) {
+          ++idle_closed_;
+          note("idle", spdlog::level::info,
+               "client " + std::to_string(c.id) + ": " +
+                   (asks_nothing ? "no request and no subscription" : "took nothing it was sent") + " for " +
+                   std::to_string(options_.idle_timeout_ms / 1000) + " s; closing it");
+          c.dead = true;
+        }
+      }
     }
     // Every queue with something in it is written now (replies queued while
     // reading go out without waiting for the next poll); then the dead go.
@@ -410,20 +475,28 @@ void Server::run(const std::atomic<bool>& stop) {
       }
       note("disconnect", spdlog::level::info,
            "client " + std::to_string(c.id) + " disconnected (" + std::to_string(c.dropped) + " events dropped for it)");
+      access_.release(c.peer);
       it = connections_.erase(it);
       changed = true;
     }
     if (changed) refresh_subscriptions();
     clients_ = connections_.size();
+    unix_clients_ = access_.unix_clients();
+    tcp_clients_ = access_.tcp_clients();
   }
 }
 
 nlohmann::json Server::status() const {
   return {{"clients", clients_.load()},
+          {"unix_clients", unix_clients_.load()},
+          {"tcp_clients", tcp_clients_.load()},
           {"accepted", accepted_.load()},
           {"rejected", rejected_.load()},
           {"protocol_errors", protocol_errors_.load()},
           {"auth_failures", auth_failures_.load()},
+          {"auth_throttled", auth_throttled_.load()},
+          {"not_permitted", not_permitted_.load()},
+          {"idle_closed", idle_closed_.load()},
           {"dropped_events", dropped_events_.load() + inbox_dropped_.load()},
           {"log_suppressed", log_suppressed_.load()}};
 }

@@ -60,7 +60,8 @@ Client::Client(const std::string& address, ClientOptions options) : options_(std
   Json args = {{"protocol", kProtocolVersion}, {"client", "tofmat-client"}};
   if (!options_.token.empty()) args["token"] = options_.token;
   try {
-    request("hello", args);
+    const Json result = request("hello", args);
+    if (result.contains("role") && result["role"].is_string()) role_ = result["role"].get<std::string>();
   } catch (const ClientError& e) {
     if (e.kind() == ClientErrorKind::kCommand && e.code() == codes::kAuth)
       throw ClientError(ClientErrorKind::kAuth, e.what(), e.code());

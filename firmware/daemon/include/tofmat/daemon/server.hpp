@@ -10,7 +10,11 @@
 // connection only. Serving is fair: each poll round a connection gets one
 // bounded read and a bounded number of requests handled, so a client that
 // pipelines requests without end delays nobody else's events; lines about
-// clients are rate-limited per kind.
+// clients are rate-limited per kind. Who may connect, how many at once and
+// what each may do is ClientAccess's (roles, per-kind and per-peer slots,
+// token throttling); a connection that after its hello neither asks nor
+// subscribes, or stops taking what it is sent, is closed after the idle
+// timeout.
 #pragma once
 #include <atomic>
 #include <functional>
@@ -24,6 +28,7 @@
 #include <nlohmann/json.hpp>
 #include <spdlog/common.h>
 
+#include "tofmat/daemon/client_access.hpp"
 #include "tofmat/daemon/log_limiter.hpp"
 #include "tofmat/protocol/messages.hpp"
 #include "tofmat/protocol/socket.hpp"
@@ -34,10 +39,17 @@ struct ServerOptions {
   std::string socket_path;      // "" = no Unix socket
   unsigned socket_mode = 0660;
   std::string tcp;              // "host:port" ("" = no TCP); needs a token
-  std::string token;
-  std::size_t max_clients = 64;
+  std::string token;             // TCP: reads
+  std::string control_token;     // TCP: controls ("" = no TCP client controls)
+  long control_gid = -1;         // Unix: members of this group control too (the daemon's user and root always do)
+  std::size_t max_clients = 64;  // Unix connections at once
+  std::size_t max_tcp_clients = 16;
+  std::size_t max_clients_per_peer = 16;  // per uid (Unix) or address (TCP)
   std::size_t max_queue_bytes = 16u << 20;  // per client
   int hello_timeout_ms = 5000;
+  // After hello: no request and no subscription for this long, or queued
+  // bytes the client has not taken for this long, closes it (0 = never).
+  int idle_timeout_ms = 60000;
   std::string server_name = "tofmatd";
   std::vector<std::string> capabilities;
 };
@@ -85,9 +97,10 @@ class Server {
   std::vector<std::pair<std::string, std::shared_ptr<const std::vector<std::uint8_t>>>> inbox_;
   std::set<std::string> subscribed_;  // union of all clients' streams (under inbox_mutex_)
   // Counters.
-  std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, dropped_events_{0},
-      inbox_dropped_{0};
-  std::atomic<std::size_t> clients_{0};
+  std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, auth_throttled_{0},
+      not_permitted_{0}, idle_closed_{0}, dropped_events_{0}, inbox_dropped_{0};
+  std::atomic<std::size_t> clients_{0}, unix_clients_{0}, tcp_clients_{0};
+  ClientAccess access_;  // server thread only (after the constructor)
   LogLimiter log_limiter_;  // server thread only
   std::atomic<std::uint64_t> log_suppressed_{0};
 };

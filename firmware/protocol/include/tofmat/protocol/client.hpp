@@ -46,6 +46,10 @@ class Client {
   // Connects and completes the handshake. Throws ClientError.
   explicit Client(const std::string& address, ClientOptions options = {});
   const Hello& hello() const { return hello_; }
+  // What the daemon lets this connection do: "read" (subscribe, status) or
+  // "control" (also profile, ROI, candidates, trigger, reset, load_table).
+  // A daemon that does not say has no roles: every client controls.
+  const std::string& role() const { return role_; }
   const Address& address() const { return address_; }
   // Sends a command and returns its result; events arriving meanwhile are
   // kept for next_event(). Throws ClientError (kCommand with the daemon's
@@ -69,6 +73,7 @@ class Client {
   Fd fd_;
   MessageReader reader_;
   Hello hello_;
+  std::string role_ = "control";
   std::deque<Message> events_;
   std::uint32_t next_id_ = 1;
 };

@@ -27,6 +27,7 @@ inline constexpr const char* kHelloFirst = "hello_first";     // a request befor
 inline constexpr const char* kUnknownCommand = "unknown_command";
 inline constexpr const char* kInvalidArgument = "invalid_argument";
 inline constexpr const char* kFailed = "failed";              // a valid command that did not work (bad table file)
+inline constexpr const char* kPermission = "permission";      // a control command from a client that may only read
 }  // namespace codes
 
 struct Hello {

@@ -1,0 +1,143 @@
+#include "tofmat/daemon/client_access.hpp"
+
+#include <arpa/inet.h>
+#include <grp.h>
+#include <netinet/in.h>
+#include <pwd.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+#include <vector>
+
+namespace tofmat::daemon {
+namespace {
+
+// Compares without leaking where the first difference is.
+bool same_token(const std::string& a, const std::string& b) {
+  unsigned char diff = a.size() == b.size() ? 0 : 1;
+  for (std::size_t i = 0; i < a.size(); ++i) diff |= static_cast<unsigned char>(a[i] ^ (i < b.size() ? b[i] : 0));
+  return diff == 0 && !a.empty();
+}
+
+// A failure is forgotten this long after the address's wait ended.
+constexpr std::uint64_t kForgetNs = 600'000'000'000ull;
+
+}  // namespace
+
+const char* role_name(Role role) { return role == Role::kControl ? "control" : "read"; }
+
+bool is_reading_command(const std::string& cmd) {
+  return cmd == "hello" || cmd == "subscribe" || cmd == "unsubscribe" || cmd == "status" || cmd == "server_status";
+}
+
+std::string Peer::key() const { return tcp ? "tcp " + address : "uid " + std::to_string(uid); }
+
+Peer peer_of(int fd, bool tcp) {
+  Peer p;
+  p.tcp = tcp;
+  if (!tcp) {
+    ucred cred{};
+    socklen_t len = sizeof cred;
+    if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) != 0)
+      throw std::runtime_error(std::string("SO_PEERCRED: ") + std::strerror(errno));
+    p.uid = cred.uid;
+    p.gid = cred.gid;
+    return p;
+  }
+  sockaddr_in sa{};
+  socklen_t len = sizeof sa;
+  if (::getpeername(fd, reinterpret_cast<sockaddr*>(&sa), &len) != 0)
+    throw std::runtime_error(std::string("getpeername: ") + std::strerror(errno));
+  char text[INET_ADDRSTRLEN] = {};
+  if (!::inet_ntop(AF_INET, &sa.sin_addr, text, sizeof text)) throw std::runtime_error("inet_ntop failed");
+  p.address = text;
+  return p;
+}
+
+bool user_in_group(uid_t uid, gid_t primary, gid_t group) {
+  if (primary == group) return true;
+  // The user's supplementary groups, from the user database (a uid without
+  // an entry has none).
+  std::vector<char> buf(16384);
+  passwd pw{};
+  passwd* found = nullptr;
+  if (::getpwuid_r(uid, &pw, buf.data(), buf.size(), &found) != 0 || !found) return false;
+  int n = 64;
+  std::vector<gid_t> groups(static_cast<std::size_t>(n));
+  if (::getgrouplist(found->pw_name, primary, groups.data(), &n) < 0) {
+    groups.resize(static_cast<std::size_t>(n));
+    if (::getgrouplist(found->pw_name, primary, groups.data(), &n) < 0) return false;
+  }
+  groups.resize(static_cast<std::size_t>(n));
+  return std::find(groups.begin(), groups.end(), group) != groups.end();
+}
+
+std::string ClientAccess::admit(const Peer& peer) {
+  std::size_t& kind = peer.tcp ? tcp_ : unix_;
+  const std::size_t max = peer.tcp ? options_.max_tcp : options_.max_unix;
+  if (kind >= max) return std::to_string(kind) + (peer.tcp ? " TCP" : " Unix") + " clients connected already";
+  std::size_t& mine = per_peer_[peer.key()];
+  if (mine >= options_.max_per_peer) return peer.key() + " has " + std::to_string(mine) + " connections already";
+  ++mine;
+  ++kind;
+  return "";
+}
+
+void ClientAccess::release(const Peer& peer) {
+  std::size_t& kind = peer.tcp ? tcp_ : unix_;
+  if (kind > 0) --kind;
+  auto it = per_peer_.find(peer.key());
+  if (it == per_peer_.end()) return;
+  if (--it->second == 0) per_peer_.erase(it);
+}
+
+Role ClientAccess::unix_role(const Peer& peer) const {
+  if (peer.uid == 0 || peer.uid == options_.owner_uid) return Role::kControl;
+  if (options_.control_gid >= 0 && user_in_group(peer.uid, peer.gid, static_cast<gid_t>(options_.control_gid)))
+    return Role::kControl;
+  return Role::kRead;
+}
+
+ClientAccess::Verdict ClientAccess::check_token(const std::string& address, const std::string& token,
+                                                std::uint64_t now_ns, std::uint64_t& wait_ms) {
+  wait_ms = 0;
+  auto it = throttle_.find(address);
+  if (it != throttle_.end() && now_ns > it->second.until_ns + kForgetNs) it->second.count = 0;  // long quiet: a fresh start
+  if (it != throttle_.end() && now_ns < it->second.until_ns) {
+    wait_ms = (it->second.until_ns - now_ns + 999'999) / 1'000'000;
+    return Verdict::kThrottled;
+  }
+  // (Both compared, whichever matches: the time taken says nothing of which.)
+  const bool control = same_token(token, options_.control_token);
+  const bool read = same_token(token, options_.read_token);
+  if (control || read) {
+    if (it != throttle_.end()) throttle_.erase(it);
+    return control ? Verdict::kControl : Verdict::kRead;
+  }
+  if (it == throttle_.end()) {
+    forget_old(now_ns);
+    it = throttle_.emplace(address, Failures{}).first;
+  }
+  Failures& f = it->second;
+  f.count = std::min(f.count + 1, 32u);
+  const std::uint64_t delay_ms = std::min(kFirstDelayMs << std::min(f.count - 1, 16u), kMaxDelayMs);
+  f.until_ns = now_ns + delay_ms * 1'000'000ull;
+  return Verdict::kWrong;
+}
+
+void ClientAccess::forget_old(std::uint64_t now_ns) {
+  if (throttle_.size() < kMaxThrottled) return;
+  for (auto it = throttle_.begin(); it != throttle_.end();)
+    it = now_ns > it->second.until_ns + kForgetNs ? throttle_.erase(it) : std::next(it);
+  // Still full (that many addresses failing at once): the one free soonest goes.
+  while (throttle_.size() >= kMaxThrottled)
+    throttle_.erase(std::min_element(throttle_.begin(), throttle_.end(), [](const auto& a, const auto& b) {
+      return a.second.until_ns < b.second.until_ns;
+    }));
+}
+
+}  // namespace tofmat::daemon

@@ -1,0 +1,157 @@
+// ClientAccess (firmware/daemon/client_access.hpp): tofmatd's roles, slots
+// and token throttling, without sockets (the server tests run them over real
+// ones).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <string>
+
+#include "tofmat/daemon/client_access.hpp"
+
+namespace {
+
+using tofmat::daemon::AccessOptions;
+using tofmat::daemon::ClientAccess;
+using tofmat::daemon::Peer;
+using tofmat::daemon::Role;
+using Verdict = ClientAccess::Verdict;
+
+constexpr std::uint64_t kMs = 1'000'000ull;
+
+Peer unix_peer(uid_t uid, gid_t gid = 100) {
+  Peer p;
+  p.uid = uid;
+  p.gid = gid;
+  return p;
+}
+Peer tcp_peer(const std::string& address) {
+  Peer p;
+  p.tcp = true;
+  p.address = address;
+  return p;
+}
+
+AccessOptions options() {
+  AccessOptions o;
+  o.max_unix = 5;
+  o.max_tcp = 3;
+  o.max_per_peer = 2;
+  o.read_token = "read-token-0123456789";
+  o.control_token = "control-token-0123456789";
+  o.owner_uid = 4242;
+  return o;
+}
+
+TEST(ClientAccess, ReadingAndControlCommands) {
+  for (const char* cmd : {"hello", "subscribe", "unsubscribe", "status", "server_status"})
+    EXPECT_TRUE(tofmat::daemon::is_reading_command(cmd)) << cmd;
+  for (const char* cmd : {"set_profile", "set_roi", "set_candidates", "trigger", "reset", "load_table", "", "x"})
+    EXPECT_FALSE(tofmat::daemon::is_reading_command(cmd)) << cmd;
+}
+
+TEST(ClientAccess, SlotsPerKindAndPerPeer) {
+  ClientAccess a(options());
+  EXPECT_EQ(a.admit(unix_peer(1)), "");
+  EXPECT_EQ(a.admit(unix_peer(1)), "");
+  EXPECT_NE(a.admit(unix_peer(1)).find("uid 1 has 2"), std::string::npos);  // its share
+  EXPECT_EQ(a.admit(unix_peer(2)), "");
+  EXPECT_EQ(a.admit(unix_peer(2)), "");
+  EXPECT_EQ(a.admit(unix_peer(3)), "");
+  EXPECT_NE(a.admit(unix_peer(4)).find("5 Unix clients"), std::string::npos);  // the Unix slots
+  // TCP counts apart: the Unix slots are full, TCP's are not.
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.1")), "");
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.1")), "");
+  EXPECT_NE(a.admit(tcp_peer("10.0.0.1")), "");
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.2")), "");
+  EXPECT_NE(a.admit(tcp_peer("10.0.0.3")).find("3 TCP clients"), std::string::npos);
+  EXPECT_EQ(a.unix_clients(), 5u);
+  EXPECT_EQ(a.tcp_clients(), 3u);
+  // Released slots come back, to the peer and the kind.
+  a.release(unix_peer(1));
+  EXPECT_EQ(a.unix_clients(), 4u);
+  EXPECT_EQ(a.admit(unix_peer(1)), "");
+  a.release(tcp_peer("10.0.0.2"));
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.3")), "");
+}
+
+TEST(ClientAccess, UnixRoles) {
+  AccessOptions o = options();
+  ClientAccess a(o);
+  EXPECT_EQ(a.unix_role(unix_peer(4242)), Role::kControl);  // the daemon's user
+  EXPECT_EQ(a.unix_role(unix_peer(0)), Role::kControl);     // root
+  EXPECT_EQ(a.unix_role(unix_peer(1000, 555)), Role::kRead);
+  o.control_gid = 555;
+  ClientAccess g(o);
+  EXPECT_EQ(g.unix_role(unix_peer(1000, 555)), Role::kControl);  // its primary group
+  EXPECT_EQ(g.unix_role(unix_peer(1000, 556)), Role::kRead);
+}
+
+TEST(ClientAccess, SupplementaryGroupsCount) {
+  // root (uid 0) is in the database everywhere; its primary group is 0.
+  EXPECT_TRUE(tofmat::daemon::user_in_group(0, 0, 0));
+  EXPECT_FALSE(tofmat::daemon::user_in_group(0, 0, 54321));
+  // A uid with no entry has only the primary group it connected with.
+  EXPECT_FALSE(tofmat::daemon::user_in_group(987654, 987654, 0));
+  EXPECT_TRUE(tofmat::daemon::user_in_group(987654, 987654, 987654));
+}
+
+TEST(ClientAccess, TokensGiveTheirRoles) {
+  ClientAccess a(options());
+  std::uint64_t wait = 0;
+  EXPECT_EQ(a.check_token("1.2.3.4", "read-token-0123456789", 0, wait), Verdict::kRead);
+  EXPECT_EQ(a.check_token("1.2.3.4", "control-token-0123456789", 0, wait), Verdict::kControl);
+  EXPECT_EQ(a.check_token("1.2.3.5", "", 0, wait), Verdict::kWrong);
+  AccessOptions no_control = options();
+  no_control.control_token.clear();
+  ClientAccess b(no_control);
+  EXPECT_EQ(b.check_token("1.2.3.4", "", 0, wait), Verdict::kWrong);  // an empty token never matches an empty one
+}
+
+TEST(ClientAccess, EachWrongTokenDoublesTheWait) {
+  ClientAccess a(options());
+  std::uint64_t now = 1'000 * kMs, wait = 0;
+  std::uint64_t expected = ClientAccess::kFirstDelayMs;
+  for (int k = 0; k < 12; ++k) {
+    SCOPED_TRACE(k);
+    ASSERT_EQ(a.check_token("1.2.3.4", "guess", now, wait), Verdict::kWrong);
+    // Until the wait is over nothing is looked at, not even the right token.
+    EXPECT_EQ(a.check_token("1.2.3.4", "read-token-0123456789", now + 1, wait), Verdict::kThrottled);
+    EXPECT_EQ(wait, expected);
+    EXPECT_EQ(a.check_token("1.2.3.4", "guess", now + expected * kMs - kMs, wait), Verdict::kThrottled);
+    // Other addresses are not held up.
+    EXPECT_EQ(a.check_token("5.6.7.8", "read-token-0123456789", now + 1, wait), Verdict::kRead);
+    now += expected * kMs;
+    expected = std::min(expected * 2, ClientAccess::kMaxDelayMs);
+  }
+  EXPECT_EQ(expected, ClientAccess::kMaxDelayMs);  // (the cap was reached)
+  // The right token after the wait clears the count: the next wrong one waits the first delay again.
+  EXPECT_EQ(a.check_token("1.2.3.4", "read-token-0123456789", now, wait), Verdict::kRead);
+  EXPECT_EQ(a.check_token("1.2.3.4", "guess", now, wait), Verdict::kWrong);
+  EXPECT_EQ(a.check_token("1.2.3.4", "guess", now + 1, wait), Verdict::kThrottled);
+  EXPECT_EQ(wait, ClientAccess::kFirstDelayMs);
+}
+
+TEST(ClientAccess, ALongQuietForgetsTheFailures) {
+  ClientAccess a(options());
+  std::uint64_t now = 0, wait = 0;
+  for (int k = 0; k < 5; ++k) {
+    a.check_token("1.2.3.4", "guess", now, wait);
+    now += 60'000 * kMs;
+  }
+  now += 3'600'000 * kMs;  // an hour later
+  EXPECT_EQ(a.check_token("1.2.3.4", "guess", now, wait), Verdict::kWrong);
+  EXPECT_EQ(a.check_token("1.2.3.4", "guess", now + 1, wait), Verdict::kThrottled);
+  EXPECT_EQ(wait, ClientAccess::kFirstDelayMs);
+}
+
+TEST(ClientAccess, RemembersABoundedNumberOfAddresses) {
+  ClientAccess a(options());
+  std::uint64_t wait = 0;
+  for (std::size_t k = 0; k < ClientAccess::kMaxThrottled + 500; ++k)
+    a.check_token("10." + std::to_string(k / 65536) + "." + std::to_string(k / 256 % 256) + "." + std::to_string(k % 256),
+                  "guess", k, wait);
+  EXPECT_LE(a.throttled_addresses(), ClientAccess::kMaxThrottled);
+  EXPECT_GT(a.throttled_addresses(), ClientAccess::kMaxThrottled / 2);
+}
+
+}  // namespace
