@@ -507,6 +507,80 @@ def test_a_corrupt_recording_fails_the_source_not_the_daemon(start: Callable[...
         assert reason in d.log.read_text()
 
 
+def _request_bytes(request_id: int, cmd: str, args: dict[str, Any] | None = None) -> bytes:
+    meta = json.dumps({"id": request_id, "cmd": cmd, "args": args or {}}).encode()
+    return b"TMAT" + struct.pack("<HBBI", 1, 2, 0, 4 + len(meta)) + struct.pack("<I", len(meta)) + meta
+
+
+def _stop_seconds(d: Daemon) -> float:
+    """SIGTERM, and how long the daemon takes to exit (cleanly)."""
+    t0 = time.monotonic()
+    d.proc.send_signal(signal.SIGTERM)
+    assert d.proc.wait(20) == 0, d.log.read_text()
+    return time.monotonic() - t0
+
+
+def test_sigterm_ends_the_daemon_within_a_second(start: Callable[..., Daemon], tmp_path: Path,
+                                                 sim_table: Path) -> None:  # fmt: skip
+    # issue 16: every blocking wait wakes on stop: a paced replay waiting 9 s for its next frame,
+    # the camera missing (the retry loop), a reload whose table file became a FIFO, a client
+    # pipelining requests without reading and a subscriber that does not read.
+    rec = tmp_path / "slow.tmrec"
+    p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", "sim:static,material=acryl,depth=800,realtime=0",
+                        "-o", str(rec), "--frames", "2"], capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    data = bytearray(rec.read_bytes())
+    header, frame = 8 + 12 + 3 * 512 * 424 * 4, 20 + 9 * 512 * 424 * 2
+    data[header + frame + 12 : header + frame + 20] = (9 * 10**9).to_bytes(8, "little")  # the second frame 9 s on
+    rec.write_bytes(bytes(data))
+    times: dict[str, float] = {}
+
+    d = start(f"replay:{rec},pace=1", name="replay")
+    with d.client() as c:
+        while c.status()["source_counters"].get("frames", 0) < 1:
+            time.sleep(0.05)
+    time.sleep(0.3)  # (waiting for the second frame now)
+    times["replay waiting 9 s"] = _stop_seconds(d)
+
+    d = start("kinect", name="camera")
+    with d.client() as c:
+        assert c.status()["device"]["state"] in ("opening", "disconnected")
+    times["camera missing"] = _stop_seconds(d)
+
+    table = tmp_path / "reload.tmx"
+    shutil.copy(sim_table, table)
+    d = start("sim:static,material=cork,realtime=1", table=table, name="fifo")
+    d.client().close()
+    table.unlink()
+    os.mkfifo(table)
+    d.proc.send_signal(signal.SIGHUP)
+    with d.client() as c:
+        deadline = time.monotonic() + 10
+        while not (r := c.status()["last_reload"]):
+            assert time.monotonic() < deadline, "the reload did not end"
+            time.sleep(0.05)
+        assert r["ok"] is False and "regular file" in r["error"], r
+    times["after a reload from a FIFO"] = _stop_seconds(d)
+
+    d = start("sim:static,material=cork,realtime=1", name="clients")
+    with d.client() as c:
+        c.status()
+    flood, mute = raw_connect(d.socket), raw_connect(d.socket)
+    flood.sendall(_request_bytes(1, "hello", {"protocol": 1}))
+    mute.sendall(_request_bytes(1, "hello", {"protocol": 1}) + _request_bytes(2, "subscribe", {"streams": ["labels"]}))
+    flood.setblocking(False)
+    burst = b"".join(_request_bytes(10 + k, "status") for k in range(64))
+    for _ in range(200):
+        try:
+            flood.send(burst)
+        except (BlockingIOError, ConnectionError):
+            break
+    times["a flood and a mute subscriber"] = _stop_seconds(d)
+    flood.close()
+    mute.close()
+    assert all(t < 1.0 for t in times.values()), times
+
+
 def _one_replay_loop(binary: Path, recording: Path, table: Path, tmp_path: Path, profile: str) -> list[Any]:
     """Every event of the second whole loop of a lossless replay (pace=0: no frame dropped), without
     timestamps: label fields, or a label map's bytes. (The first loop may start before the client listens.)"""
