@@ -3,8 +3,15 @@
 // MessageReader (byte by byte and in one piece), every bound and malformation
 // as a ProtocolError, and parse_address.
 #include <gtest/gtest.h>
+#include <stdlib.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
 
+#include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <thread>
 #include <cstring>
 #include <limits>
 #include <string>
@@ -892,6 +899,52 @@ TEST(Address, HostAndPort) {
     SCOPED_TRACE(bad);
     EXPECT_THROW(parse_address(bad), std::invalid_argument);
   }
+}
+
+TEST(Sockets, AUnixClientWaitsForAFullBacklogUntilItsTimeout) {
+  // A Unix connect with the listener's backlog full fails with EAGAIN: the
+  // server is busy, not gone. connect_to tries again until its timeout (it
+  // used to take EAGAIN for a connection in progress and hand back a socket
+  // that was never connected).
+  char tmpl[] = "/tmp/tofmat-backlog-XXXXXX";
+  ASSERT_NE(::mkdtemp(tmpl), nullptr);
+  const std::string path = std::string(tmpl) + "/s.sock";
+  Fd server(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+  sockaddr_un sa{};
+  sa.sun_family = AF_UNIX;
+  std::strncpy(sa.sun_path, path.c_str(), sizeof sa.sun_path - 1);
+  ASSERT_EQ(::bind(server.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa), 0);
+  ASSERT_EQ(::listen(server.get(), 0), 0);
+  std::vector<Fd> queued;  // fill the backlog: connections nobody accepts
+  for (int k = 0; k < 8; ++k) {
+    Fd c(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
+    if (::connect(c.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) != 0) break;
+    queued.push_back(std::move(c));
+  }
+  ASSERT_FALSE(queued.empty());
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    connect_to(parse_address(path), 200);
+    ADD_FAILURE() << "connected to a full backlog";
+  } catch (const SocketError& e) {
+    EXPECT_EQ(e.os_error(), ETIMEDOUT) << e.what();
+  }
+  EXPECT_GE(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(200));
+  // Room made while it waits: it connects, to a connection the server accepts.
+  std::thread server_side([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    for (std::size_t k = 0; k < queued.size(); ++k) Fd(::accept(server.get(), nullptr, nullptr));
+  });
+  Fd c = connect_to(parse_address(path), 5000);
+  server_side.join();
+  Fd accepted(::accept(server.get(), nullptr, nullptr));
+  EXPECT_TRUE(accepted);
+  const char byte = 'x';
+  EXPECT_EQ(::send(c.get(), &byte, 1, MSG_NOSIGNAL), 1);
+  char got = 0;
+  EXPECT_EQ(::recv(accepted.get(), &got, 1, 0), 1);
+  EXPECT_EQ(got, 'x');
+  std::filesystem::remove_all(tmpl);
 }
 
 }  // namespace

@@ -11,10 +11,12 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <ctime>
+#include <thread>
 
 namespace tofmat::protocol {
 namespace {
@@ -118,7 +120,8 @@ Fd listen_unix(const std::string& path, unsigned mode) {
       throw SocketError("\"" + path + "\" is a socket of another user (uid " + std::to_string(st.st_uid) +
                             "); not replacing it",
                         EEXIST);
-    Fd probe(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
+    // (Non-blocking: a live daemon's full backlog answers EAGAIN at once instead of holding us.)
+    Fd probe(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
     if (!probe) fail("socket(AF_UNIX)");
     if (::connect(probe.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) == 0)
       throw SocketError("another daemon is listening on \"" + path + "\"", EADDRINUSE);
@@ -135,7 +138,9 @@ Fd listen_unix(const std::string& path, unsigned mode) {
   ::umask(old);
   if (r != 0) fail("bind(\"" + path + "\")");
   if (::chmod(path.c_str(), static_cast<mode_t>(mode)) != 0) fail("chmod(\"" + path + "\")");
-  if (::listen(fd.get(), 64) != 0) fail("listen(\"" + path + "\")");
+  // The kernel's largest backlog: a client connecting and closing in a loop
+  // should not fill it for everyone between two of the server's accepts.
+  if (::listen(fd.get(), SOMAXCONN) != 0) fail("listen(\"" + path + "\")");
   return fd;
 }
 
@@ -147,7 +152,7 @@ Fd listen_tcp(const std::string& host, std::uint16_t port) {
   ::setsockopt(fd.get(), SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
   if (::bind(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) != 0)
     fail("bind(" + host + ":" + std::to_string(port) + ")");
-  if (::listen(fd.get(), 64) != 0) fail("listen");
+  if (::listen(fd.get(), SOMAXCONN) != 0) fail("listen");
   return fd;
 }
 
@@ -169,13 +174,26 @@ Fd connect_to(const Address& address, int timeout_ms) {
     ::setsockopt(fd.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
     r = ::connect(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa);
   } else {
+    // A Unix socket connects at once or not at all: EAGAIN is a full
+    // backlog (the server is busy), not a connection in progress. Try again
+    // until the timeout.
     const sockaddr_un sa = unix_address(address.path);
     fd = Fd(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
     if (!fd) fail("socket(AF_UNIX)");
-    r = ::connect(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    int wait_ms = 1;
+    while (::connect(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) != 0) {
+      if (errno == EINTR) continue;
+      if (errno != EAGAIN) fail("connect to " + address.describe());
+      if (std::chrono::steady_clock::now() >= deadline)
+        throw SocketError("connect to " + address.describe() + ": timed out (its backlog stayed full)", ETIMEDOUT);
+      std::this_thread::sleep_for(std::chrono::milliseconds(wait_ms));
+      wait_ms = std::min(wait_ms * 2, 50);
+    }
+    return fd;
   }
   if (r != 0) {
-    if (errno != EINPROGRESS && errno != EAGAIN) fail("connect to " + address.describe());
+    if (errno != EINPROGRESS) fail("connect to " + address.describe());
     if (!poll_one(fd.get(), POLLOUT, timeout_ms))
       throw SocketError("connect to " + address.describe() + ": timed out", ETIMEDOUT);
     int err = 0;
