@@ -154,4 +154,51 @@ TEST(ClientAccess, RemembersABoundedNumberOfAddresses) {
   EXPECT_GT(a.throttled_addresses(), ClientAccess::kMaxThrottled / 2);
 }
 
+TEST(ClientAccess, RequestsAtThePeersRate) {
+  AccessOptions o = options();
+  o.requests_per_second = 100;
+  ClientAccess a(o);
+  const Peer flooder = unix_peer(1), other = unix_peer(2);
+  std::uint64_t now = 5'000 * kMs, wait = 0;
+  int taken = 0;
+  while (a.may_request(flooder, now, wait)) {
+    a.count_request(flooder);
+    ++taken;
+  }
+  EXPECT_EQ(taken, 100);  // the burst: a second's worth
+  EXPECT_EQ(wait, 10 * kMs + 1);  // then one every 10 ms
+  EXPECT_FALSE(a.may_request(flooder, now + 9 * kMs, wait));
+  EXPECT_TRUE(a.may_request(flooder, now + 10 * kMs, wait));
+  EXPECT_TRUE(a.may_request(other, now, wait));  // every peer has its own
+  // Over a minute of trying as fast as it can, the rate holds.
+  taken = 0;
+  for (std::uint64_t t = now; t < now + 60'000 * kMs; t += kMs)
+    if (a.may_request(flooder, t, wait)) {
+      a.count_request(flooder);
+      ++taken;
+    }
+  EXPECT_NEAR(taken, 6000, 2);
+}
+
+TEST(ClientAccess, ConnectionsAtThePeersRate) {
+  AccessOptions o = options();
+  o.connects_per_second = 10;
+  ClientAccess a(o);
+  const std::uint64_t now = 5'000 * kMs;
+  int taken = 0;
+  for (int k = 0; k < 100; ++k) taken += a.take_connect(tcp_peer("10.0.0.9"), now) ? 1 : 0;
+  EXPECT_EQ(taken, 20);  // twice the rate at once
+  EXPECT_FALSE(a.take_connect(tcp_peer("10.0.0.9"), now + 99 * kMs));
+  EXPECT_TRUE(a.take_connect(tcp_peer("10.0.0.9"), now + 100 * kMs));
+  EXPECT_TRUE(a.take_connect(tcp_peer("10.0.0.10"), now));
+  EXPECT_TRUE(a.take_connect(unix_peer(7), now));
+}
+
+TEST(ClientAccess, RememberedRatesAreBounded) {
+  ClientAccess a(options());
+  for (std::size_t k = 0; k < ClientAccess::kMaxThrottled + 100; ++k)
+    a.take_connect(unix_peer(static_cast<uid_t>(k)), k * kMs);
+  EXPECT_LE(a.rated_peers(), ClientAccess::kMaxThrottled);
+}
+
 }  // namespace

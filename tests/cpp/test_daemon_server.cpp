@@ -947,11 +947,111 @@ TEST_F(ServerTest, UnixAndTcpHaveTheirOwnSlotsAndEveryPeerItsShare) {
   EXPECT_EQ(again.request("echo")["cmd"], "echo");
 }
 
+TEST_F(ServerTest, APeersRequestsAreServedAtItsRateOthersAtOnce) {
+  // One user pipelining requests over several connections gets them answered
+  // at its rate, the rest held unread; another peer's requests go at once
+  // (issue 16, case 1: a flood takes a bounded share of the server).
+  ServerOptions o = options();
+  o.peer_request_rate = 50;
+  start(o);
+  std::vector<std::unique_ptr<Raw>> flood;
+  for (int k = 0; k < 3; ++k) {
+    flood.push_back(std::make_unique<Raw>(socket_path()));
+    flood.back()->handshake();  // (3 of the burst of 50)
+  }
+  Request r;
+  r.cmd = "server_status";
+  Bytes burst;
+  for (int k = 0; k < 100; ++k) {
+    r.id = static_cast<std::uint32_t>(100 + k);
+    const Bytes one = encode(encode_request(r));
+    burst.insert(burst.end(), one.begin(), one.end());
+  }
+  const auto t0 = Clock::now();
+  for (auto& f : flood) f->send_bytes(burst);
+  // Another peer (TCP, its own address): answered at once meanwhile.
+  Client other(tcp_address(), ClientOptions{kControlToken, kPatienceMs});
+  const auto asked = Clock::now();
+  EXPECT_EQ(other.request("echo")["cmd"], "echo");
+  EXPECT_LT(Clock::now() - asked, std::chrono::milliseconds(100));
+  // The flood's 300 requests: 47 at once, then 50 a second.
+  int answered = 0;
+  std::this_thread::sleep_for(t0 + std::chrono::milliseconds(1000) - Clock::now());
+  for (auto& f : flood)
+    while (f->read(20)) ++answered;  // (what came within the first second, and a few 20-ms waits)
+  EXPECT_GE(answered, 47 + 30);
+  EXPECT_LE(answered, 47 + 60);
+  // All are answered in the end, in about 5 s.
+  const auto deadline = Clock::now() + std::chrono::seconds(10);
+  while (answered < 300 && Clock::now() < deadline)
+    for (auto& f : flood)
+      if (f->read(50)) ++answered;
+  EXPECT_EQ(answered, 300);
+  EXPECT_GE(Clock::now() - t0, std::chrono::milliseconds(4500));
+}
+
+TEST_F(ServerTest, AClientConnectingInALoopDelaysNobody) {
+  // Connecting and closing as fast as it can (issue 16, case 7): the server
+  // accepts a bounded number a round, so a subscriber's events still go out
+  // at the camera's rate.
+  start();
+  Raw good(socket_path());
+  good.handshake();
+  good.request(2, "subscribe", {{"streams", {"labels"}}});
+  ASSERT_TRUE(good.read_reply().ok);
+  std::atomic<bool> looping{true};
+  std::atomic<std::uint64_t> connects{0};
+  const auto loop = [&] {
+    const Address a = parse_address(socket_path());
+    while (looping) {
+      try {
+        connect_to(a, 100);  // (and closed at once)
+        ++connects;
+      } catch (const std::exception&) {
+        // a full backlog: the next try
+      }
+    }
+  };
+  std::thread looper(loop), looper2(loop);
+  constexpr int kFrames = 60;  // 2 s
+  std::thread pub = publisher(*server_, kFrames);
+  const Received got = receive_labels(good, 2500);
+  pub.join();
+  looping = false;
+  looper.join();
+  looper2.join();
+  EXPECT_GT(connects.load(), 1000u) << "the loop did not get going";
+  EXPECT_GE(got.events, kFrames - 2);
+  EXPECT_LT(got.worst_ms, 250.0) << "an event waited behind the connections";
+}
+
+TEST_F(ServerTest, APeerConnectingTooOftenIsRefused) {
+  ServerOptions o = options();
+  o.peer_connect_rate = 5;  // 10 at once, then 5 a second
+  start(o);
+  int refused = 0;
+  for (int k = 0; k < 30; ++k) {
+    try {
+      Client c(socket_path(), ClientOptions{"", 2000});
+    } catch (const ClientError&) {
+      ++refused;
+    }
+  }
+  EXPECT_GE(refused, 18);
+  EXPECT_LE(refused, 20);
+  EXPECT_EQ(counter("rejected"), static_cast<std::uint64_t>(refused));
+  // Another peer is not held up.
+  Client tcp(tcp_address(), ClientOptions{kControlToken, kPatienceMs});
+  EXPECT_EQ(tcp.request("echo")["cmd"], "echo");
+}
+
 TEST_F(ServerTest, WrongTokensMakeTheAddressWaitLongerEachTime) {
   // Each wrong token doubles the time before the address's next token is
   // looked at (issue 16, case 7): a guesser gets a handful of real tries,
   // not thousands a second; the right token works again once the wait is over.
-  start();
+  ServerOptions o = options();
+  o.peer_connect_rate = 1e6;  // (the guesser connects thousands of times: the wait is under test, not the rate)
+  start(o);
   const auto try_token = [&](const std::string& token) {
     try {
       Client c(tcp_address(), ClientOptions{token, kPatienceMs});

@@ -79,7 +79,8 @@ TEST(Options, EveryFlagReachesItsOption) {
                         "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600", "--tcp",
                         "127.0.0.1:7020", "--token-file", token.string(), "--control-token-file", control.string(),
                         "--control-group", "root", "--max-tcp-clients", "5", "--max-clients-per-peer", "3",
-                        "--idle-timeout", "12", "--roi", "10,20,60,70", "--candidates",
+                        "--idle-timeout", "12", "--peer-request-rate", "50", "--peer-connect-rate", "2.5",
+                        "--roi", "10,20,60,70", "--candidates",
                         "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--threads", "3", "--queue-frames", "4",
                         "--max-clients", "9", "--sim-data", "/opt/sim", "--log-level", "debug"});
   std::filesystem::remove(token);
@@ -98,6 +99,8 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.server.max_tcp_clients, 5u);
   EXPECT_EQ(o.server.max_clients_per_peer, 3u);
   EXPECT_EQ(o.server.idle_timeout_ms, 12000);
+  EXPECT_EQ(o.server.peer_request_rate, 50.0);
+  EXPECT_EQ(o.server.peer_connect_rate, 2.5);
   EXPECT_EQ(o.profile.roi.x0, 10);
   EXPECT_EQ(o.profile.roi.y1, 70);
   EXPECT_EQ(o.profile.candidates, (std::vector<std::string>{"pvc", "epvc"}));
@@ -183,6 +186,8 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   expect_usage_error({"--table", "t", "--idle-timeout", "-1"});                // out of range
   expect_usage_error({"--table", "t", "--max-tcp-clients", "0"});              // out of range
   expect_usage_error({"--table", "t", "--max-clients-per-peer", "0"});         // out of range
+  expect_usage_error({"--table", "t", "--peer-request-rate", "0"});            // out of range
+  expect_usage_error({"--table", "t", "--peer-connect-rate", "nan"});          // not a number in range
   expect_usage_error({"--table", "t", "--control-group", "no-such-group-here"});  // no such group
   std::filesystem::remove(short_token);
 }

@@ -68,6 +68,7 @@ struct Harness {
     o.token = kReadToken;
     o.control_token = kControlToken;
     o.hello_timeout_ms = 2000;
+    o.peer_request_rate = o.peer_connect_rate = 1e9;  // (one peer, this process, a thousand connections a second)
     server = std::make_unique<tofmat::daemon::Server>(o, [](const Request& r) {
       Reply rep;
       rep.id = r.id;

@@ -102,6 +102,55 @@ Role ClientAccess::unix_role(const Peer& peer) const {
   return Role::kRead;
 }
 
+bool ClientAccess::Bucket::refill(double rate, double burst, std::uint64_t now_ns) {
+  if (!started) {
+    started = true;
+    tokens = burst;
+  } else if (now_ns > at_ns) {
+    tokens = std::min(burst, tokens + rate * static_cast<double>(now_ns - at_ns) * 1e-9);
+  }
+  at_ns = std::max(at_ns, now_ns);
+  return tokens >= 1.0;
+}
+
+ClientAccess::Rates& ClientAccess::rates_of(const Peer& peer, std::uint64_t now_ns) {
+  const std::string key = peer.key();
+  auto it = rates_.find(key);
+  if (it == rates_.end()) {
+    if (rates_.size() >= kMaxThrottled) {
+      // A peer idle for long enough has full buckets again: forgetting it changes nothing.
+      for (auto r = rates_.begin(); r != rates_.end();)
+        r = now_ns > r->second.used_ns + 10'000'000'000ull ? rates_.erase(r) : std::next(r);
+      while (rates_.size() >= kMaxThrottled)
+        rates_.erase(std::min_element(rates_.begin(), rates_.end(), [](const auto& a, const auto& b) {
+          return a.second.used_ns < b.second.used_ns;
+        }));
+    }
+    it = rates_.emplace(key, Rates{}).first;
+  }
+  it->second.used_ns = now_ns;
+  return it->second;
+}
+
+bool ClientAccess::take_connect(const Peer& peer, std::uint64_t now_ns) {
+  Bucket& b = rates_of(peer, now_ns).connects;
+  if (!b.refill(options_.connects_per_second, 2 * options_.connects_per_second, now_ns)) return false;
+  b.tokens -= 1.0;
+  return true;
+}
+
+bool ClientAccess::may_request(const Peer& peer, std::uint64_t now_ns, std::uint64_t& wait_ns) {
+  Bucket& b = rates_of(peer, now_ns).requests;
+  if (b.refill(options_.requests_per_second, options_.requests_per_second, now_ns)) return true;
+  wait_ns = static_cast<std::uint64_t>((1.0 - b.tokens) / options_.requests_per_second * 1e9) + 1;
+  return false;
+}
+
+void ClientAccess::count_request(const Peer& peer) {
+  auto it = rates_.find(peer.key());
+  if (it != rates_.end()) it->second.requests.tokens -= 1.0;
+}
+
 ClientAccess::Verdict ClientAccess::check_token(const std::string& address, const std::string& token,
                                                 std::uint64_t now_ns, std::uint64_t& wait_ms) {
   wait_ms = 0;

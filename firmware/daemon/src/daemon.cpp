@@ -1,5 +1,6 @@
 #include "tofmat/daemon/daemon.hpp"
 
+#include <pthread.h>
 #include <signal.h>
 #include <unistd.h>
 
@@ -78,7 +79,9 @@ void Daemon::start() {
   // Every thread reports what ends it. Without a server or a pipeline the
   // daemon is of no use: it fails (exit status 1, so systemd restarts it).
   // A source that fails leaves the daemon serving status, which says why.
+  // (Named, so that top -H and ps -L say which thread does what.)
   server_thread_ = std::thread([this] {
+    ::pthread_setname_np(::pthread_self(), "tofmatd-server");
     try {
       server_->run(stop_);
     } catch (const std::exception& e) {
@@ -86,6 +89,7 @@ void Daemon::start() {
     }
   });
   pipeline_thread_ = std::thread([this] {
+    ::pthread_setname_np(::pthread_self(), "tofmatd-process");
     try {
       pipeline_->run(stop_);
     } catch (const std::exception& e) {
@@ -93,6 +97,7 @@ void Daemon::start() {
     }
   });
   source_thread_ = std::thread([this] {
+    ::pthread_setname_np(::pthread_self(), "tofmatd-source");
     SourceCallbacks cb;
     cb.region = [this] { return pipeline_->wanted_region(); };
     cb.raw_buffer = [this] { return pipeline_->raw_buffer(); };

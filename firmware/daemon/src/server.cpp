@@ -27,6 +27,7 @@ constexpr std::size_t kMaxQueuedMessages = 1024;
 constexpr std::size_t kReadChunk = 64 * 1024;
 constexpr std::size_t kRequestsPerRound = 32;
 constexpr std::size_t kMaxQueuedReplies = 256;
+constexpr std::size_t kAcceptsPerRound = 32;
 
 AccessOptions access_options(const ServerOptions& o) {
   AccessOptions a;
@@ -37,6 +38,8 @@ AccessOptions access_options(const ServerOptions& o) {
   a.control_token = o.control_token;
   a.control_gid = o.control_gid;
   a.owner_uid = ::geteuid();
+  a.requests_per_second = o.peer_request_rate;
+  a.connects_per_second = o.peer_connect_rate;
   return a;
 }
 
@@ -72,6 +75,7 @@ struct Server::Connection {
   std::uint64_t dropped = 0;
   bool dead = false;
   bool more = false;  // requests may be left to handle from an earlier read
+  std::uint64_t resume_ns = 0;  // with more: its peer's request rate holds them until then
 };
 
 Server::Server(ServerOptions options, Handler handler)
@@ -158,7 +162,9 @@ void Server::note(const char* kind, spdlog::level::level_enum level, const std::
 }
 
 void Server::accept_from(int listener, bool tcp) {
-  for (;;) {
+  // A bounded number a round: a client connecting as fast as it can must not
+  // keep the server accepting (the rest wait in the backlog for the next round).
+  for (std::size_t k = 0; k < kAcceptsPerRound; ++k) {
     protocol::Fd fd(::accept4(listener, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));
     if (!fd) return;  // EAGAIN: nothing more waiting (or a transient error)
     Peer peer;
@@ -167,6 +173,11 @@ void Server::accept_from(int listener, bool tcp) {
     } catch (const std::exception& e) {  // (gone already)
       ++rejected_;
       note("refuse", spdlog::level::warn, std::string("refusing a client: ") + e.what());
+      continue;
+    }
+    if (!access_.take_connect(peer, protocol::monotonic_ns())) {
+      ++rejected_;
+      note("refuse", spdlog::level::warn, "refusing a client: " + peer.key() + " connects too often");
       continue;
     }
     if (const std::string why = access_.admit(peer); !why.empty()) {
@@ -337,11 +348,21 @@ void Server::handle(Connection& c, const protocol::Message& m) {
 
 void Server::read_from(Connection& c, bool readable) {
   // Requests already read come first, then (if there is room) one read.
+  // The peer's request rate may hold the rest back (until c.resume_ns).
   std::size_t handled = 0;
+  bool held = false;
   const auto work = [&] {
     while (handled < kRequestsPerRound && !c.closing && !c.dead) {
+      std::uint64_t wait_ns = 0;
+      const std::uint64_t now = protocol::monotonic_ns();
+      if (c.reader.buffered() > 0 && !access_.may_request(c.peer, now, wait_ns)) {
+        held = true;
+        c.resume_ns = now + wait_ns;
+        return;
+      }
       auto m = c.reader.next();
       if (!m) return;
+      access_.count_request(c.peer);
       ++handled;
       c.last_request_ns = protocol::monotonic_ns();
       handle(c, *m);
@@ -349,7 +370,7 @@ void Server::read_from(Connection& c, bool readable) {
   };
   try {
     work();
-    if (readable && !c.dead && handled < kRequestsPerRound) {
+    if (readable && !c.dead && !held && handled < kRequestsPerRound) {
       std::uint8_t buf[kReadChunk];
       ssize_t n;
       do {
@@ -370,8 +391,9 @@ void Server::read_from(Connection& c, bool readable) {
     note("protocol", spdlog::level::warn, "client " + std::to_string(c.id) + ": " + e.what() + "; closing it");
     c.dead = true;
   }
-  // The budget ran out: more whole requests may be waiting in the reader.
-  c.more = !c.dead && !c.closing && handled == kRequestsPerRound;
+  // The budget ran out, or the rate held them: more requests may be waiting in the reader.
+  c.more = !c.dead && !c.closing && (held || handled == kRequestsPerRound);
+  if (!held) c.resume_ns = 0;
 }
 
 void Server::write_to(Connection& c) {
@@ -417,14 +439,23 @@ void Server::run(const std::atomic<bool>& stop) {
     if (tcp_) fds.push_back({tcp_.get(), POLLIN, 0});
     const std::size_t first_client = fds.size();
     bool more = false;
+    const std::uint64_t before = protocol::monotonic_ns();
+    std::uint64_t resume = before + 200'000'000ull;
     for (auto& [id, c] : connections_) {
-      // (Not read from while closing: the answer is on its way.)
-      fds.push_back({c->fd.get(), static_cast<short>((c->closing ? 0 : POLLIN) | (c->out.empty() ? 0 : POLLOUT)), 0});
+      // Not read from while closing (the answer is on its way) or while it
+      // has requests left (they come first). One its peer's rate holds is
+      // not even watched for a hang-up until then, unless it has output.
+      const bool held = c->more && c->resume_ns > before;
+      const short events = static_cast<short>((c->closing || c->more ? 0 : POLLIN) | (c->out.empty() ? 0 : POLLOUT));
+      fds.push_back({held && events == 0 ? -1 : c->fd.get(), events, 0});
       ids.push_back(id);
-      more = more || c->more;
+      more = more || (c->more && !held);
+      if (held) resume = std::min(resume, c->resume_ns);
     }
-    // (Requests left over from the last round: another round at once.)
-    const int r = ::poll(fds.data(), fds.size(), more ? 0 : 200);
+    // (Requests left over from the last round: another round at once;
+    // requests held by a rate: a round when the first may go.)
+    const int timeout_ms = more ? 0 : static_cast<int>((resume - before + 999'999) / 1'000'000);
+    const int r = ::poll(fds.data(), fds.size(), timeout_ms);
     if (r < 0 && errno != EINTR) throw protocol::SocketError("poll failed", errno);
     if (fds[0].revents & POLLIN) {
       std::uint64_t v;
@@ -434,12 +465,18 @@ void Server::run(const std::atomic<bool>& stop) {
     if (unix_ && (fds[k++].revents & POLLIN)) accept_from(unix_.get(), false);
     if (tcp_ && (fds[k++].revents & POLLIN)) accept_from(tcp_.get(), true);
     const std::uint64_t now = protocol::monotonic_ns();
-    for (std::size_t i = first_client; i < fds.size(); ++i) {
+    // Each round starts at the next connection: when a peer's request rate
+    // lets one request through, its connections take turns (one of them
+    // flooding cannot starve the others, a new client's hello included).
+    const std::size_t n = fds.size() - first_client;
+    const std::size_t start = n > 0 ? rotation_++ % n : 0;
+    for (std::size_t j = 0; j < n; ++j) {
+      const std::size_t i = first_client + (start + j) % n;
       auto it = connections_.find(ids[i - first_client]);
       if (it == connections_.end()) continue;
       Connection& c = *it->second;
       const bool readable = (fds[i].revents & (POLLIN | POLLHUP | POLLERR)) != 0;
-      if (!c.dead && (readable || c.more)) read_from(c, readable);
+      if (!c.dead && (readable || (c.more && c.resume_ns <= now))) read_from(c, readable);
       if (!c.ready && !c.dead &&
           now - c.accepted_ns > static_cast<std::uint64_t>(options_.hello_timeout_ms) * 1'000'000ull) {
         note("hello", spdlog::level::warn,

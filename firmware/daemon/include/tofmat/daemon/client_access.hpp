@@ -13,6 +13,11 @@
 // authenticated cannot take the local clients' places, and every peer has
 // its own bound within them.
 //
+// Rates: every peer has a bucket of requests and one of new connections
+// (a rate per second, and as many at once), so that one user or address
+// flooding requests or connecting in a loop takes a bounded share of the
+// server thread whatever it does.
+//
 // Tokens: each wrong token from an address doubles the time that address
 // must wait before its next token is looked at (refused unchecked until
 // then), from kFirstDelayMs up to kMaxDelayMs; a right token clears it.
@@ -51,6 +56,8 @@ struct AccessOptions {
   std::string control_token;      // TCP: controls ("" = no TCP client controls)
   long control_gid = -1;          // Unix: this group's members control too (-1 = none)
   uid_t owner_uid = 0;            // the daemon's own user (controls)
+  double requests_per_second = 200;  // per peer (and as many at once)
+  double connects_per_second = 20;   // per peer (and twice as many at once)
 };
 
 // Whether a local user is in a group: its primary group or a supplementary one.
@@ -75,6 +82,14 @@ class ClientAccess {
   // The role of a Unix peer.
   Role unix_role(const Peer& peer) const;
 
+  // Rates. take_connect: whether the peer may open a connection now (one is
+  // counted). may_request: whether it may send a request now, else how long
+  // until it may (wait_ns); count_request counts one.
+  bool take_connect(const Peer& peer, std::uint64_t now_ns);
+  bool may_request(const Peer& peer, std::uint64_t now_ns, std::uint64_t& wait_ns);
+  void count_request(const Peer& peer);
+  std::size_t rated_peers() const { return rates_.size(); }
+
   enum class Verdict { kRead, kControl, kWrong, kThrottled };
   // A TCP hello's token from `address` at `now_ns`. kThrottled: not looked
   // at, `wait_ms` says how long the address must still wait.
@@ -92,6 +107,19 @@ class ClientAccess {
   };
   std::map<std::string, Failures> throttle_;
   void forget_old(std::uint64_t now_ns);
+  struct Bucket {
+    double tokens = 0;
+    std::uint64_t at_ns = 0;
+    bool started = false;
+    // Refills to `burst` at `rate` a second; true if at least one is there.
+    bool refill(double rate, double burst, std::uint64_t now_ns);
+  };
+  struct Rates {
+    Bucket requests, connects;
+    std::uint64_t used_ns = 0;
+  };
+  std::map<std::string, Rates> rates_;
+  Rates& rates_of(const Peer& peer, std::uint64_t now_ns);
 };
 
 }  // namespace tofmat::daemon

@@ -45,6 +45,8 @@ struct ServerOptions {
   std::size_t max_clients = 64;  // Unix connections at once
   std::size_t max_tcp_clients = 16;
   std::size_t max_clients_per_peer = 16;  // per uid (Unix) or address (TCP)
+  double peer_request_rate = 200;  // requests a second per peer (and as many at once)
+  double peer_connect_rate = 20;   // new connections a second per peer (and twice as many at once)
   std::size_t max_queue_bytes = 16u << 20;  // per client
   int hello_timeout_ms = 5000;
   // After hello: no request and no subscription for this long, or queued
@@ -92,6 +94,7 @@ class Server {
   std::uint16_t tcp_port_ = 0;
   std::map<std::uint64_t, std::unique_ptr<Connection>> connections_;  // server thread only
   std::uint64_t next_id_ = 1;
+  std::size_t rotation_ = 0;  // where a poll round starts among the connections (server thread only)
   // Published messages waiting for the server thread (bounded, oldest dropped).
   mutable std::mutex inbox_mutex_;
   std::vector<std::pair<std::string, std::shared_ptr<const std::vector<std::uint8_t>>>> inbox_;
