@@ -198,3 +198,8 @@ bench-cross: cross check-db
 	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
 	cmake --build $(BENCH_DIR) -j$(JOBS) --target qemu_insn_count
 	tests/bench/insn_counts.sh $(QEMU_PLUGIN) $(CROSS)/tests/bench/tofmat_bench_fixed $(DB)
+
+# Issue 16's attacks on tofmatd, each while a well-behaved subscriber is
+# measured (figures only), and the 30-minute soak of them mixed: outside
+# `make test` and CI (tests/soak/README.md).
+include tests/soak/attacks.mk
