@@ -1069,6 +1069,7 @@ class LabelStats:
     raw_gap_ms: float = float("nan")  # longest wait for any label, the scene's empty frames included
     missed_frames: int = 0  # frames with a target in view that gave no label
     source_gap_ms: float = float("nan")  # longest frame interval while tracking, by the daemon's frame clock
+    gap_end: float = float("nan")  # when the longest gap ended (time.monotonic of the label after it, or the window's end)
 
 
 def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: LabelRecord | None = None) -> LabelStats:
@@ -1087,26 +1088,31 @@ def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: La
         s.p50_ms, s.p99_ms, s.max_ms = (float(np.percentile(lat, 50)), float(np.percentile(lat, 99)),
                                         float(lat.max()))  # fmt: skip
     chain: list[LabelRecord] = ([before] if before is not None else []) + list(records)
-    gaps, raw, source = [], [], []
+    gaps, raw, source, ends = [], [], [], []
     last_arrival = t0
     for a, b in pairwise(chain):
         gap = (b.arrival - a.arrival) * 1000.0
         if a.state == "tracking":
             gaps.append(gap)
+            ends.append(b.arrival)
             s.missed_frames += max(b.frame - a.frame - 1, 0)
             source.append((b.timestamp_ns - a.timestamp_ns) * 1e-6)
         else:
             gaps.append(gap - (b.timestamp_ns - a.timestamp_ns) * 1e-6 + FRAME_MS)
+            ends.append(b.arrival)
         raw.append((b.arrival - max(a.arrival, t0)) * 1000.0)
     if chain:
         last = chain[-1]
         tail = (t1 - last.arrival) * 1000.0
         gaps.append(tail if last.state == "tracking" else tail - SCENE_GAP * FRAME_MS)
+        ends.append(t1)
         last_arrival = last.arrival
     else:
         gaps.append((t1 - t0) * 1000.0)
+        ends.append(t1)
     raw.append((t1 - max(last_arrival, t0)) * 1000.0)
     s.gap_ms, s.raw_gap_ms = max(gaps), max(raw)
+    s.gap_end = ends[int(np.argmax(gaps))]
     s.source_gap_ms = max(source, default=float("nan"))
     return s
 
@@ -1442,6 +1448,7 @@ def soak(args: argparse.Namespace) -> int:
     ran_as: dict[str, str] = {}
     crowded: list[str] = []  # attacks that never got a connection or an answer in a phase
     phase_lines: list[dict[str, Any]] = []
+    bounds: list[tuple[float, float]] = []  # each phase's window (time.monotonic)
     changes: list[str] = []
     with tempfile.TemporaryDirectory(prefix="tofmat-soak-") as tmp:
         daemon = DaemonUnderTest(Path(tmp), args.daemon_args, args.daemon_nice)
@@ -1486,6 +1493,7 @@ def soak(args: argparse.Namespace) -> int:
                     if changed:
                         changes.append(f"phase {k + 1} ({', '.join(group)}): {', '.join(changed)}")
                 p1 = time.monotonic()
+                bounds.append((p0, p1))
                 st = [label_stats(s.window(p0, p1), p0, p1, s.before(p0)) for s in subs]
                 smp = sampler.sample()
                 line = {"phase": k + 1, "t": round(p1 - t_start), "attacks": group,
@@ -1517,13 +1525,19 @@ def soak(args: argparse.Namespace) -> int:
         rss_growth = (last.rss_kb or 0) / at60.rss_kb - 1.0 if at60.rss_kb else float("nan")
         fd_growth = (last.fds or 0) - (first.fds or 0)
         gap = max(s.gap_ms for s in stats.values())
+        # Where the longest gap ended: in which phase (its attacks), or after the last.
+        worst = max(stats.values(), key=lambda s: s.gap_ms)
+        gap_phase = next((f"phase {k + 1} ({', '.join(schedule[k])})" for k, b in enumerate(bounds)
+                          if b[0] <= worst.gap_end <= b[1]), "outside the phases (after the last attack)")
+        gap_where = f"{worst.gap_end - t_attacks:.1f} s after the first attack, {gap_phase}"
         failures = []
         if daemon.deaths or rc not in (0, None):
             failures.append(f"the daemon died ({len(daemon.deaths)} times; exit status at the end {rc})")
         if gap > GAP_LIMIT_MS:
             source = max((s.source_gap_ms for s in stats.values() if not math.isnan(s.source_gap_ms)), default=math.nan)
             failures.append(f"the longest gap between labels was {gap:.0f} ms (> {GAP_LIMIT_MS:.0f} ms; the longest "
-                            f"between tracked frames by the daemon's frame clock: {num(source, 0)} ms)")  # fmt: skip
+                            f"between tracked frames by the daemon's frame clock: {num(source, 0)} ms), ending "
+                            f"{gap_where}")  # fmt: skip
         if rss_growth > RSS_GROWTH_LIMIT:
             failures.append(f"RSS grew by {rss_growth * 100:.1f} % from the 60-s sample to the end "
                             f"(> {RSS_GROWTH_LIMIT * 100:.0f} %)")  # fmt: skip
@@ -1533,6 +1547,7 @@ def soak(args: argparse.Namespace) -> int:
             "seconds": round(t_end_attacks - t_attacks, 1),
             "phases": phase_lines,
             "subscribers": {k: asdict(v) for k, v in stats.items()},
+            "worst_gap_at": gap_where,
             "subscriber_errors": {s.name: dict(s.errors) for s in subs},
             "rss_kb": {"first": first.rss_kb, "at_60s": at60.rss_kb, "last": last.rss_kb,
                        "max": max(rss, default=None)},
