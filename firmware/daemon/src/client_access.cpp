@@ -26,6 +26,17 @@ bool same_token(const std::string& a, const std::string& b) {
 // A failure is forgotten this long after the address's wait ended.
 constexpr std::uint64_t kForgetNs = 600'000'000'000ull;
 
+// Room for one more entry in a map of at most `max` per-peer entries: those
+// `stale` go first; if that is not enough, the `earlier` ones one by one.
+template <typename Map, typename Stale, typename Earlier>
+void make_room(Map& map, std::size_t max, Stale stale, Earlier earlier) {
+  if (map.size() < max) return;
+  for (auto it = map.begin(); it != map.end();) it = stale(it->second) ? map.erase(it) : std::next(it);
+  while (map.size() >= max)
+    map.erase(std::min_element(map.begin(), map.end(),
+                               [&](const auto& a, const auto& b) { return earlier(a.second, b.second); }));
+}
+
 }  // namespace
 
 const char* role_name(Role role) { return role == Role::kControl ? "control" : "read"; }
@@ -117,15 +128,10 @@ ClientAccess::Rates& ClientAccess::rates_of(const Peer& peer, std::uint64_t now_
   const std::string key = peer.key();
   auto it = rates_.find(key);
   if (it == rates_.end()) {
-    if (rates_.size() >= kMaxThrottled) {
-      // A peer idle for long enough has full buckets again: forgetting it changes nothing.
-      for (auto r = rates_.begin(); r != rates_.end();)
-        r = now_ns > r->second.used_ns + 10'000'000'000ull ? rates_.erase(r) : std::next(r);
-      while (rates_.size() >= kMaxThrottled)
-        rates_.erase(std::min_element(rates_.begin(), rates_.end(), [](const auto& a, const auto& b) {
-          return a.second.used_ns < b.second.used_ns;
-        }));
-    }
+    // A peer idle for long enough has full buckets again: forgetting it changes nothing.
+    make_room(
+        rates_, kMaxThrottled, [&](const Rates& r) { return now_ns > r.used_ns + 10'000'000'000ull; },
+        [](const Rates& a, const Rates& b) { return a.used_ns < b.used_ns; });
     it = rates_.emplace(key, Rates{}).first;
   }
   it->second.used_ns = now_ns;
@@ -168,7 +174,10 @@ ClientAccess::Verdict ClientAccess::check_token(const std::string& address, cons
     return control ? Verdict::kControl : Verdict::kRead;
   }
   if (it == throttle_.end()) {
-    forget_old(now_ns);
+    // (Still full of addresses failing at once: the one free soonest goes.)
+    make_room(
+        throttle_, kMaxThrottled, [&](const Failures& f) { return now_ns > f.until_ns + kForgetNs; },
+        [](const Failures& a, const Failures& b) { return a.until_ns < b.until_ns; });
     it = throttle_.emplace(address, Failures{}).first;
   }
   Failures& f = it->second;
@@ -176,17 +185,6 @@ ClientAccess::Verdict ClientAccess::check_token(const std::string& address, cons
   const std::uint64_t delay_ms = std::min(kFirstDelayMs << std::min(f.count - 1, 16u), kMaxDelayMs);
   f.until_ns = now_ns + delay_ms * 1'000'000ull;
   return Verdict::kWrong;
-}
-
-void ClientAccess::forget_old(std::uint64_t now_ns) {
-  if (throttle_.size() < kMaxThrottled) return;
-  for (auto it = throttle_.begin(); it != throttle_.end();)
-    it = now_ns > it->second.until_ns + kForgetNs ? throttle_.erase(it) : std::next(it);
-  // Still full (that many addresses failing at once): the one free soonest goes.
-  while (throttle_.size() >= kMaxThrottled)
-    throttle_.erase(std::min_element(throttle_.begin(), throttle_.end(), [](const auto& a, const auto& b) {
-      return a.second.until_ns < b.second.until_ns;
-    }));
 }
 
 }  // namespace tofmat::daemon

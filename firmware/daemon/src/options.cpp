@@ -162,14 +162,22 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                  "connections at once from one user (Unix) or address (TCP)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1024));
+  // (CLI::Range lets NaN through: a rate is a number from 1 to 1e6, NaN is not.)
+  const CLI::Validator rate(
+      [](std::string& text) {
+        double v = 0;
+        return CLI::detail::lexical_cast(text, v) && v >= 1.0 && v <= 1e6 ? std::string()
+                                                                            : "must be a number from 1 to 1000000";
+      },
+      "RATE in [1 - 1000000]");
   app.add_option("--peer-request-rate", o.server.peer_request_rate,
                  "requests a second one user (Unix) or address (TCP) may send, and as many at once; more wait")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 1e6));
+      ->check(rate);
   app.add_option("--peer-connect-rate", o.server.peer_connect_rate,
                  "new connections a second from one user or address, and twice as many at once; more are refused")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 1e6));
+      ->check(rate);
   app.add_option("--idle-timeout", idle_timeout_s,
                  "seconds after which a client that neither asks nor subscribes, or takes nothing it is sent, is "
                  "closed (0: never)")
@@ -217,9 +225,6 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     }
     if (!control_group.empty()) o.server.control_gid = group_id(control_group);
     o.server.idle_timeout_ms = idle_timeout_s * 1000;
-    for (const auto& [flag, rate] : {std::pair{"--peer-request-rate", o.server.peer_request_rate},
-                                     std::pair{"--peer-connect-rate", o.server.peer_connect_rate}})
-      if (!(rate >= 1.0 && rate <= 1e6)) throw CLI::ValidationError(flag, "must be a number from 1 to 1000000");
     std::size_t used = 0;
     const unsigned long mode = socket_mode.empty() ? 01000 : std::stoul(socket_mode, &used, 8);
     if (used != socket_mode.size() || mode > 0777) throw CLI::ValidationError("--socket-mode", "expected octal like 0660");

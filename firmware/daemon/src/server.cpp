@@ -55,8 +55,7 @@ bool valid_stream(const std::string& s) {
 struct Server::Connection {
   std::uint64_t id = 0;
   protocol::Fd fd;
-  bool tcp = false;
-  Peer peer;
+  Peer peer;  // (peer.tcp: which socket it came in on)
   Role role = Role::kRead;  // Unix: from the peer at accept; TCP: from the token at hello
   bool ready = false;    // hello done
   bool closing = false;  // close once the queue is written (a refused hello's reply)
@@ -188,7 +187,6 @@ void Server::accept_from(int listener, bool tcp) {
     auto c = std::make_unique<Connection>();
     c->id = next_id_++;
     c->fd = std::move(fd);
-    c->tcp = tcp;
     c->peer = std::move(peer);
     c->role = tcp ? Role::kRead : access_.unix_role(c->peer);
     c->accepted_ns = c->last_request_ns = c->last_progress_ns = protocol::monotonic_ns();
@@ -201,6 +199,10 @@ void Server::accept_from(int listener, bool tcp) {
     note("connect", spdlog::level::info, "client " + std::to_string(c->id) + " connected (" + c->peer.key() + ")");
     connections_.emplace(c->id, std::move(c));
   }
+  count_clients();
+}
+
+void Server::count_clients() {
   clients_ = connections_.size();
   unix_clients_ = access_.unix_clients();
   tcp_clients_ = access_.tcp_clients();
@@ -273,7 +275,7 @@ void Server::handle(Connection& c, const protocol::Message& m) {
         args["protocol"].get<std::uint64_t>() != protocol::kProtocolVersion)
       return refuse(protocol::codes::kVersion,
                     "this daemon speaks protocol version " + std::to_string(protocol::kProtocolVersion), true);
-    if (c.tcp) {
+    if (c.peer.tcp) {
       const std::string token = args.contains("token") && args["token"].is_string() ? args["token"].get<std::string>() : "";
       std::uint64_t wait_ms = 0;
       switch (access_.check_token(c.peer.address, token, protocol::monotonic_ns(), wait_ms)) {
@@ -301,7 +303,7 @@ void Server::handle(Connection& c, const protocol::Message& m) {
          "client " + std::to_string(c.id) + " (" + c.peer.key() + "): \"" + req.cmd + "\" refused, it may only read");
     return refuse(protocol::codes::kPermission,
                   "\"" + req.cmd + "\" needs the control role (" +
-                      (c.tcp ? "the control token" : "the daemon's user or its control group") +
+                      (c.peer.tcp ? "the control token" : "the daemon's user or its control group") +
                       "); this connection may only read",
                   false);
   }
@@ -517,9 +519,7 @@ void Server::run(const std::atomic<bool>& stop) {
       changed = true;
     }
     if (changed) refresh_subscriptions();
-    clients_ = connections_.size();
-    unix_clients_ = access_.unix_clients();
-    tcp_clients_ = access_.tcp_clients();
+    count_clients();
   }
 }
 

@@ -106,7 +106,6 @@ class ClientAccess {
     std::uint64_t until_ns = 0;  // no token looked at before this
   };
   std::map<std::string, Failures> throttle_;
-  void forget_old(std::uint64_t now_ns);
   struct Bucket {
     double tokens = 0;
     std::uint64_t at_ns = 0;

@@ -86,6 +86,7 @@ class Server {
   void enqueue(Connection& c, std::shared_ptr<const std::vector<std::uint8_t>> bytes, bool event);
   void write_to(Connection& c);
   void refresh_subscriptions();
+  void count_clients();  // the counts status() reads (clients_, unix_clients_, tcp_clients_)
 
   ServerOptions options_;
   Handler handler_;
