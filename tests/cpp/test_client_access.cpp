@@ -12,6 +12,7 @@ namespace {
 
 using tofmat::daemon::AccessOptions;
 using tofmat::daemon::ClientAccess;
+using tofmat::daemon::RateBucket;
 using tofmat::daemon::Peer;
 using tofmat::daemon::Role;
 using Verdict = ClientAccess::Verdict;
@@ -192,6 +193,22 @@ TEST(ClientAccess, ConnectionsAtThePeersRate) {
   EXPECT_TRUE(a.take_connect(tcp_peer("10.0.0.9"), now + 100 * kMs));
   EXPECT_TRUE(a.take_connect(tcp_peer("10.0.0.10"), now));
   EXPECT_TRUE(a.take_connect(unix_peer(7), now));
+}
+
+TEST(RateBucket, StartsFullRefillsAtItsRateAndSaysHowLongToWait) {
+  RateBucket b;
+  const std::uint64_t now = 7'000 * kMs;
+  ASSERT_TRUE(b.refill(100, 4, now));  // full: 4 at once
+  EXPECT_EQ(b.wait_ns(100), 0u);
+  b.tokens -= 4;
+  EXPECT_FALSE(b.refill(100, 4, now));
+  EXPECT_NEAR(static_cast<double>(b.wait_ns(100)), 10.0 * kMs, 1.0);  // one in 1/100 s
+  EXPECT_FALSE(b.refill(100, 4, now + 9 * kMs));
+  EXPECT_TRUE(b.refill(100, 4, now + 10 * kMs));
+  b.tokens -= 1;
+  EXPECT_FALSE(b.refill(100, 4, now)) << "an earlier time does not refill it again";
+  EXPECT_TRUE(b.refill(100, 4, now + 10'000 * kMs));
+  EXPECT_DOUBLE_EQ(b.tokens, 4.0) << "never more than the burst";
 }
 
 TEST(ClientAccess, RememberedRatesAreBounded) {

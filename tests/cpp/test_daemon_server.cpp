@@ -992,9 +992,11 @@ TEST_F(ServerTest, APeersRequestsAreServedAtItsRateOthersAtOnce) {
 
 TEST_F(ServerTest, AClientConnectingInALoopDelaysNobody) {
   // Connecting and closing as fast as it can (issue 16, case 7): the server
-  // accepts a bounded number a round, so a subscriber's events still go out
-  // at the camera's rate.
+  // accepts a bounded number a round and a bounded number a second, so a
+  // subscriber's events still go out at the camera's rate, and a client on
+  // the other listener is not held up.
   start();
+  const auto t0 = Clock::now();
   Raw good(socket_path());
   good.handshake();
   good.request(2, "subscribe", {{"streams", {"labels"}}});
@@ -1015,12 +1017,24 @@ TEST_F(ServerTest, AClientConnectingInALoopDelaysNobody) {
   std::thread looper(loop), looper2(loop);
   constexpr int kFrames = 60;  // 2 s
   std::thread pub = publisher(*server_, kFrames);
+  std::thread fresh([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    const auto c0 = Clock::now();
+    Client tcp(tcp_address(), ClientOptions{kControlToken, kPatienceMs});
+    EXPECT_EQ(tcp.request("echo")["cmd"], "echo");
+    EXPECT_LT(Clock::now() - c0, std::chrono::milliseconds(500)) << "a TCP client waited behind the Unix loop";
+  });
   const Received got = receive_labels(good, 2500);
   pub.join();
+  fresh.join();
   looping = false;
   looper.join();
   looper2.join();
+  const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   EXPECT_GT(connects.load(), 1000u) << "the loop did not get going";
+  // The budget starts full (kAcceptsPerSecond) and refills at that rate.
+  EXPECT_LE(counter("accepted") + counter("rejected"),
+            static_cast<std::uint64_t>(Server::kAcceptsPerSecond * (1.0 + seconds)) + 2);
   EXPECT_GE(got.events, kFrames - 2);
   EXPECT_LT(got.worst_ms, 250.0) << "an event waited behind the connections";
 }

@@ -902,10 +902,10 @@ TEST(Address, HostAndPort) {
 }
 
 TEST(Sockets, AUnixClientWaitsForAFullBacklogUntilItsTimeout) {
-  // A Unix connect with the listener's backlog full fails with EAGAIN: the
-  // server is busy, not gone. connect_to tries again until its timeout (it
-  // used to take EAGAIN for a connection in progress and hand back a socket
-  // that was never connected).
+  // A Unix connect with the listener's backlog full: the server is busy (or
+  // paces its accepts, as tofmatd does under a connect loop), not gone.
+  // connect_to waits for room until its timeout, then fails with ETIMEDOUT;
+  // never a socket that was not connected.
   char tmpl[] = "/tmp/tofmat-backlog-XXXXXX";
   ASSERT_NE(::mkdtemp(tmpl), nullptr);
   const std::string path = std::string(tmpl) + "/s.sock";

@@ -743,6 +743,11 @@ def attack_main(name: str, cfg: AttackConfig) -> int:
     return 0
 
 
+def attacker_priority() -> None:
+    """In an attack's child process: an ordinary user's niceness (0), whatever --client-nice gave the harness."""
+    os.setpriority(os.PRIO_PROCESS, 0, 0)
+
+
 class AttackProcess:
     """An attack in its own process, started and stopped from the measuring one."""
 
@@ -751,7 +756,7 @@ class AttackProcess:
         self._stderr = log.open("ab")
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "_attack", name, "--config",
                                       json.dumps(asdict(cfg))], stdout=subprocess.PIPE, stderr=self._stderr,
-                                     text=True)  # fmt: skip
+                                     text=True, preexec_fn=attacker_priority)  # fmt: skip
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline().strip()
         if line != "ready":
@@ -845,8 +850,9 @@ class DaemonUnderTest:
 
     def start(self) -> None:
         with self.log.open("ab") as log:
-            niced = ["nice", "-n", str(self.nice)] if self.nice else []  # (nice execs: the pid is tofmatd's)
-            self.proc = subprocess.Popen(niced + self.command(), stdout=log, stderr=subprocess.STDOUT)
+            nice = self.nice  # absolute, whatever the harness's own (--client-nice)
+            self.proc = subprocess.Popen(self.command(), stdout=log, stderr=subprocess.STDOUT,
+                                         preexec_fn=lambda: os.setpriority(os.PRIO_PROCESS, 0, nice))  # fmt: skip
         deadline = time.monotonic() + 30.0
         while True:
             if self.proc.poll() is not None:
@@ -1628,6 +1634,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         q.add_argument("--slots", type=int, default=DEFAULT_SLOTS, help="connections of idle_slots and tcp_unauth")
         q.add_argument("--daemon-nice", type=int, default=0,
                        help="run tofmatd at this niceness (the box's systemd unit: -5; needs root below 0)")
+        q.add_argument("--client-nice", type=int, default=0,
+                       help="run the measured subscribers at this niceness, as a box's own services are "
+                            "(the attacks stay at 0; needs root below 0)")
         q.add_argument("--json", default="", help="write the figures to this file")
         q.add_argument("--same-user", action="store_true",
                        help=f"run as root, the Unix attacks still run as root (default: as uid {OTHER_UID}+)")
@@ -1652,6 +1661,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "_attack":
         return attack_main(args.name, AttackConfig(**json.loads(args.config)))
     run: Callable[[argparse.Namespace], int] = bench if args.command == "bench" else soak
+    if args.client_nice:
+        os.setpriority(os.PRIO_PROCESS, 0, args.client_nice)  # the attacks reset theirs: attacker_priority
     return run(args)
 
 

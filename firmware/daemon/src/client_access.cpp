@@ -113,7 +113,7 @@ Role ClientAccess::unix_role(const Peer& peer) const {
   return Role::kRead;
 }
 
-bool ClientAccess::Bucket::refill(double rate, double burst, std::uint64_t now_ns) {
+bool RateBucket::refill(double rate, double burst, std::uint64_t now_ns) {
   if (!started) {
     started = true;
     tokens = burst;
@@ -122,6 +122,10 @@ bool ClientAccess::Bucket::refill(double rate, double burst, std::uint64_t now_n
   }
   at_ns = std::max(at_ns, now_ns);
   return tokens >= 1.0;
+}
+
+std::uint64_t RateBucket::wait_ns(double rate) const {
+  return tokens >= 1.0 ? 0 : static_cast<std::uint64_t>((1.0 - tokens) / rate * 1e9) + 1;
 }
 
 ClientAccess::Rates& ClientAccess::rates_of(const Peer& peer, std::uint64_t now_ns) {
@@ -139,16 +143,16 @@ ClientAccess::Rates& ClientAccess::rates_of(const Peer& peer, std::uint64_t now_
 }
 
 bool ClientAccess::take_connect(const Peer& peer, std::uint64_t now_ns) {
-  Bucket& b = rates_of(peer, now_ns).connects;
+  RateBucket& b = rates_of(peer, now_ns).connects;
   if (!b.refill(options_.connects_per_second, 2 * options_.connects_per_second, now_ns)) return false;
   b.tokens -= 1.0;
   return true;
 }
 
 bool ClientAccess::may_request(const Peer& peer, std::uint64_t now_ns, std::uint64_t& wait_ns) {
-  Bucket& b = rates_of(peer, now_ns).requests;
+  RateBucket& b = rates_of(peer, now_ns).requests;
   if (b.refill(options_.requests_per_second, options_.requests_per_second, now_ns)) return true;
-  wait_ns = static_cast<std::uint64_t>((1.0 - b.tokens) / options_.requests_per_second * 1e9) + 1;
+  wait_ns = b.wait_ns(options_.requests_per_second);
   return false;
 }
 

@@ -54,14 +54,17 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
   if (options_.table_dir.empty())
     options_.table_dir = std::filesystem::absolute(options_.table).lexically_normal().parent_path().string();
   options_.table_dir = std::filesystem::weakly_canonical(options_.table_dir).string();
-  auto table = load_table_file(options_.table);
-  pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
   options_.server.server_name = kVersion;
   options_.server.capabilities = {"labels",      "label_map",  "depth",         "device",  "status",
                                   "reset",       "set_profile", "set_roi",      "set_candidates",
                                   "load_table",  "trigger"};
-  source_ = make_source(options_.source, options_.source_options);
+  // The sockets first: a second daemon started on a live one's socket is
+  // refused before it spends anything on a table or a camera (requests are
+  // only handled once start() runs, after the rest is built).
   server_ = std::make_unique<Server>(options_.server, [this](const protocol::Request& r) { return handle(r); });
+  auto table = load_table_file(options_.table);
+  pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
+  source_ = make_source(options_.source, options_.source_options);
   Emitter emit;
   emit.label = [this](const protocol::LabelEvent& e) { server_->publish("labels", protocol::encode_label(e)); };
   emit.label_map = [this](const protocol::LabelMapEvent& e) {

@@ -164,8 +164,14 @@ void Server::accept_from(int listener, bool tcp) {
   // A bounded number a round: a client connecting as fast as it can must not
   // keep the server accepting (the rest wait in the backlog for the next round).
   for (std::size_t k = 0; k < kAcceptsPerRound; ++k) {
+    RateBucket& budget = tcp ? tcp_accepts_ : unix_accepts_;
+    if (!budget.refill(Server::kAcceptsPerSecond, Server::kAcceptsPerSecond, protocol::monotonic_ns())) break;
+    budget.tokens -= 1.0;
     protocol::Fd fd(::accept4(listener, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC));
-    if (!fd) return;  // EAGAIN: nothing more waiting (or a transient error)
+    if (!fd) {  // EAGAIN: nothing more waiting (or a transient error)
+      budget.tokens += 1.0;
+      break;
+    }
     Peer peer;
     try {
       peer = peer_of(fd.get(), tcp);
@@ -436,13 +442,18 @@ void Server::run(const std::atomic<bool>& stop) {
 
     fds.clear();
     ids.clear();
-    fds.push_back({wake_fd_.get(), POLLIN, 0});
-    if (unix_) fds.push_back({unix_.get(), POLLIN, 0});
-    if (tcp_) fds.push_back({tcp_.get(), POLLIN, 0});
-    const std::size_t first_client = fds.size();
-    bool more = false;
     const std::uint64_t before = protocol::monotonic_ns();
     std::uint64_t resume = before + 200'000'000ull;
+    fds.push_back({wake_fd_.get(), POLLIN, 0});
+    // (A listener out of budget is left out, -1: poll ignores it.)
+    for (auto [listener, budget] : {std::pair{&unix_, &unix_accepts_}, std::pair{&tcp_, &tcp_accepts_}}) {
+      if (!*listener) continue;
+      const bool may_accept = budget->refill(Server::kAcceptsPerSecond, Server::kAcceptsPerSecond, before);
+      if (!may_accept) resume = std::min(resume, before + budget->wait_ns(Server::kAcceptsPerSecond));
+      fds.push_back({may_accept ? listener->get() : -1, POLLIN, 0});
+    }
+    const std::size_t first_client = fds.size();
+    bool more = false;
     for (auto& [id, c] : connections_) {
       // Not read from while closing (the answer is on its way) or while it
       // has requests left (they come first). One its peer's rate holds is

@@ -138,9 +138,10 @@ Fd listen_unix(const std::string& path, unsigned mode) {
   ::umask(old);
   if (r != 0) fail("bind(\"" + path + "\")");
   if (::chmod(path.c_str(), static_cast<mode_t>(mode)) != 0) fail("chmod(\"" + path + "\")");
-  // The kernel's largest backlog: a client connecting and closing in a loop
-  // should not fill it for everyone between two of the server's accepts.
-  if (::listen(fd.get(), SOMAXCONN) != 0) fail("listen(\"" + path + "\")");
+  // A short backlog: a server that paces its accepts (tofmatd: while a
+  // client connects in a loop) then holds a new client for at most this
+  // many accepts; clients wait for room in connect (connect_to).
+  if (::listen(fd.get(), kUnixBacklog) != 0) fail("listen(\"" + path + "\")");
   return fd;
 }
 
@@ -174,22 +175,28 @@ Fd connect_to(const Address& address, int timeout_ms) {
     ::setsockopt(fd.get(), IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
     r = ::connect(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa);
   } else {
-    // A Unix socket connects at once or not at all: EAGAIN is a full
-    // backlog (the server is busy), not a connection in progress. Try again
-    // until the timeout.
+    // A Unix socket connects at once or not at all: with a full backlog
+    // (the server is busy, or paces its accepts) a blocking connect sleeps
+    // until the server accepts one, when the kernel wakes the waiters, up
+    // to SO_SNDTIMEO. Polling for room instead would lose every time to a
+    // client connecting in a loop.
     const sockaddr_un sa = unix_address(address.path);
-    fd = Fd(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
+    fd = Fd(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0));
     if (!fd) fail("socket(AF_UNIX)");
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    int wait_ms = 1;
-    while (::connect(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) != 0) {
-      if (errno == EINTR) continue;
-      if (errno != EAGAIN) fail("connect to " + address.describe());
-      if (std::chrono::steady_clock::now() >= deadline)
+    for (;;) {
+      const auto left_us =
+          std::chrono::duration_cast<std::chrono::microseconds>(deadline - std::chrono::steady_clock::now()).count();
+      if (left_us <= 0)
         throw SocketError("connect to " + address.describe() + ": timed out (its backlog stayed full)", ETIMEDOUT);
-      std::this_thread::sleep_for(std::chrono::milliseconds(wait_ms));
-      wait_ms = std::min(wait_ms * 2, 50);
+      timeval tv{};
+      tv.tv_sec = static_cast<time_t>(left_us / 1'000'000);
+      tv.tv_usec = static_cast<suseconds_t>(left_us % 1'000'000);
+      if (::setsockopt(fd.get(), SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv) != 0) fail("setsockopt(SO_SNDTIMEO)");
+      if (::connect(fd.get(), reinterpret_cast<const sockaddr*>(&sa), sizeof sa) == 0) break;
+      if (errno != EINTR && errno != EAGAIN) fail("connect to " + address.describe());
     }
+    set_nonblocking(fd.get());
     return fd;
   }
   if (r != 0) {

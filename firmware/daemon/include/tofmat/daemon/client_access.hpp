@@ -60,6 +60,17 @@ struct AccessOptions {
   double connects_per_second = 20;   // per peer (and twice as many at once)
 };
 
+// A token bucket: `rate` a second, up to `burst` at once (starts full).
+struct RateBucket {
+  double tokens = 0;
+  std::uint64_t at_ns = 0;
+  bool started = false;
+  // Refills to `burst` at `rate` a second; true if at least one is there.
+  bool refill(double rate, double burst, std::uint64_t now_ns);
+  // How long until one is there, at `rate` (after refill).
+  std::uint64_t wait_ns(double rate) const;
+};
+
 // Whether a local user is in a group: its primary group or a supplementary one.
 bool user_in_group(uid_t uid, gid_t primary, gid_t group);
 
@@ -106,15 +117,8 @@ class ClientAccess {
     std::uint64_t until_ns = 0;  // no token looked at before this
   };
   std::map<std::string, Failures> throttle_;
-  struct Bucket {
-    double tokens = 0;
-    std::uint64_t at_ns = 0;
-    bool started = false;
-    // Refills to `burst` at `rate` a second; true if at least one is there.
-    bool refill(double rate, double burst, std::uint64_t now_ns);
-  };
   struct Rates {
-    Bucket requests, connects;
+    RateBucket requests, connects;
     std::uint64_t used_ns = 0;
   };
   std::map<std::string, Rates> rates_;

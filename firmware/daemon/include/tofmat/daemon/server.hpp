@@ -61,6 +61,13 @@ bool valid_stream(const std::string& stream);
 
 class Server {
  public:
+  // All peers together, per listener: connections accepted a second (and as
+  // many at once). Beyond it the listener is not watched until its budget
+  // refills: new connects wait in the kernel (a Unix client in connect, for
+  // at most the backlog's protocol::kUnixBacklog accepts), which costs the
+  // server nothing, where accepting and closing a client that connects in a
+  // loop cost the server thread half a core (docs/benchmarks.md).
+  static constexpr double kAcceptsPerSecond = 1000;
   using Handler = std::function<protocol::Reply(const protocol::Request&)>;
   // Opens the listening sockets; throws protocol::SocketError / std::invalid_argument.
   Server(ServerOptions options, Handler handler);
@@ -106,6 +113,7 @@ class Server {
   std::atomic<std::size_t> clients_{0}, unix_clients_{0}, tcp_clients_{0};
   ClientAccess access_;  // server thread only (after the constructor)
   LogLimiter log_limiter_;  // server thread only
+  RateBucket unix_accepts_, tcp_accepts_;  // connections accepted, all peers (server thread only)
   std::atomic<std::uint64_t> log_suppressed_{0};
 };
 

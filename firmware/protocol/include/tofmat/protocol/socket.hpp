@@ -51,6 +51,9 @@ struct Address {
 };
 Address parse_address(const std::string& text);  // throws std::invalid_argument
 
+// The Unix listener's backlog: connections the kernel holds for the server.
+constexpr int kUnixBacklog = 64;
+
 // Listening sockets, non-blocking, close-on-exec. listen_unix replaces a
 // stale socket file (one nobody answers on) and refuses to replace a live one
 // or anything that is not a socket.
