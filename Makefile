@@ -16,7 +16,7 @@ SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 # tofmatd: spdlog (logging), CLI11 (flags and config file); OpenCV imgproc for
 # the tests (the float reference of the segmentation's integer smoothing).
 APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev \
-                libspdlog-dev libcli11-dev libopencv-imgproc-dev
+                libspdlog-dev libcli11-dev libopencv-imgproc-dev libgpiod-dev
 
 CROSS    := build/aarch64
 # The aarch64 cross build of everything that runs on the box: Debian's cross
