@@ -65,8 +65,28 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
   source_ = make_source(options_.source, options_.source_options);
+  if (options_.line.enabled()) {
+    if (options_.profile.name != "sorting")
+      throw std::invalid_argument("the sorting line (--gpio) needs --profile sorting, not " + options_.profile.name);
+    SortingLine::Hooks hooks;
+    hooks.start_burst = [this](std::string& why) -> std::optional<std::uint64_t> {
+      try {
+        return pipeline_->trigger(0);
+      } catch (const std::exception& e) {  // (a client switched the profile away from sorting)
+        why = e.what();
+        return std::nullopt;
+      }
+    };
+    hooks.publish = [this](const protocol::Message& m, const std::string& stream) { server_->publish(stream, m); };
+    line_ = std::make_unique<SortingLine>(options_.line, make_gpio_backend(options_.line.gpio), table->materials(),
+                                          std::move(hooks));
+    options_.server.capabilities.insert(options_.server.capabilities.end(), {"sort", "line"});
+  }
   Emitter emit;
-  emit.label = [this](const protocol::LabelEvent& e) { server_->publish("labels", protocol::encode_label(e)); };
+  emit.label = [this](const protocol::LabelEvent& e) {
+    if (line_) line_->label(e);
+    server_->publish("labels", protocol::encode_label(e));
+  };
   emit.label_map = [this](const protocol::LabelMapEvent& e) {
     server_->publish("label_map", protocol::encode_label_map(e));
   };
@@ -99,6 +119,18 @@ void Daemon::start() {
       fail("processing stopped: " + std::string(e.what()));
     }
   });
+  if (line_) {
+    // Without its thread the line would push nothing and reject nothing: the
+    // daemon fails (systemd restarts it) rather than run a line blind.
+    line_thread_ = std::thread([this] {
+      ::pthread_setname_np(::pthread_self(), "tofmatd-line");
+      try {
+        line_->run(stop_);
+      } catch (const std::exception& e) {
+        fail("the sorting line stopped: " + std::string(e.what()));
+      }
+    });
+  }
   source_thread_ = std::thread([this] {
     ::pthread_setname_np(::pthread_self(), "tofmatd-source");
     SourceCallbacks cb;
@@ -119,6 +151,7 @@ void Daemon::start() {
         ++device_changes_;
       }
       spdlog::info("device {}: {}", device_state_name(s), message);
+      if (line_) line_->camera(s == DeviceState::kStreaming);
       protocol::Message m;
       m.meta = {{"event", "device"}, {"state", device_state_name(s)}, {"message", message},
                 {"timestamp_ns", protocol::monotonic_ns()}};
@@ -146,7 +179,8 @@ void Daemon::fail(const std::string& why) {
 void Daemon::stop() {
   stop_ = true;
   if (server_) server_->wake();
-  for (auto* t : {&source_thread_, &pipeline_thread_, &server_thread_})
+  if (line_) line_->wake();
+  for (auto* t : {&source_thread_, &pipeline_thread_, &server_thread_, &line_thread_})
     if (t->joinable()) t->join();
 }
 
@@ -177,6 +211,7 @@ nlohmann::json Daemon::status() const {
   s["clients"] = server_->status();
   s["uptime_s"] = static_cast<double>(protocol::monotonic_ns() - started_ns_) * 1e-9;
   s["last_reload"] = last_reload_;
+  if (line_) s["line"] = line_->status();
   return s;
 }
 
@@ -212,6 +247,9 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
       pipeline_->set_table(table, path);
       r.result = {{"materials", table->materials()}};
     } else if (req.cmd == "trigger") {
+      if (line_)
+        return failure(req.id, codes::kInvalidArgument,
+                       "the light barrier triggers this sorting line; a trigger from a client would take an item's burst");
       const int burst = a.contains("burst") ? static_cast<int>(protocol::get_int(a, "burst", 1, 300)) : 0;
       r.result = {{"trigger", pipeline_->trigger(burst)}};
     } else {

@@ -200,6 +200,54 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--sim-data", o.source_options.sim_data_dir,
                  "simulator device profiles and material libraries (default: installed beside tofmatd)")
       ->capture_default_str();
+  // The sorting line (issue 17; docs/sorting-line.md).
+  LineOptions& line = o.line;
+  const CLI::Validator non_negative(
+      [](std::string& text) {
+        double v = 0;
+        return CLI::detail::lexical_cast(text, v) && v >= 0.0 && v <= 1e9 ? std::string() : "must be a number >= 0";
+      },
+      "NUMBER >= 0");
+  app.add_option("--gpio", line.gpio,
+                 "the sorting line's GPIO: libgpiod (the board's chips) | sim (a simulated chip); none by default")
+      ->check(CLI::IsMember({"libgpiod", "sim"}));
+  app.add_option("--line-barrier", line.barrier, "the light barrier's input, CHIP:LINE (chip label or /dev path)");
+  app.add_flag("--line-barrier-active-low", line.barrier_active_low, "the barrier's line is low while the beam is interrupted");
+  app.add_option("--line-barrier-bias", line.barrier_bias, "as-is | disabled | pull-up | pull-down")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"as-is", "disabled", "pull-up", "pull-down"}));
+  app.add_option("--line-debounce-ms", line.debounce_ms, "an edge of the barrier counts when held this long")
+      ->capture_default_str()
+      ->check(non_negative);
+  app.add_option("--line-min-gap-ms", line.min_gap_ms,
+                 "items closer together than this are reported and rejected, never merged")
+      ->capture_default_str()
+      ->check(non_negative);
+  app.add_option("--line-speed", line.speed_mm_s, "a belt of fixed speed, mm/s (or an encoder)")->check(non_negative);
+  app.add_option("--line-encoder-a", line.encoder_a, "the belt encoder's channel A, CHIP:LINE");
+  app.add_option("--line-encoder-b", line.encoder_b, "the belt encoder's channel B, CHIP:LINE");
+  app.add_option("--line-encoder-counts-per-mm", line.encoder_counts_per_mm,
+                 "encoder counts per mm of belt: 4 x pulses per turn / (pi x pulley diameter)")
+      ->check(non_negative);
+  app.add_option("--line-camera-mm", line.camera_mm, "from the barrier to the camera's ROI along the belt, mm")
+      ->capture_default_str()
+      ->check(non_negative);
+  app.add_option("--outlet", line.outlets,
+                 "an outlet, NAME:position=MM,line=CHIP:LINE[,materials=a+b][,pulse=MS][,active_low=1] (repeat "
+                 "for each; position from the barrier)");
+  app.add_option("--line-reject", line.reject,
+                 "the outlet that takes rejects (default: none, they ride to the belt's end)");
+  app.add_option("--line-alarm", line.alarm, "an alarm output, CHIP:LINE: on while the camera is lost or labels come late");
+  app.add_option("--line-margin-ms", line.margin_ms, "a label must come this long before its outlet fires")
+      ->capture_default_str()
+      ->check(non_negative);
+  app.add_option("--line-alarm-hold-ms", line.alarm_hold_ms, "a late label keeps the alarm on this long")
+      ->capture_default_str()
+      ->check(non_negative);
+  app.add_option("--line-max-distance", line.max_distance,
+                 "a burst's label is confident when its Eq. (12) distance is at most this (mm^2; 0: any)")
+      ->capture_default_str()
+      ->check(non_negative);
   app.add_option("--log-level", cl.log_level, "trace | debug | info | warn | error")
       ->capture_default_str()
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
@@ -211,6 +259,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.profile.backend = parse_backend(backend);
     o.profile.candidates = candidates;
     if (!roi.empty()) o.profile.roi = parse_roi(roi);
+    if (!line.enabled() && (!line.barrier.empty() || !line.outlets.empty() || line.speed_mm_s > 0 ||
+                            !line.encoder_a.empty() || !line.alarm.empty()))
+      throw CLI::ValidationError("--gpio", "the sorting line's options need --gpio libgpiod (or sim)");
     o.server.tcp = tcp;
     if (tcp.empty() && !token_file.empty())
       throw CLI::ValidationError("--token-file", "a token is for TCP clients: give --tcp too, or leave the token out");

@@ -11,6 +11,7 @@
 
 #include "tofmat/daemon/pipeline.hpp"
 #include "tofmat/daemon/server.hpp"
+#include "tofmat/daemon/sorting_line.hpp"
 #include "tofmat/daemon/source.hpp"
 
 namespace tofmat::daemon {
@@ -27,6 +28,8 @@ struct DaemonOptions {
   ServerOptions server;
   SourceOptions source_options;
   std::size_t queue_frames = 2;
+  // The sorting line on GPIO (line.gpio "" = none): needs the sorting profile.
+  LineOptions line;
 };
 
 // A table file (.tmx) or a folder of the real database's .npy files.
@@ -54,10 +57,11 @@ class Daemon {
   std::unique_ptr<Pipeline> pipeline_;
   std::unique_ptr<Server> server_;
   std::unique_ptr<Source> source_;
+  std::unique_ptr<SortingLine> line_;  // null without a sorting line
   std::atomic<bool> stop_{false};
   std::atomic<bool> failed_{false};
   void fail(const std::string& why);
-  std::thread source_thread_, pipeline_thread_, server_thread_;
+  std::thread source_thread_, pipeline_thread_, server_thread_, line_thread_;
   std::uint64_t started_ns_ = 0;
   mutable std::mutex state_mutex_;
   DeviceState device_state_ = DeviceState::kOpening;

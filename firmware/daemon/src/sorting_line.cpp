@@ -1,0 +1,307 @@
+#include "tofmat/daemon/sorting_line.hpp"
+
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <cstring>
+
+#include "tofmat/gpio/sim_gpio.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+
+namespace tofmat::daemon {
+namespace {
+
+double number(const std::string& key, const std::string& value, const std::string& outlet) {
+  std::size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used != value.size() || !std::isfinite(v))
+    throw std::invalid_argument("outlet \"" + outlet + "\": " + key + " \"" + value + "\" is not a number");
+  return v;
+}
+
+std::uint64_t ms_to_ns(double ms) { return static_cast<std::uint64_t>(std::llround(ms * 1e6)); }
+
+}  // namespace
+
+std::shared_ptr<gpio::Backend> make_gpio_backend(const std::string& name) {
+  if (name == "libgpiod") return gpio::make_libgpiod_backend();
+  if (name == "sim") return gpio::SimGpio::create();
+  throw std::invalid_argument("--gpio \"" + name + "\": libgpiod (the board's GPIO) or sim (a simulated chip)");
+}
+
+OutletOptions parse_outlet(const std::string& text) {
+  const auto colon = text.find(':');
+  if (colon == std::string::npos || colon == 0)
+    throw std::invalid_argument("outlet \"" + text +
+                                "\": expected NAME:position=MM,line=CHIP:LINE[,materials=a+b][,pulse=MS][,active_low=1]");
+  OutletOptions o;
+  o.outlet.name = text.substr(0, colon);
+  bool has_position = false, has_line = false;
+  std::stringstream parts(text.substr(colon + 1));
+  std::string part;
+  while (std::getline(parts, part, ',')) {
+    const auto eq = part.find('=');
+    if (eq == std::string::npos)
+      throw std::invalid_argument("outlet \"" + o.outlet.name + "\": \"" + part + "\" is not key=value");
+    const std::string key = part.substr(0, eq), value = part.substr(eq + 1);
+    if (key == "position") {
+      o.outlet.position_mm = number(key, value, o.outlet.name);
+      has_position = true;
+    } else if (key == "line") {
+      o.line = gpio::LineSpec::parse(value);
+      has_line = true;
+    } else if (key == "materials") {
+      std::stringstream m(value);
+      std::string name;
+      while (std::getline(m, name, '+'))
+        if (!name.empty()) o.outlet.materials.push_back(name);
+    } else if (key == "pulse") {
+      const double ms = number(key, value, o.outlet.name);
+      if (!(ms > 0 && ms <= 10'000))
+        throw std::invalid_argument("outlet \"" + o.outlet.name + "\": pulse must be 0 to 10000 ms (not 0)");
+      o.outlet.pulse_ns = ms_to_ns(ms);
+    } else if (key == "active_low") {
+      if (value != "0" && value != "1")
+        throw std::invalid_argument("outlet \"" + o.outlet.name + "\": active_low is 0 or 1");
+      o.active_low = value == "1";
+    } else {
+      throw std::invalid_argument("outlet \"" + o.outlet.name + "\": unknown key \"" + key +
+                                  "\" (position, line, materials, pulse, active_low)");
+    }
+  }
+  if (!has_position) throw std::invalid_argument("outlet \"" + o.outlet.name + "\": no position=MM");
+  if (!has_line) throw std::invalid_argument("outlet \"" + o.outlet.name + "\": no line=CHIP:LINE");
+  return o;
+}
+
+SortingLine::SortingLine(const LineOptions& options, std::shared_ptr<gpio::Backend> backend,
+                         const std::vector<std::string>& materials, Hooks hooks)
+    : options_(options),
+      backend_(std::move(backend)),
+      hooks_(std::move(hooks)),
+      filter_({ms_to_ns(options.debounce_ms), ms_to_ns(options.min_gap_ms)}),
+      wake_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
+  const auto bad = [](const std::string& what) { throw std::invalid_argument("sorting line: " + what); };
+  if (!wake_fd_) bad("eventfd failed");
+  if (options.barrier.empty()) bad("--line-barrier is needed (the light barrier's CHIP:LINE)");
+  const bool encoder = !options.encoder_a.empty() || !options.encoder_b.empty();
+  if (encoder == (options.speed_mm_s > 0))
+    bad("give the belt's motion: --line-speed MM/S, or --line-encoder-a, --line-encoder-b and "
+        "--line-encoder-counts-per-mm (one of the two)");
+  if (encoder && (options.encoder_a.empty() || options.encoder_b.empty() || !(options.encoder_counts_per_mm > 0)))
+    bad("an encoder needs --line-encoder-a, --line-encoder-b and a positive --line-encoder-counts-per-mm");
+  for (const double v : {options.debounce_ms, options.min_gap_ms, options.margin_ms, options.alarm_hold_ms,
+                         options.max_distance, options.camera_mm})
+    if (!(v >= 0) || !std::isfinite(v)) bad("times, distances and --line-max-distance must be numbers >= 0");
+  line::SorterConfig config;
+  config.camera_mm = options.camera_mm;
+  config.decision_margin_ns = ms_to_ns(options.margin_ms);
+  config.alarm_hold_ns = ms_to_ns(options.alarm_hold_ms);
+  std::vector<OutletOptions> outlets;
+  for (const auto& text : options.outlets) outlets.push_back(parse_outlet(text));
+  const std::set<std::string> known(materials.begin(), materials.end());
+  for (std::size_t k = 0; k < outlets.size(); ++k) {
+    for (const auto& m : outlets[k].outlet.materials)
+      if (!known.count(m)) bad("outlet \"" + outlets[k].outlet.name + "\" takes \"" + m + "\", which the table does not hold");
+    if (outlets[k].outlet.name == options.reject) config.reject = k;
+    config.outlets.push_back(outlets[k].outlet);
+  }
+  if (!options.reject.empty() && !config.reject) bad("--line-reject \"" + options.reject + "\" is not an outlet");
+  line::validate(config);
+  // The lines: every one asked for now, so that a wrong name fails at start.
+  const std::string consumer = "tofmatd";
+  barrier_ = backend_->request_input(gpio::LineSpec::parse(options.barrier),
+                                     {options.barrier_active_low, gpio::parse_bias(options.barrier_bias)}, consumer);
+  if (encoder) {
+    enc_a_ = backend_->request_input(gpio::LineSpec::parse(options.encoder_a), {}, consumer);
+    enc_b_ = backend_->request_input(gpio::LineSpec::parse(options.encoder_b), {}, consumer);
+    auto m = std::make_unique<line::EncoderMotion>(options.encoder_counts_per_mm);
+    m->set_levels(enc_a_->value(), enc_b_->value());
+    encoder_ = m.get();
+    motion_ = std::move(m);
+  } else {
+    motion_ = std::make_unique<line::FixedSpeed>(options.speed_mm_s);
+  }
+  for (const auto& o : outlets) outlets_.push_back(backend_->request_output(o.line, {o.active_low, false}, consumer));
+  if (!options.alarm.empty()) alarm_ = backend_->request_output(gpio::LineSpec::parse(options.alarm), {}, consumer);
+
+  line::Hooks h;
+  h.start_burst = [this](std::uint64_t item) -> std::optional<std::uint64_t> {
+    std::string why;
+    const auto t = hooks_.start_burst ? hooks_.start_burst(why) : std::nullopt;
+    if (!t) publish_line("burst", "item " + std::to_string(item) + ": no burst (" + why + ")");
+    return t;
+  };
+  h.drive = [this](std::size_t outlet, bool on) {
+    try {
+      outlets_.at(outlet)->set(on);
+    } catch (const std::exception& e) {
+      publish_line("gpio", e.what());
+    }
+  };
+  h.alarm = [this](bool on) {
+    if (alarm_) {
+      try {
+        alarm_->set(on);
+      } catch (const std::exception& e) {
+        publish_line("gpio", e.what());
+      }
+    }
+    publish_line("alarm", on ? "on" : "off");
+  };
+  h.event = [this](const line::SortEvent& e) { publish_sort(e); };
+  h.fault = [this](const std::string& kind, const std::string& message) { publish_line(kind, message); };
+  sorter_ = std::make_unique<line::Sorter>(config, *motion_, std::move(h));
+}
+
+SortingLine::~SortingLine() = default;
+
+void SortingLine::wake() {
+  const std::uint64_t one = 1;
+  [[maybe_unused]] const auto n = ::write(wake_fd_.get(), &one, sizeof one);
+}
+
+void SortingLine::label(const protocol::LabelEvent& e) {
+  if (!e.trigger || e.state == "tracking") return;
+  line::BurstLabel l;
+  l.trigger = *e.trigger;
+  l.material = e.state == "final" ? e.material : "";
+  l.distance = e.distance;
+  l.confident = !l.material.empty() && (options_.max_distance <= 0 || e.distance <= options_.max_distance);
+  {
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    if (labels_.size() < 1024) labels_.push_back(l);  // (the line thread takes them at once; a bound all the same)
+  }
+  wake();
+}
+
+void SortingLine::camera(bool streaming) {
+  {
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    camera_ = streaming;
+  }
+  wake();
+}
+
+void SortingLine::handle_inbox(std::uint64_t now_ns) {
+  std::vector<line::BurstLabel> labels;
+  std::optional<bool> camera;
+  {
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    labels.swap(labels_);
+    camera.swap(camera_);
+  }
+  if (camera) sorter_->camera(*camera, now_ns);
+  for (const auto& l : labels) sorter_->label(l, now_ns);
+}
+
+void SortingLine::publish_sort(const line::SortEvent& e) {
+  protocol::Message m;
+  m.meta = {{"event", "sort"},          {"state", e.state},           {"item", e.item},
+            {"trigger_ns", e.trigger_ns}, {"material", e.material},     {"distance", e.distance},
+            {"outlet", e.outlet},         {"reason", line::reason_name(e.reason)},
+            {"decided_ns", e.decided_ns}, {"margin_ms", e.margin_ms}};
+  if (e.fire_ns) m.meta["fire_ns"] = *e.fire_ns;  // (absent: no pusher, or the belt stands)
+  if (hooks_.publish) hooks_.publish(m, "sort");
+}
+
+void SortingLine::publish_line(const std::string& kind, const std::string& message) {
+  if (kind == "alarm")
+    spdlog::warn("sorting line: alarm {}", message);
+  else
+    spdlog::warn("sorting line: {}: {}", kind, message);
+  protocol::Message m;
+  m.meta = {{"event", "line"},
+            {"kind", kind},
+            {"message", message},
+            {"alarm", sorter_ ? sorter_->alarm_on() : false},
+            {"timestamp_ns", protocol::monotonic_ns()}};
+  if (hooks_.publish) hooks_.publish(m, "line");
+}
+
+void SortingLine::run(const std::atomic<bool>& stop) {
+  struct Edge {
+    std::uint64_t t;
+    int source;  // 0 barrier, 1 encoder A, 2 encoder B
+    bool rising;
+  };
+  std::vector<gpio::EdgeEvent> got;
+  std::vector<Edge> edges;
+  while (!stop.load()) {
+    std::vector<pollfd> fds{{wake_fd_.get(), POLLIN, 0}, {barrier_->fd(), POLLIN, 0}};
+    if (enc_a_) fds.push_back({enc_a_->fd(), POLLIN, 0});
+    if (enc_b_) fds.push_back({enc_b_->fd(), POLLIN, 0});
+    std::uint64_t now = protocol::monotonic_ns();
+    // Wake for the schedule's next step (to the nanosecond: ppoll), and at
+    // least every 200 ms (status, stop).
+    std::uint64_t until = now + 200'000'000ull;
+    if (const auto w = sorter_->next_wake(now)) until = std::min(until, std::max(*w, now));
+    if (const auto d = filter_.next_deadline()) until = std::min(until, std::max(*d, now));
+    const std::uint64_t wait = until - now;
+    timespec ts{static_cast<time_t>(wait / 1'000'000'000ull), static_cast<long>(wait % 1'000'000'000ull)};
+    if (::ppoll(fds.data(), fds.size(), &ts, nullptr) < 0 && errno != EINTR)
+      throw std::runtime_error(std::string("sorting line: poll failed: ") + std::strerror(errno));
+    if (fds[0].revents & POLLIN) {
+      std::uint64_t v;
+      [[maybe_unused]] const auto n = ::read(wake_fd_.get(), &v, sizeof v);
+    }
+    // Every input's edges, in the order they happened (the barrier's item
+    // needs the belt's position at its edge).
+    edges.clear();
+    const auto take = [&](gpio::InputLine* in, int source) {
+      if (!in) return;
+      got.clear();
+      in->read_events(got, 256);
+      for (const auto& e : got) edges.push_back({e.timestamp_ns, source, e.rising});
+    };
+    take(barrier_.get(), 0);
+    take(enc_a_.get(), 1);
+    take(enc_b_.get(), 2);
+    std::stable_sort(edges.begin(), edges.end(), [](const Edge& a, const Edge& b) { return a.t < b.t; });
+    now = protocol::monotonic_ns();
+    for (const auto& e : edges) {
+      if (e.source == 0) {
+        if (const auto item = filter_.edge(e.t, e.rising)) sorter_->item(*item, now);
+      } else if (encoder_) {
+        encoder_->edge(e.source == 2, e.rising, e.t);
+      }
+    }
+    if (const auto item = filter_.advance(now)) sorter_->item(*item, now);
+    handle_inbox(now);
+    sorter_->poll(now);
+    const auto& c = sorter_->counts();
+    nlohmann::json s = {{"gpio", backend_->name()},
+                        {"items", c.items},
+                        {"sorted", c.sorted},
+                        {"rejected", c.rejected},
+                        {"late", c.late},
+                        {"faults", c.faults},
+                        {"on_belt", sorter_->on_belt()},
+                        {"alarm", sorter_->alarm_on()},
+                        {"speed_mm_s", motion_->speed_mm_s(now)},
+                        {"barrier_glitches", filter_.glitches()},
+                        {"barrier_bounces", filter_.bounces()}};
+    if (encoder_) s["encoder_errors"] = encoder_->quadrature().errors();
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    status_ = std::move(s);
+  }
+}
+
+nlohmann::json SortingLine::status() const {
+  std::lock_guard<std::mutex> lock(status_mutex_);
+  return status_.is_null() ? nlohmann::json{{"gpio", backend_->name()}} : status_;
+}
+
+}  // namespace tofmat::daemon
