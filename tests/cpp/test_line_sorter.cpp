@@ -53,7 +53,7 @@ struct Line {
     sorter.item({t, too_close, 0}, now);
   }
   void label(std::uint64_t item, const std::string& material, bool confident = true) {
-    sorter.label({100 + item, material, confident, 12.5}, now);
+    sorter.label({100 + item, material, confident, 12.5, material}, now);
   }
   std::vector<SortEvent> of(std::uint64_t item, const std::string& state) const {
     std::vector<SortEvent> out;
@@ -93,6 +93,7 @@ TEST(Sorter, AnItemIsMeasuredUnderTheCameraAndPushedAtItsOutlet) {
   EXPECT_EQ(decided[0].outlet, "cork");
   EXPECT_EQ(decided[0].reason, Reason::kSorted);
   EXPECT_EQ(decided[0].trigger_ns, 1000 * kMs);
+  EXPECT_EQ(decided[0].truth, "cork") << "a simulated item's truth passes through";
   EXPECT_EQ(decided[0].fire_ns, 2600 * kMs);
   EXPECT_NEAR(decided[0].margin_ms, 1100.0, 1e-6);
   l.run_to(3200 * kMs);

@@ -9,6 +9,7 @@
 #include <filesystem>
 
 #include "tofmat/core/table_file.hpp"
+#include "tofmat/gpio/sim_gpio.hpp"
 
 namespace tofmat::daemon {
 namespace {
@@ -58,12 +59,23 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
   options_.server.capabilities = {"labels",      "label_map",  "depth",         "device",  "status",
                                   "reset",       "set_profile", "set_roi",      "set_candidates",
                                   "load_table",  "trigger"};
+  if (options_.line.enabled())
+    options_.server.capabilities.insert(options_.server.capabilities.end(), {"sort", "line"});
   // The sockets first: a second daemon started on a live one's socket is
   // refused before it spends anything on a table or a camera (requests are
   // only handled once start() runs, after the rest is built).
   server_ = std::make_unique<Server>(options_.server, [this](const protocol::Request& r) { return handle(r); });
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
+  // --gpio sim: one simulated chip, the simulated belt's (sim:belt) and the line's.
+  std::shared_ptr<gpio::Backend> gpio_backend;
+  if (options_.line.gpio == "sim") {
+    auto chip = gpio::SimGpio::create();
+    options_.source_options.sim_gpio = chip;
+    gpio_backend = chip;
+  } else if (options_.line.enabled()) {
+    gpio_backend = make_gpio_backend(options_.line.gpio);
+  }
   source_ = make_source(options_.source, options_.source_options);
   if (options_.line.enabled()) {
     if (options_.profile.name != "sorting")
@@ -78,9 +90,7 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
       }
     };
     hooks.publish = [this](const protocol::Message& m, const std::string& stream) { server_->publish(stream, m); };
-    line_ = std::make_unique<SortingLine>(options_.line, make_gpio_backend(options_.line.gpio), table->materials(),
-                                          std::move(hooks));
-    options_.server.capabilities.insert(options_.server.capabilities.end(), {"sort", "line"});
+    line_ = std::make_unique<SortingLine>(options_.line, gpio_backend, table->materials(), std::move(hooks));
   }
   Emitter emit;
   emit.label = [this](const protocol::LabelEvent& e) {

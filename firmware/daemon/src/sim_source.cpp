@@ -1,12 +1,17 @@
 #include "tofmat/daemon/sim_source.hpp"
 
+#include <pthread.h>
+
 #include <algorithm>
 #include <chrono>
+#include <thread>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
 
+#include "tofmat/daemon/belt_sim.hpp"
 #include "tofmat/daemon/device_source.hpp"
+#include "tofmat/protocol/socket.hpp"
 #include "tofmat/sim/kinect_device.hpp"
 #include "tofmat/sim/profile_io.hpp"
 #include "tofmat/sim/renderer.hpp"
@@ -40,6 +45,43 @@ std::vector<std::string> split(const std::string& s, char sep) {
   return out;
 }
 
+// The simulated camera over a simulated belt: the belt starts with the
+// source and drives the simulated light barrier on a thread of its own for
+// as long as the source runs.
+class BeltSource : public Source {
+ public:
+  BeltSource(std::unique_ptr<Source> camera, std::shared_ptr<BeltSim> belt)
+      : camera_(std::move(camera)), belt_(std::move(belt)) {}
+  std::string describe() const override { return camera_->describe(); }
+  bool simulated() const override { return true; }
+  nlohmann::json counters() const override { return camera_->counters(); }
+  void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) override {
+    belt_->start(protocol::monotonic_ns());
+    std::atomic<bool> belt_stop{false};
+    std::thread barrier([&] {
+      ::pthread_setname_np(::pthread_self(), "tofmatd-belt");
+      try {
+        belt_->run(belt_stop);
+      } catch (const std::exception& e) {
+        callbacks.state(DeviceState::kFailed, std::string("the simulated belt stopped: ") + e.what());
+      }
+    });
+    try {
+      camera_->run(callbacks, stop);
+    } catch (...) {
+      belt_stop = true;
+      barrier.join();
+      throw;
+    }
+    belt_stop = true;
+    barrier.join();
+  }
+
+ private:
+  std::unique_ptr<Source> camera_;
+  std::shared_ptr<BeltSim> belt_;
+};
+
 }  // namespace
 
 SimSpec parse_sim_spec(const std::string& text) {
@@ -50,8 +92,8 @@ SimSpec parse_sim_spec(const std::string& text) {
     if (!parts[0].empty()) s.scene = parts[0];
     first = 1;
   }
-  if (s.scene != "sweep" && s.scene != "static" && s.scene != "regions")
-    throw std::invalid_argument("sim: unknown scene \"" + s.scene + "\" (sweep, static, regions)");
+  if (s.scene != "sweep" && s.scene != "static" && s.scene != "regions" && s.scene != "belt")
+    throw std::invalid_argument("sim: unknown scene \"" + s.scene + "\" (sweep, static, regions, belt)");
   for (std::size_t i = first; i < parts.size(); ++i) {
     const auto eq = parts[i].find('=');
     if (eq == std::string::npos) throw std::invalid_argument("sim: \"" + parts[i] + "\" is not key=value");
@@ -88,6 +130,18 @@ SimSpec parse_sim_spec(const std::string& text) {
       s.unplug_at = to_int(key, value, 0, 1 << 30);
     } else if (key == "replug_ms") {
       s.replug_ms = to_int(key, value, 0, 3600000);
+    } else if (key == "speed") {
+      s.speed_mm_s = to_number(key, value);
+    } else if (key == "rate") {
+      s.rate_per_min = to_number(key, value);
+    } else if (key == "item") {
+      s.item_mm = to_number(key, value);
+    } else if (key == "width") {
+      s.width_mm = to_number(key, value);
+    } else if (key == "camera") {
+      s.camera_mm = to_number(key, value);
+    } else if (key == "jitter") {
+      s.jitter = to_number(key, value);
     } else {
       throw std::invalid_argument("sim: unknown key \"" + key + "\"");
     }
@@ -140,8 +194,25 @@ std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions
   // One render thread: the daemon's other threads need the other core.
   auto renderer = std::make_shared<const sim::Renderer>(std::move(device), std::move(library), 1);
   const SimSpec s = spec;
-  auto kinect = std::make_shared<sim::SimulatedKinect>(
-      renderer, [s](std::uint64_t frame) { return sim_scene_at(s, frame); }, spec.realtime);
+  std::shared_ptr<BeltSim> belt;
+  if (spec.scene == "belt") {
+    BeltSpec b;
+    b.materials = spec.materials;
+    b.speed_mm_s = spec.speed_mm_s;
+    b.rate_per_min = spec.rate_per_min;
+    b.item_mm = spec.item_mm;
+    b.width_mm = spec.width_mm;
+    b.depth_mm = spec.depth_mm;
+    b.camera_mm = spec.camera_mm;
+    b.jitter = spec.jitter;
+    b.yaw_deg = spec.yaw_deg;
+    b.seed = spec.seed;
+    belt = std::make_shared<BeltSim>(b, options.sim_gpio);
+  }
+  // (The belt's frames show it as it is when they are taken: by the clock, not the frame count.)
+  sim::SimulatedKinect::SceneAt scene_at = [s](std::uint64_t frame) { return sim_scene_at(s, frame); };
+  if (belt) scene_at = [belt](std::uint64_t frame) { return belt->scene(frame, protocol::monotonic_ns()); };
+  auto kinect = std::make_shared<sim::SimulatedKinect>(renderer, scene_at, spec.realtime);
   if (spec.unplug_at >= 0) {
     sim::KinectFaults faults;
     faults.unplug_at_frame = spec.unplug_at;
@@ -162,17 +233,23 @@ std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions
     }
     return kinect->connect();
   };
-  auto truth = [kinect, s](std::uint32_t sequence) -> std::shared_ptr<const FrameTruth> {
+  auto truth = [kinect, s, belt](std::uint32_t sequence) -> std::shared_ptr<const FrameTruth> {
     auto frame = kinect->truth(sequence);
     if (!frame || frame->width != kWidth || frame->height != kHeight) return nullptr;
     auto t = std::make_shared<FrameTruth>();
-    for (const auto& target : sim_scene_at(s, sequence).targets) t->materials.push_back(target.material);
+    if (belt)
+      t->materials = belt->truth_materials(sequence);
+    else
+      for (const auto& target : sim_scene_at(s, sequence).targets) t->materials.push_back(target.material);
     t->target = frame->target;
     t->depth_mm = frame->depth_mm;
     return t;
   };
   std::string description = "simulated Kinect v2 (scene " + spec.scene + ", device " + spec.device + ")";
-  return std::make_unique<DeviceSource>(description, open, truth, std::min(options.retry_ms, 100), /*simulated=*/true);
+  auto camera =
+      std::make_unique<DeviceSource>(description, open, truth, std::min(options.retry_ms, 100), /*simulated=*/true);
+  if (!belt) return camera;
+  return std::make_unique<BeltSource>(std::move(camera), belt);
 }
 
 }  // namespace tofmat::daemon

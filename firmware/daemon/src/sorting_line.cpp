@@ -180,6 +180,7 @@ void SortingLine::label(const protocol::LabelEvent& e) {
   l.material = e.state == "final" ? e.material : "";
   l.distance = e.distance;
   l.confident = !l.material.empty() && (options_.max_distance <= 0 || e.distance <= options_.max_distance);
+  if (e.truth) l.truth = e.truth->material;
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
     if (labels_.size() < 1024) labels_.push_back(l);  // (the line thread takes them at once; a bound all the same)
@@ -214,6 +215,7 @@ void SortingLine::publish_sort(const line::SortEvent& e) {
             {"outlet", e.outlet},         {"reason", line::reason_name(e.reason)},
             {"decided_ns", e.decided_ns}, {"margin_ms", e.margin_ms}};
   if (e.fire_ns) m.meta["fire_ns"] = *e.fire_ns;  // (absent: no pusher, or the belt stands)
+  if (e.truth) m.meta["truth"] = *e.truth;        // (simulated items only)
   if (hooks_.publish) hooks_.publish(m, "sort");
 }
 

@@ -122,6 +122,7 @@ void Sorter::decide(Item& it, std::optional<std::size_t> outlet, Reason reason, 
   if (label) {
     e.material = label->material;
     e.distance = label->distance;
+    e.truth = label->truth;
   }
   e.outlet = outlet ? config_.outlets[*outlet].name : "";
   e.fire_ns = outlet ? motion_.time_at(it.start_mm + config_.outlets[*outlet].position_mm, now_ns) : std::nullopt;
@@ -137,7 +138,7 @@ void Sorter::label(const BurstLabel& l, std::uint64_t now_ns) {
   const auto it = std::find_if(items_.begin(), items_.end(),
                                [&](const Item& i) { return i.stage == Stage::kMeasuring && i.burst == l.trigger; });
   if (it == items_.end()) return;  // (its item was decided without it: late, or the camera was lost)
-  if (l.material.empty()) return reject(*it, Reason::kNoTarget, now_ns);
+  if (l.material.empty()) return decide(*it, config_.reject, Reason::kNoTarget, &l, now_ns);
   if (!l.confident) return decide(*it, config_.reject, Reason::kNotConfident, &l, now_ns);
   const auto outlet = outlet_for(l.material);
   if (!outlet) return decide(*it, config_.reject, Reason::kNoOutlet, &l, now_ns);

@@ -8,6 +8,12 @@
 //   static   one target of the first material at `depth` mm
 //   regions  up to six materials side by side at depths from `near` to
 //            `far` (a scene for the segmentation profile)
+//   belt     a conveyor carrying items of `materials` under the camera
+//            (belt_sim.hpp): speed=MM/S, rate=ITEMS/MIN, item=MM, width=MM,
+//            camera=MM (barrier to the optical axis), jitter=0..1, depth=MM
+//            (camera to the items), yaw=DEG (the items' surface askew to the
+//            camera, as tables are recorded); with tofmatd --gpio sim it
+//            drives the simulated light barrier
 // Keys: materials=a+b+c (or material=a), frames=N, gap=N, near=MM, far=MM, depth=MM, yaw=DEG,
 // size=PIXELS, realtime=0|1 (30 frames/s, default 1), seed=N,
 // device=NAME, library=NAME, unplug_at=FRAME, replug_ms=MS (the simulated
@@ -35,6 +41,8 @@ struct SimSpec {
   std::string library = "tanaka2017";
   std::int64_t unplug_at = -1;
   int replug_ms = 500;
+  // belt:
+  double speed_mm_s = 500, rate_per_min = 60, item_mm = 160, width_mm = 140, camera_mm = 300, jitter = 0.3;
 };
 
 // The text after "sim:" (may be empty). Throws std::invalid_argument.

@@ -15,6 +15,10 @@
 
 #include "tofmat/daemon/frame.hpp"
 
+namespace tofmat::gpio {
+class SimGpio;
+}
+
 namespace tofmat::daemon {
 
 // kFailed: the source stopped on an error it cannot recover from (a corrupt
@@ -54,6 +58,9 @@ class Source {
 struct SourceOptions {
   std::string sim_data_dir;  // device profiles and material libraries of the simulator ("" = not installed)
   int retry_ms = 500;        // wait between attempts to open a device that is gone
+  // The simulated chip a simulated belt (sim:belt) drives its light barrier
+  // on (tofmatd --gpio sim); null: the belt drives no GPIO.
+  std::shared_ptr<gpio::SimGpio> sim_gpio;
 };
 
 // "kinect[:SERIAL]", "sim[:SCENE[,key=value...]]", "replay:FILE[,loop=1][,pace=0]".

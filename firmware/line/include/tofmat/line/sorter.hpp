@@ -58,6 +58,7 @@ struct BurstLabel {
   std::string material;       // "" when no target was seen
   bool confident = false;
   double distance = 0;
+  std::optional<std::string> truth;  // a simulated item's real material (passed on, never used)
 };
 
 struct SortEvent {
@@ -71,6 +72,7 @@ struct SortEvent {
   std::uint64_t decided_ns = 0;
   std::optional<std::uint64_t> fire_ns;  // planned ("decided") or done ("fired"); none: no pusher / belt stopped
   double margin_ms = 0;          // fire time minus decision time (how early the label came)
+  std::optional<std::string> truth;  // a simulated item's real material, when its burst knew it
 };
 
 struct Hooks {
