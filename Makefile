@@ -26,7 +26,7 @@ CROSS    := build/aarch64
 CROSS_APT_PACKAGES := g++-aarch64-linux-gnu qemu-user zlib1g-dev:arm64 libgtest-dev:arm64 libusb-1.0-0-dev:arm64 \
                       libspdlog-dev:arm64 libopencv-imgproc-dev:arm64 libgpiod-dev:arm64 libcli11-dev nlohmann-json3-dev
 
-.PHONY: all setup setup-cross cross cross-test cross-test-all build-cpp build-python typecheck test test-cpp test-sanitize test-python fuzz demo bench clean check-db
+.PHONY: all setup setup-cross cross cross-test cross-test-all build-cpp build-python typecheck test test-cpp test-sanitize test-python fuzz demo demo-line bench clean check-db
 
 all: build
 
@@ -159,6 +159,10 @@ $(SIM_TABLE):
 
 demo: setup build-python $(SIM_TABLE)
 	$(TOFMAT) demo --table $(SIM_TABLE)
+
+# The sorting line, simulated end to end (belt, light barrier, camera, outlets) for a minute.
+demo-line: setup build-python $(SIM_TABLE)
+	$(TOFMAT) line-demo --table $(SIM_TABLE)
 
 bench: setup check-db build-python $(TABLE)
 	$(TOFMAT) bench --table $(TABLE)

@@ -220,6 +220,37 @@ def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None
         raise click.ClickException(str(e)) from e
 
 
+@main.command("line-demo")
+@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@click.option("--materials", default="acryl,copper,fabric,silicone,cork", show_default=True,
+              help="The items' materials; each gets an outlet, in this order along the belt.")  # fmt: skip
+@click.option("--seconds", default=60.0, show_default=True, type=click.FloatRange(5, 3600),
+              help="How long to run after the first item.")  # fmt: skip
+@click.option("--speed", default=500.0, show_default=True, type=click.FloatRange(50, 2000), help="Belt speed, mm/s.")
+@click.option("--rate", default=60.0, show_default=True, type=click.FloatRange(1, 600), help="Items offered a minute.")
+@click.option("--burst", default=4, show_default=True, type=click.IntRange(1, 30), help="Frames per item.")
+@click.option("--seed", default=1, show_default=True, type=click.IntRange(0, 2**30))
+@click.option("-q", "--quiet", is_flag=True, help="Only the summary, not every item.")
+@user_errors
+def line_demo(table_path: Path | None, materials: str, seconds: float, speed: float, rate: float, burst: int,
+              seed: int, quiet: bool) -> None:  # fmt: skip
+    """tofmatd sorting a simulated belt: barrier, camera, outlets; items/min, right outlet, margins."""
+    from .tools.line_demo import LineSetup, run_line, summary
+    from .tools.live_demo import ensure_sim_table
+
+    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
+    setup = LineSetup(tuple(csv_list(materials) or []), speed_mm_s=speed, rate_per_min=rate, burst=burst, seed=seed)
+    click.echo(f"starting tofmatd --source {setup.source()} --gpio sim (a simulated line, {seconds:g} s)")
+    try:
+        result = run_line(table, setup, seconds, echo=None if quiet else click.echo)
+    except RuntimeError as e:
+        raise click.ClickException(str(e)) from e
+    click.echo("")
+    for line in summary(setup, result):
+        click.echo(line)
+
+
 @main.command("bench-daemon")
 @click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Table (default: the simulated camera's own, recorded once into build/).")  # fmt: skip

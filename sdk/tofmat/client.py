@@ -37,7 +37,7 @@ from ._tofmat import (
 )
 
 DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
-STREAMS = ("labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined")
+STREAMS = ("labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined", "sort", "line")
 
 
 @dataclass(frozen=True)
@@ -111,7 +111,37 @@ class DeviceEvent:
     timestamp_ns: int
 
 
-Event = Label | LabelMap | DepthImage | DeviceEvent
+@dataclass(frozen=True)
+class SortDecision:
+    """The sorting line's decision for one item (stream "sort"): once when its outlet is chosen
+    (``state == "decided"``, ``fire_ns`` planned) and once when the pusher was driven
+    (``state == "fired"``). ``reason`` is "sorted" or why it went to reject: too_close, camera_busy,
+    camera_lost, no_target, not_confident, no_outlet, late, full."""
+
+    state: str
+    item: int
+    trigger_ns: int  # the light barrier's edge (kernel timestamp, CLOCK_MONOTONIC)
+    material: str | None
+    distance: float
+    outlet: str | None  # None: rejects ride to the belt's end
+    reason: str
+    decided_ns: int
+    fire_ns: int | None  # None: no pusher, or the belt stands
+    margin_ms: float  # fire time minus decision time
+    truth: str | None = None  # a simulated item's real material ("" when its burst saw none)
+
+
+@dataclass(frozen=True)
+class LineEvent:
+    """A fault or alarm change of the sorting line (stream "line")."""
+
+    kind: str  # alarm, late, camera, too_close, camera_busy, missed, full, burst, gpio
+    message: str
+    alarm: bool  # the alarm output's state after it
+    timestamp_ns: int
+
+
+Event = Label | LabelMap | DepthImage | DeviceEvent | SortDecision | LineEvent
 
 
 def _event(meta: dict[str, Any], blob: bytes) -> Event:
@@ -151,6 +181,22 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event:
         return DepthImage(meta["frame"], meta["timestamp_ns"], meta["kind"], meta["x0"], meta["y0"], depth)
     if name == "device":
         return DeviceEvent(meta["state"], meta["message"], meta["timestamp_ns"])
+    if name == "sort":
+        return SortDecision(
+            state=meta["state"],
+            item=meta["item"],
+            trigger_ns=meta["trigger_ns"],
+            material=meta["material"] or None,
+            distance=meta["distance"],
+            outlet=meta["outlet"] or None,
+            reason=meta["reason"],
+            decided_ns=meta["decided_ns"],
+            fire_ns=meta.get("fire_ns"),
+            margin_ms=meta["margin_ms"],
+            truth=meta.get("truth"),
+        )
+    if name == "line":
+        return LineEvent(meta["kind"], meta["message"], bool(meta["alarm"]), meta["timestamp_ns"])
     raise ProtocolError(f"unknown event {name!r} from tofmatd")
 
 
@@ -356,6 +402,8 @@ __all__ = [
     "NotPermittedError",
     "DepthImage",
     "DeviceEvent",
+    "SortDecision",
+    "LineEvent",
     "Event",
     "Label",
     "LabelMap",

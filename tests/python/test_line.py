@@ -1,0 +1,119 @@
+"""The sorting line end to end on the simulated belt (issue 17): tofmatd --gpio sim with
+--source sim:belt, watched through the Python client's `sort` and `line` streams.
+
+The belt drives the simulated light barrier at the moments its items cross it and the camera
+renders them where they are; tofmatd's line starts each item's burst, picks its outlet and drives
+the pusher. These check what a line's operator relies on: every item is decided once and pushed
+once, at the planned moment, to its own material's outlet or to reject, never silently merged or
+lost, and the figures agree with the daemon's own counts.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from collections import Counter
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+import tofmat
+from tofmat.client import daemon_binary, sim_data_dir
+from tofmat.tools.line_demo import LineResult, LineSetup, run_line
+
+from conftest import Daemon
+
+
+MATERIALS = ("acryl", "copper", "silicone")  # (told apart at one depth: tofmat.tools.line_demo.LineSetup)
+
+
+@pytest.fixture(scope="module")
+def line_table(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The simulated camera's own table of the line's materials (tofmat sim table)."""
+    from tofmat.sim import Renderer, load_device, load_library
+    from tofmat.sim.table import database_bins, simulated_table
+
+    path = tmp_path_factory.mktemp("linetable") / "line.tmx"
+    simulated_table(Renderer(load_device(), load_library(), 1), list(MATERIALS), database_bins()).save(str(path))
+    return path
+
+
+@pytest.fixture(scope="module")
+def line_run(line_table: Path) -> tuple[LineSetup, LineResult]:
+    setup = LineSetup(MATERIALS, speed_mm_s=500.0, rate_per_min=90.0, burst=4, seed=3)
+    return setup, run_line(line_table, setup, seconds=12.0)
+
+
+def test_every_item_is_decided_once_and_pushed_once_on_time(line_run: tuple[LineSetup, LineResult]) -> None:
+    setup, r = line_run
+    assert r.items >= 12, f"only {r.items} items in 12 s at 90/min"
+    items = [d.item for d in r.decided]
+    assert items == sorted(set(items)), "an item decided twice, or out of order"
+    assert items == list(range(items[0], items[0] + len(items))), "an item number skipped (lost or merged)"
+    fired = Counter(f.item for f in r.fired)
+    assert max(fired.values()) == 1, "a pusher driven twice for one item"
+    # Every decided item reaches its pusher (but the last few, still on the belt at the end).
+    assert len(fired) >= len(items) - 4
+    late = r.fire_error_ms()
+    assert late.size >= 8
+    assert late.min() >= -0.01, f"a pusher fired {-late.min():.2f} ms early"
+    assert np.percentile(late, 50) < 5.0 and late.max() < 50.0, f"pushers late: {np.percentile(late, [50, 100])} ms"
+
+
+def test_items_go_to_their_own_outlet_or_to_reject(line_run: tuple[LineSetup, LineResult]) -> None:
+    setup, r = line_run
+    outlets = {name for name, _ in setup.outlets()}
+    for d in r.decided:
+        assert d.outlet in outlets, d
+        if d.reason == "sorted":
+            assert d.outlet == d.material, "sorted to another material's outlet than its label's"
+        else:
+            assert d.outlet == "reject", d
+    right = r.right_fraction()
+    assert right >= 0.8, f"only {right:.0%} to the right outlet: {r.reasons()}"
+    assert r.wrong() <= 1, "items sorted to a wrong material's outlet"
+    margins = r.margins_ms()
+    assert margins.min() >= 20.0, "a sorted item's decision came under the margin"
+
+
+def test_the_daemons_counts_agree(line_run: tuple[LineSetup, LineResult]) -> None:
+    _, r = line_run
+    line = r.status["line"]
+    assert line["gpio"] == "sim"
+    assert line["items"] >= r.items
+    decided = line["sorted"] + line["rejected"]
+    assert decided <= line["items"] <= decided + line["on_belt"], "an item neither decided nor on the belt"
+    assert line["sorted"] >= sum(1 for d in r.decided if d.reason == "sorted")
+    assert line["barrier_glitches"] == 0 and line["barrier_bounces"] == 0
+
+
+def test_a_clients_trigger_is_refused_while_the_barrier_triggers(start: Callable[..., Daemon], line_table: Path) -> None:
+    setup = LineSetup(MATERIALS)
+    d = start(setup.source(), "--profile", "sorting", *setup.daemon_args(), table=line_table)
+    with d.client() as c:
+        assert "sort" in c.hello["capabilities"]
+        with pytest.raises(tofmat.CommandError, match="light barrier triggers"):
+            c.trigger()
+        c.subscribe("sort", "line")
+
+
+def test_the_line_refuses_what_cannot_work(tmp_path: Path, line_table: Path) -> None:
+    setup = LineSetup(MATERIALS)
+    base = [str(daemon_binary()), "--source", setup.source(), "--table", str(line_table), "--socket",
+            str(tmp_path / "s"), "--sim-data", str(sim_data_dir())]  # fmt: skip
+    args = setup.daemon_args()
+    teak = [a.replace("materials=copper", "materials=teak") for a in args]
+    chip_number = [a.replace("sim:barrier", "gpiochip0:17") for a in args]
+    for extra, says in ((args, "needs --profile sorting"), (["--profile", "sorting", *teak], "teak"),
+                        (["--profile", "sorting", *chip_number], "chip number"),
+                        (["--profile", "sorting", "--line-speed", "500"], "need --gpio")):  # fmt: skip
+        p = subprocess.run(base + extra, capture_output=True, text=True, timeout=60)
+        assert p.returncode != 0 and says in p.stderr + p.stdout, (extra, p.stderr)
+    # The board's backend where there is no GPIO: a clear failure naming the line.
+    real = [a.replace("sim:", "pinctrl-rp1:") if a.startswith("sim:") or "line=sim:" in a else a for a in args]
+    real = [a.replace("line=sim:", "line=pinctrl-rp1:") for a in real]
+    real[real.index("sim")] = "libgpiod"
+    p = subprocess.run(base + ["--profile", "sorting", *real], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 1
+    assert "pinctrl-rp1:barrier" in p.stderr and ("no GPIO chip" in p.stderr or "no chip labelled" in p.stderr)
