@@ -2,7 +2,8 @@
 
 The core (``import tofmat``, the client, tables, the classifier and their commands) needs numpy and
 click only. The simulator's calibration and evaluation need ``tofmat[sim]`` (scipy, matplotlib for
-their figures), the plots ``tofmat[plot]`` (matplotlib); ``tofmat[all]`` is both. Code that uses an
+their figures), the plots ``tofmat[plot]`` (matplotlib), the box's I2C peripherals on a real bus and
+the front panel's text ``tofmat[hw]`` (smbus2, Pillow); ``tofmat[all]`` is all three. Code that uses an
 optional package imports it inside the function that needs it, after :func:`require`::
 
     require("scipy", extra="sim", feature="tofmat sim calibrate")

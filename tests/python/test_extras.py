@@ -1,11 +1,13 @@
 """The SDK's dependency split: the core (numpy, click) works without the optional extras.
 
 `pip install ./sdk` installs numpy and click only; scipy and matplotlib come with the `sim`, `plot`
-and `all` extras (sdk/pyproject.toml). Here a subprocess blocks scipy and matplotlib (a meta path
-finder installed before tofmat is imported, which also logs every attempt to import them) and runs
-what the board runs: `import tofmat`, the classifier on the real database, the client against a live
-tofmatd, and the `tofmat` command's table, classify, watch, status, record and devices. Nothing there
-may even try to import an extra. What does need one exits 1 with one line naming the extra to install.
+and `all` extras, smbus2 and Pillow with `hw` and `all` (sdk/pyproject.toml). Here a subprocess
+blocks all four (a meta path finder installed before tofmat is imported, which also logs every
+attempt to import them) and runs what the board runs: `import tofmat`, the classifier on the real
+database, the client against a live tofmatd, the `tofmat` command's table, classify, watch, status,
+record and devices, and the tofmat.hw drivers on their simulated chips. Nothing there may even try
+to import an extra. What does need one exits 1 with one line (or raises MissingExtraError) naming
+the extra to install.
 """
 
 from __future__ import annotations
@@ -31,12 +33,14 @@ from tofmat._extras import MissingExtraError, require
 
 REPO = Path(__file__).resolve().parents[2]
 SDK = REPO / "sdk"
-BLOCKED = ("scipy", "matplotlib")
+BLOCKED = ("scipy", "matplotlib", "smbus2", "PIL")  # import names
 CORE = ["numpy", "click"]  # the decided core dependencies (by name)
-EXTRAS = {"sim": {"scipy", "matplotlib"}, "plot": {"matplotlib"}, "all": {"scipy", "matplotlib"}}
+EXTRAS = {"sim": {"scipy", "matplotlib"}, "plot": {"matplotlib"}, "hw": {"smbus2", "pillow"},
+          "all": {"scipy", "matplotlib", "smbus2", "pillow"}}  # fmt: skip
+DISTRIBUTION = {"PIL": "pillow"}  # import name -> the name pip installs it by, where they differ
 
-# Runs first in every subprocess: importing scipy or matplotlib (or a submodule) fails as if they
-# were not installed, and each attempt is appended to the file named by $TOFMAT_TEST_IMPORT_LOG.
+# Runs first in every subprocess: importing a blocked package (or a submodule) fails as if it were
+# not installed, and each attempt is appended to the file named by $TOFMAT_TEST_IMPORT_LOG.
 BLOCKER = textwrap.dedent(
     f"""
     import importlib.abc, os, sys
@@ -60,7 +64,7 @@ RUN_CLI = "import runpy; runpy.run_module('tofmat', run_name='__main__', alter_s
 
 
 class Blocked:
-    """Runs Python code or the `tofmat` command in a subprocess without scipy and matplotlib."""
+    """Runs Python code or the `tofmat` command in a subprocess without the extras' packages."""
 
     def __init__(self, workdir: Path) -> None:
         self.workdir = workdir
@@ -162,7 +166,9 @@ def test_every_module_imports_without_the_extras(blocked: Blocked) -> None:
     ))  # fmt: skip
     imported = p.stdout.split()
     for name in ("tofmat.cli", "tofmat.client", "tofmat.tools.plot", "tofmat.sim.plots", "tofmat.sim.calibrate",
-                 "tofmat.sim.model_np", "tofmat.sim.evaluate", "tofmat.sim.cli"):  # fmt: skip
+                 "tofmat.sim.model_np", "tofmat.sim.evaluate", "tofmat.sim.cli", "tofmat.hw", "tofmat.hw.bus",
+                 "tofmat.hw.pca9685", "tofmat.hw.ssd1306", "tofmat.hw.fake_pca9685",
+                 "tofmat.hw.fake_ssd1306"):  # fmt: skip
         assert name in imported
     assert blocked.attempts() == []
 
@@ -305,6 +311,50 @@ def test_library_functions_raise_missing_extra_error(blocked: Blocked, core_tmx:
     assert blocked.attempts() == ["matplotlib", "scipy"]
 
 
+def test_hw_needs_its_extra_only_for_a_real_bus_and_pictures(blocked: Blocked) -> None:
+    """The drivers run on the simulated chips with numpy alone; a real bus needs smbus2, text and
+    PNGs need Pillow, and each says to install tofmat[hw]."""
+    ok(blocked.python(
+        """
+        import numpy as np
+        import tofmat
+        from tofmat.hw import PCA9685, SSD1306, FakePCA9685Bus, FakeSSD1306Bus, Servo, open_bus, render_text
+
+        pca_bus = FakePCA9685Bus()
+        pca = PCA9685(pca_bus)
+        pca.set_frequency(50)
+        Servo(pca, 0).move_to(0)
+        assert pca_bus.counts(0)[1] == 205 and pca_bus.errors == []
+        oled_bus = FakeSSD1306Bus()
+        panel = SSD1306(oled_bus)
+        panel.init()
+        panel.show(np.eye(64, 128, dtype=bool))
+        assert (oled_bus.frame() == np.eye(64, 128, dtype=bool)).all()
+        for call, module in ((lambda: open_bus(1), "smbus2"), (lambda: render_text(["cork 0.93"]), "PIL"),
+                             (lambda: oled_bus.save_png("never.png"), "PIL")):
+            try:
+                call()
+                raise SystemExit(f"no MissingExtraError without {module}")
+            except tofmat.MissingExtraError as e:
+                assert (e.module, e.extra) == (module, "hw"), (e.module, e.extra)
+                print(e)
+        """
+    ))  # fmt: skip
+    assert blocked.attempts() == ["smbus2", "PIL", "PIL"]
+    assert not (blocked.workdir / "never.png").exists()
+    p = ok(blocked.python(
+        """
+        from tofmat.hw import open_bus
+        try:
+            open_bus(1)
+        except ImportError as e:
+            print(e)
+        """
+    ))  # fmt: skip
+    assert p.stdout.strip() == "tofmat.hw.open_bus (a real I2C bus) needs smbus2: pip install 'tofmat[hw]'"
+    assert blocked.attempts() == ["smbus2"]
+
+
 def test_require_imports_or_names_the_extra(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert require("json.decoder", extra="sim", feature="x").__name__ == "json.decoder"
     with pytest.raises(MissingExtraError) as e:
@@ -334,7 +384,7 @@ def test_pyproject_core_and_extras() -> None:
     assert [requirement_name(r) for r in project["dependencies"]] == CORE
     extras = {k: {requirement_name(r) for r in v} for k, v in project["optional-dependencies"].items()}
     assert extras == EXTRAS
-    assert extras["all"] == extras["sim"] | extras["plot"]
+    assert extras["all"] == extras["sim"] | extras["plot"] | extras["hw"]
     # The pinned dev/test set (make setup) still installs everything, extras included.
     pinned = {requirement_name(ln) for ln in (SDK / "requirements.txt").read_text().splitlines() if ln.strip()
               and not ln.startswith("#")}  # fmt: skip
@@ -366,6 +416,8 @@ def test_every_require_names_an_extra_that_installs_the_module() -> None:
                 continue
             extra, where = kw["extra"], f"{path}:{node.lineno}"
             assert isinstance(extra, ast.Constant), f"{where}: extra must be a literal"
-            assert module in extras.get(str(extra.value), set()), f"{where}: {module} is not in [{extra.value}]"
+            dist = DISTRIBUTION.get(module, module).lower()
+            assert dist in extras.get(str(extra.value), set()), f"{where}: {dist} is not in [{extra.value}]"
             seen.append((path.name, module))
-    assert {("cli.py", "matplotlib"), ("calibrate.py", "scipy"), ("plot.py", "matplotlib")} <= set(seen)
+    assert {("cli.py", "matplotlib"), ("calibrate.py", "scipy"), ("plot.py", "matplotlib"), ("bus.py", "smbus2"),
+            ("ssd1306.py", "PIL"), ("fake_ssd1306.py", "PIL")} <= set(seen)  # fmt: skip
