@@ -287,6 +287,38 @@ def _connect(address: str, token_file: Path | None) -> Any:
         raise click.ClickException(str(e)) from e
 
 
+@main.command("sort")
+@_client_options
+@click.option("--gate", "gates", multiple=True, required=True,
+              help="An outlet's gate: OUTLET:channel=N[,open=DEG][,closed=DEG][,travel=MS][,hold=MS] (repeat).")  # fmt: skip
+@click.option("--bus", help="I2C bus of the PCA9685 (number or /dev path).")
+@click.option("--pca-address", default="0x40", show_default=True, help="The PCA9685's I2C address.")
+@click.option("--simulated", is_flag=True, help="Drive a simulated PCA9685 instead of a real bus.")
+@click.option("--seconds", type=click.FloatRange(0.1, None), help="Stop after this long (default: run until stopped).")
+@user_errors
+def sort_cmd(address: str, token_file: Path | None, gates: tuple[str, ...], bus: str | None, pca_address: str,
+             simulated: bool, seconds: float | None) -> None:  # fmt: skip
+    """The diverter agent: moves each outlet's gate (a servo on a PCA9685) for tofmatd's sort decisions."""
+    from .hw import PCA9685, FakePCA9685Bus, Servo, open_bus
+    from .line import parse_gate
+    from .tools.sort_agent import run_sort_agent
+
+    if simulated == (bus is not None):
+        raise click.UsageError("give --bus N (the PCA9685's I2C bus) or --simulated")
+    try:
+        parsed = [parse_gate(g) for g in gates]
+        addr = int(pca_address, 0)
+    except ValueError as e:
+        raise click.BadParameter(str(e)) from e
+    i2c = FakePCA9685Bus(addr) if simulated else open_bus(int(bus) if bus and bus.isdigit() else str(bus))
+    pca = PCA9685(i2c, addr)
+    pca.set_frequency(50)
+    servos = {g.outlet: Servo(pca, g.channel) for g in parsed}
+    with _connect(address, token_file) as client:
+        r = run_sort_agent(client, servos, parsed, seconds, echo=click.echo)
+    click.echo(f"{r.decisions} decisions, {len(r.moves)} gate moves, {len(r.late)} too late to open in time")
+
+
 @main.command()
 @_client_options
 @click.option("--top", default=3, show_default=True, help="Ranking entries shown.")

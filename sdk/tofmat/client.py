@@ -332,6 +332,19 @@ class Client:
         else:
             self._streams.clear()
 
+    def next_event(self, timeout: float) -> Event | None:
+        """The next event of the subscribed streams, or None if none comes within ``timeout``
+        seconds: for a program that also keeps a schedule of its own (tofmat sort)."""
+        while True:
+            try:
+                item = self._connection().next_event(max(0.0, timeout))
+            except ConnectionClosedError:
+                if not self._reconnect or self._conn is None:
+                    raise
+                self._reopen()
+                continue
+            return None if item is None else _event(*item)
+
     def events(self, timeout: float | None = None) -> Iterator[Event]:
         """Events of the subscribed streams, in order. Raises DaemonTimeoutError when none comes
         within ``timeout`` seconds (None: wait forever)."""
