@@ -1,7 +1,9 @@
 // libFuzzer target: tofmatd's configuration file (--config FILE, CLI11's
 // TOML/INI reader behind parse_command_line). Each input is written to a
 // file and parsed as the daemon would at start: any input ends in options or
-// a usage error, never a crash, a hang or unbounded memory.
+// a usage error, never a crash, a hang or unbounded memory. The sorting
+// line's values are parsed further at start (outlets, GPIO line names,
+// bias): those parsers take what the file gave them here too.
 #include <unistd.h>
 
 #include <cstdint>
@@ -10,6 +12,8 @@
 #include <string>
 
 #include "tofmat/daemon/options.hpp"
+#include "tofmat/daemon/sorting_line.hpp"
+#include "tofmat/gpio/gpio.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static const std::string path = "/tmp/tofmat_fuzz_config_" + std::to_string(::getpid()) + ".toml";
@@ -28,5 +32,23 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   int exit_code = 0;
   const auto cl = tofmat::daemon::parse_command_line(3, argv, exit_code);
   if (!cl && exit_code != 0 && exit_code != 2) __builtin_trap();  // only options, --help/--version or a usage error
+  if (!cl) return 0;
+  const auto& line = cl->daemon.line;
+  for (const auto& text : line.outlets) {
+    try {
+      tofmat::daemon::parse_outlet(text);
+    } catch (const std::invalid_argument&) {
+    }
+  }
+  for (const auto* text : {&line.barrier, &line.encoder_a, &line.encoder_b, &line.alarm}) {
+    try {
+      tofmat::gpio::LineSpec::parse(*text);
+    } catch (const std::invalid_argument&) {
+    }
+  }
+  try {
+    tofmat::gpio::parse_bias(line.barrier_bias);
+  } catch (const std::invalid_argument&) {
+  }
   return 0;
 }

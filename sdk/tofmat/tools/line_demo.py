@@ -21,7 +21,7 @@ from typing import Callable
 import numpy as np
 
 from ..client import LineEvent, SortDecision
-from .live_demo import connect, start_daemon, stop_daemon
+from .live_demo import connect, start_daemon, stop_daemon_or_raise
 
 FRAME_S = 1.0 / 30.0
 
@@ -152,10 +152,7 @@ def run_line(table: Path, setup: LineSetup, seconds: float, echo: Callable[[str]
                 result.seconds = seconds
                 result.status = client.status()
         finally:
-            code = stop_daemon(daemon)
-            if code != 0:
-                say(log.read_text(errors="replace")[-2000:])
-                raise RuntimeError(f"tofmatd stopped with status {code} (log above)")
+            stop_daemon_or_raise(daemon, log, say)
     return result
 
 

@@ -57,6 +57,14 @@ def connect(socket: Path, daemon: subprocess.Popen[bytes], timeout_s: float = 30
             time.sleep(0.1)
 
 
+def stop_daemon_or_raise(daemon: subprocess.Popen[bytes], log: Path, echo: Callable[[str], None]) -> None:
+    """Stops the daemon; if it did not stop cleanly, shows the end of its log and raises RuntimeError."""
+    code = stop_daemon(daemon)
+    if code != 0:
+        echo(log.read_text(errors="replace")[-2000:])
+        raise RuntimeError(f"tofmatd stopped with status {code} (log above)")
+
+
 def stop_daemon(daemon: subprocess.Popen[bytes]) -> int:
     if daemon.poll() is None:
         daemon.send_signal(signal.SIGTERM)
@@ -117,10 +125,7 @@ def run_live_demo(
                         shown = label.material or ""
                 result.status = client.status()
         finally:
-            code = stop_daemon(daemon)
-            if code != 0:
-                echo(log.read_text(errors="replace")[-2000:])
-                raise RuntimeError(f"tofmatd stopped with status {code} (log above)")
+            stop_daemon_or_raise(daemon, log, echo)
     lat = np.array(result.latencies_ms) if result.latencies_ms else np.zeros(1)
     s = result.status
     echo("")
