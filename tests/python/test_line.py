@@ -88,6 +88,21 @@ def test_the_daemons_counts_agree(line_run: tuple[LineSetup, LineResult]) -> Non
     assert line["barrier_glitches"] == 0 and line["barrier_bounces"] == 0
 
 
+def test_the_camera_lost_mid_run_sends_items_to_reject_until_it_is_back(line_table: Path) -> None:
+    # The simulated camera is unplugged 5 s in (frame 150) and plugged back 2.5 s later.
+    setup = LineSetup(MATERIALS, rate_per_min=90.0, seed=4, source_extra="unplug_at=150,replug_ms=2500")
+    r = run_line(line_table, setup, seconds=14.0)
+    reasons = [d.reason for d in r.decided]
+    assert "camera_lost" in reasons, reasons
+    first_lost = reasons.index("camera_lost")
+    assert "sorted" in reasons[:first_lost], "nothing sorted before the camera went"
+    assert "sorted" in reasons[first_lost:], "nothing sorted after the camera came back"
+    assert any(f.kind == "camera" for f in r.faults)
+    assert r.wrong() == 0
+    assert r.status["line"]["alarm"] is False, "the alarm stayed on after the camera came back"
+    assert r.status["device"]["state"] == "streaming"
+
+
 def test_a_clients_trigger_is_refused_while_the_barrier_triggers(start: Callable[..., Daemon], line_table: Path) -> None:
     setup = LineSetup(MATERIALS)
     d = start(setup.source(), "--profile", "sorting", *setup.daemon_args(), table=line_table)

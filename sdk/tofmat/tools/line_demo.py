@@ -51,6 +51,7 @@ class LineSetup:
     jitter: float = 0.3
     seed: int = 1
     max_distance: float = 50.0  # mm^2: a label further than this from its material goes to reject
+    source_extra: str = ""  # more sim keys, e.g. "unplug_at=150,replug_ms=2000" (the camera lost a while)
 
     def outlets(self) -> list[tuple[str, float]]:
         """(name, position) of each material's outlet, then the reject outlet's."""
@@ -66,7 +67,7 @@ class LineSetup:
     def source(self) -> str:
         return (f"sim:belt,materials={'+'.join(self.materials)},speed={self.speed_mm_s:g},rate={self.rate_per_min:g},"
                 f"item={self.item_mm:g},width={self.width_mm:g},depth={self.depth_mm:g},camera={self.camera_mm:g},"
-                f"jitter={self.jitter:g},seed={self.seed}")  # fmt: skip
+                f"jitter={self.jitter:g},seed={self.seed}{',' + self.source_extra if self.source_extra else ''}")  # fmt: skip
 
     def daemon_args(self) -> list[str]:
         args = ["--burst", str(self.burst), "--candidates", ",".join(self.materials), "--gpio", "sim",
