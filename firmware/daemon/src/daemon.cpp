@@ -67,15 +67,9 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
   server_ = std::make_unique<Server>(options_.server, [this](const protocol::Request& r) { return handle(r); });
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
-  // --gpio sim: one simulated chip, the simulated belt's (sim:belt) and the line's.
-  std::shared_ptr<gpio::Backend> gpio_backend;
-  if (options_.line.gpio == "sim") {
-    auto chip = gpio::SimGpio::create();
-    options_.source_options.sim_gpio = chip;
-    gpio_backend = chip;
-  } else if (options_.line.enabled()) {
-    gpio_backend = make_gpio_backend(options_.line.gpio);
-  }
+  // --gpio sim: one simulated chip, the line's and the simulated belt's (sim:belt drives its barrier).
+  const auto gpio_backend = options_.line.enabled() ? make_gpio_backend(options_.line.gpio) : nullptr;
+  options_.source_options.sim_gpio = std::dynamic_pointer_cast<gpio::SimGpio>(gpio_backend);
   source_ = make_source(options_.source, options_.source_options);
   if (options_.line.enabled()) {
     if (options_.profile.name != "sorting")

@@ -4,11 +4,11 @@
 
 #include <algorithm>
 #include <chrono>
-#include <thread>
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
+#include <thread>
 
+#include "spec_text.hpp"
 #include "tofmat/daemon/belt_sim.hpp"
 #include "tofmat/daemon/device_source.hpp"
 #include "tofmat/protocol/socket.hpp"
@@ -20,12 +20,7 @@ namespace tofmat::daemon {
 namespace {
 
 double to_number(const std::string& key, const std::string& value) {
-  try {
-    std::size_t used = 0;
-    const double v = std::stod(value, &used);
-    if (used == value.size() && std::isfinite(v)) return v;
-  } catch (const std::exception&) {
-  }
+  if (const auto v = whole_number(value)) return *v;
   throw std::invalid_argument("sim: " + key + "=" + value + " is not a number");
 }
 
@@ -35,14 +30,6 @@ int to_int(const std::string& key, const std::string& value, int lo, int hi) {
     throw std::invalid_argument("sim: " + key + " must be an integer in [" + std::to_string(lo) + ", " +
                                 std::to_string(hi) + "], got " + value);
   return static_cast<int>(v);
-}
-
-std::vector<std::string> split(const std::string& s, char sep) {
-  std::vector<std::string> out;
-  std::stringstream in(s);
-  std::string part;
-  while (std::getline(in, part, sep)) out.push_back(part);
-  return out;
 }
 
 // The simulated camera over a simulated belt: the belt starts with the
@@ -131,17 +118,17 @@ SimSpec parse_sim_spec(const std::string& text) {
     } else if (key == "replug_ms") {
       s.replug_ms = to_int(key, value, 0, 3600000);
     } else if (key == "speed") {
-      s.speed_mm_s = to_number(key, value);
+      s.belt.speed_mm_s = to_number(key, value);
     } else if (key == "rate") {
-      s.rate_per_min = to_number(key, value);
+      s.belt.rate_per_min = to_number(key, value);
     } else if (key == "item") {
-      s.item_mm = to_number(key, value);
+      s.belt.item_mm = to_number(key, value);
     } else if (key == "width") {
-      s.width_mm = to_number(key, value);
+      s.belt.width_mm = to_number(key, value);
     } else if (key == "camera") {
-      s.camera_mm = to_number(key, value);
+      s.belt.camera_mm = to_number(key, value);
     } else if (key == "jitter") {
-      s.jitter = to_number(key, value);
+      s.belt.jitter = to_number(key, value);
     } else {
       throw std::invalid_argument("sim: unknown key \"" + key + "\"");
     }
@@ -196,15 +183,10 @@ std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions
   const SimSpec s = spec;
   std::shared_ptr<BeltSim> belt;
   if (spec.scene == "belt") {
-    BeltSpec b;
+    // (The keys every scene has: the belt's own are parsed into spec.belt.)
+    BeltSpec b = spec.belt;
     b.materials = spec.materials;
-    b.speed_mm_s = spec.speed_mm_s;
-    b.rate_per_min = spec.rate_per_min;
-    b.item_mm = spec.item_mm;
-    b.width_mm = spec.width_mm;
     b.depth_mm = spec.depth_mm;
-    b.camera_mm = spec.camera_mm;
-    b.jitter = spec.jitter;
     b.yaw_deg = spec.yaw_deg;
     b.seed = spec.seed;
     belt = std::make_shared<BeltSim>(b, options.sim_gpio);

@@ -6,29 +6,20 @@
 
 #include <spdlog/spdlog.h>
 
-#include <cstring>
-
-#include "tofmat/gpio/sim_gpio.hpp"
-
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <set>
-#include <sstream>
+
+#include "spec_text.hpp"
+#include "tofmat/gpio/sim_gpio.hpp"
 
 namespace tofmat::daemon {
 namespace {
 
 double number(const std::string& key, const std::string& value, const std::string& outlet) {
-  std::size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(value, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != value.size() || !std::isfinite(v))
-    throw std::invalid_argument("outlet \"" + outlet + "\": " + key + " \"" + value + "\" is not a number");
-  return v;
+  if (const auto v = whole_number(value)) return *v;
+  throw std::invalid_argument("outlet \"" + outlet + "\": " + key + " \"" + value + "\" is not a number");
 }
 
 std::uint64_t ms_to_ns(double ms) { return static_cast<std::uint64_t>(std::llround(ms * 1e6)); }
@@ -49,9 +40,7 @@ OutletOptions parse_outlet(const std::string& text) {
   OutletOptions o;
   o.outlet.name = text.substr(0, colon);
   bool has_position = false, has_line = false;
-  std::stringstream parts(text.substr(colon + 1));
-  std::string part;
-  while (std::getline(parts, part, ',')) {
+  for (const auto& part : split(text.substr(colon + 1), ',')) {
     const auto eq = part.find('=');
     if (eq == std::string::npos)
       throw std::invalid_argument("outlet \"" + o.outlet.name + "\": \"" + part + "\" is not key=value");
@@ -63,9 +52,7 @@ OutletOptions parse_outlet(const std::string& text) {
       o.line = gpio::LineSpec::parse(value);
       has_line = true;
     } else if (key == "materials") {
-      std::stringstream m(value);
-      std::string name;
-      while (std::getline(m, name, '+'))
+      for (const auto& name : split(value, '+'))
         if (!name.empty()) o.outlet.materials.push_back(name);
     } else if (key == "pulse") {
       const double ms = number(key, value, o.outlet.name);
@@ -241,10 +228,10 @@ void SortingLine::run(const std::atomic<bool>& stop) {
   };
   std::vector<gpio::EdgeEvent> got;
   std::vector<Edge> edges;
+  std::vector<pollfd> fds{{wake_fd_.get(), POLLIN, 0}, {barrier_->fd(), POLLIN, 0}};
+  if (enc_a_) fds.push_back({enc_a_->fd(), POLLIN, 0});
+  if (enc_b_) fds.push_back({enc_b_->fd(), POLLIN, 0});
   while (!stop.load()) {
-    std::vector<pollfd> fds{{wake_fd_.get(), POLLIN, 0}, {barrier_->fd(), POLLIN, 0}};
-    if (enc_a_) fds.push_back({enc_a_->fd(), POLLIN, 0});
-    if (enc_b_) fds.push_back({enc_b_->fd(), POLLIN, 0});
     std::uint64_t now = protocol::monotonic_ns();
     // Wake for the schedule's next step (to the nanosecond: ppoll), and at
     // least every 200 ms (status, stop).
@@ -283,27 +270,29 @@ void SortingLine::run(const std::atomic<bool>& stop) {
     if (const auto item = filter_.advance(now)) sorter_->item(*item, now);
     handle_inbox(now);
     sorter_->poll(now);
-    const auto& c = sorter_->counts();
-    nlohmann::json s = {{"gpio", backend_->name()},
-                        {"items", c.items},
-                        {"sorted", c.sorted},
-                        {"rejected", c.rejected},
-                        {"late", c.late},
-                        {"faults", c.faults},
-                        {"on_belt", sorter_->on_belt()},
-                        {"alarm", sorter_->alarm_on()},
-                        {"speed_mm_s", motion_->speed_mm_s(now)},
-                        {"barrier_glitches", filter_.glitches()},
-                        {"barrier_bounces", filter_.bounces()}};
-    if (encoder_) s["encoder_errors"] = encoder_->quadrature().errors();
+    // (What status() reports, copied here; the JSON is built when asked for.)
     std::lock_guard<std::mutex> lock(status_mutex_);
-    status_ = std::move(s);
+    snapshot_ = {sorter_->counts(), sorter_->on_belt(), sorter_->alarm_on(), motion_->speed_mm_s(now),
+                 filter_.glitches(), filter_.bounces(), encoder_ ? encoder_->quadrature().errors() : 0};
   }
 }
 
 nlohmann::json SortingLine::status() const {
   std::lock_guard<std::mutex> lock(status_mutex_);
-  return status_.is_null() ? nlohmann::json{{"gpio", backend_->name()}} : status_;
+  const Snapshot& n = snapshot_;
+  nlohmann::json s = {{"gpio", backend_->name()},
+                      {"items", n.counts.items},
+                      {"sorted", n.counts.sorted},
+                      {"rejected", n.counts.rejected},
+                      {"late", n.counts.late},
+                      {"faults", n.counts.faults},
+                      {"on_belt", n.on_belt},
+                      {"alarm", n.alarm},
+                      {"speed_mm_s", n.speed_mm_s},
+                      {"barrier_glitches", n.glitches},
+                      {"barrier_bounces", n.bounces}};
+  if (encoder_) s["encoder_errors"] = n.encoder_errors;
+  return s;
 }
 
 }  // namespace tofmat::daemon

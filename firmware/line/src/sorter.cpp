@@ -134,6 +134,14 @@ void Sorter::decide(Item& it, std::optional<std::size_t> outlet, Reason reason, 
   if (hooks_.event) hooks_.event(e);
 }
 
+void Sorter::late(Item& it, const std::string& why, const BurstLabel* label, std::uint64_t now_ns) {
+  ++counts_.late;
+  late_until_ns_ = now_ns + config_.alarm_hold_ns;
+  fault("late", "item " + std::to_string(it.number) + ": " + why + ": rejected");
+  set_alarm(now_ns);
+  decide(it, config_.reject, Reason::kLate, label, now_ns);
+}
+
 void Sorter::label(const BurstLabel& l, std::uint64_t now_ns) {
   const auto it = std::find_if(items_.begin(), items_.end(),
                                [&](const Item& i) { return i.stage == Stage::kMeasuring && i.burst == l.trigger; });
@@ -143,16 +151,10 @@ void Sorter::label(const BurstLabel& l, std::uint64_t now_ns) {
   const auto outlet = outlet_for(l.material);
   if (!outlet) return decide(*it, config_.reject, Reason::kNoOutlet, &l, now_ns);
   const auto fire = motion_.time_at(it->start_mm + config_.outlets[*outlet].position_mm, now_ns);
-  if (fire && *fire < now_ns + config_.decision_margin_ns) {
-    ++counts_.late;
-    late_until_ns_ = now_ns + config_.alarm_hold_ns;
-    fault("late", "item " + std::to_string(it->number) + ": its label came " +
-                      std::to_string((static_cast<std::int64_t>(now_ns) - static_cast<std::int64_t>(*fire)) / 1'000'000 +
-                                     static_cast<std::int64_t>(config_.decision_margin_ns / 1'000'000)) +
-                      " ms too late for outlet \"" + config_.outlets[*outlet].name + "\": rejected");
-    set_alarm(now_ns);
-    return decide(*it, config_.reject, Reason::kLate, &l, now_ns);
-  }
+  if (fire && *fire < now_ns + config_.decision_margin_ns)
+    return late(*it, "its label came " + std::to_string((now_ns + config_.decision_margin_ns - *fire) / 1'000'000) +
+                         " ms too late for outlet \"" + config_.outlets[*outlet].name + "\"",
+                &l, now_ns);
   decide(*it, outlet, Reason::kSorted, &l, now_ns);
 }
 
@@ -194,13 +196,8 @@ void Sorter::poll(std::uint64_t now_ns) {
       }
     }
     if (it.stage == Stage::kMeasuring) {
-      if (const auto d = decision_deadline(it, now_ns); d && now_ns >= *d) {
-        ++counts_.late;
-        late_until_ns_ = now_ns + config_.alarm_hold_ns;
-        fault("late", "item " + std::to_string(it.number) + ": no label before its last chance to be sorted: rejected");
-        set_alarm(now_ns);
-        reject(it, Reason::kLate, now_ns);
-      }
+      if (const auto d = decision_deadline(it, now_ns); d && now_ns >= *d)
+        late(it, "no label before its last chance to be sorted", nullptr, now_ns);
     }
     if (it.stage == Stage::kDecided) {
       if (!it.outlet) {

@@ -16,7 +16,6 @@
 #include <chrono>
 #include <cstring>
 #include <ctime>
-#include <thread>
 
 namespace tofmat::protocol {
 namespace {

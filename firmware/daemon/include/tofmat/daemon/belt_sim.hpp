@@ -29,6 +29,7 @@
 namespace tofmat::daemon {
 
 struct BeltSpec {
+  // (sim:belt sets these four from the keys every scene has.)
   std::vector<std::string> materials;
   double speed_mm_s = 500, rate_per_min = 60, item_mm = 160, width_mm = 140, depth_mm = 900, camera_mm = 300;
   double jitter = 0.3;

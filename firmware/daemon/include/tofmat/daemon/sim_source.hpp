@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "tofmat/daemon/belt_sim.hpp"
 #include "tofmat/daemon/source.hpp"
 #include "tofmat/sim/scene.hpp"
 
@@ -41,8 +42,8 @@ struct SimSpec {
   std::string library = "tanaka2017";
   std::int64_t unplug_at = -1;
   int replug_ms = 500;
-  // belt:
-  double speed_mm_s = 500, rate_per_min = 60, item_mm = 160, width_mm = 140, camera_mm = 300, jitter = 0.3;
+  // belt: its own keys (materials, depth, yaw and seed are the ones above)
+  BeltSpec belt;
 };
 
 // The text after "sim:" (may be empty). Throws std::invalid_argument.

@@ -101,9 +101,16 @@ class SortingLine {
   mutable std::mutex inbox_mutex_;
   std::vector<line::BurstLabel> labels_;
   std::optional<bool> camera_;
-  // For status (under status_mutex_).
+  // For status (under status_mutex_): the line thread's figures after each round.
+  struct Snapshot {
+    line::Sorter::Counts counts;
+    std::size_t on_belt = 0;
+    bool alarm = false;
+    double speed_mm_s = 0;
+    std::uint64_t glitches = 0, bounces = 0, encoder_errors = 0;
+  };
   mutable std::mutex status_mutex_;
-  nlohmann::json status_;
+  Snapshot snapshot_;
 };
 
 }  // namespace tofmat::daemon

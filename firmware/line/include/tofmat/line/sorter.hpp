@@ -122,6 +122,9 @@ class Sorter {
   };
   void decide(Item& it, std::optional<std::size_t> outlet, Reason reason, const BurstLabel* label, std::uint64_t now_ns);
   void reject(Item& it, Reason reason, std::uint64_t now_ns) { decide(it, config_.reject, reason, nullptr, now_ns); }
+  // Too late to be sorted (no label in time, or one too late for its
+  // outlet): reject, counted, reported, and the alarm held on.
+  void late(Item& it, const std::string& why, const BurstLabel* label, std::uint64_t now_ns);
   std::optional<std::size_t> outlet_for(const std::string& material) const;
   double end_mm() const;
   std::optional<std::uint64_t> decision_deadline(const Item& it, std::uint64_t now_ns) const;
