@@ -332,12 +332,12 @@ class Client:
         else:
             self._streams.clear()
 
-    def next_event(self, timeout: float) -> Event | None:
+    def next_event(self, timeout: float | None) -> Event | None:
         """The next event of the subscribed streams, or None if none comes within ``timeout``
-        seconds: for a program that also keeps a schedule of its own (tofmat sort)."""
+        seconds (None: wait for one): for a program that keeps a schedule of its own (tofmat sort)."""
         while True:
             try:
-                item = self._connection().next_event(max(0.0, timeout))
+                item = self._connection().next_event(-1.0 if timeout is None else max(0.0, timeout))
             except ConnectionClosedError:
                 if not self._reconnect or self._conn is None:
                     raise
@@ -349,17 +349,10 @@ class Client:
         """Events of the subscribed streams, in order. Raises DaemonTimeoutError when none comes
         within ``timeout`` seconds (None: wait forever)."""
         while True:
-            try:
-                item = self._connection().next_event(-1.0 if timeout is None else timeout)
-            except ConnectionClosedError:
-                if not self._reconnect or self._conn is None:
-                    raise
-                self._reopen()
-                continue
-            if item is None:
+            event = self.next_event(timeout)
+            if event is None:
                 raise DaemonTimeoutError(f"no event from tofmatd within {timeout} s")
-            meta, blob = item
-            yield _event(meta, blob)
+            yield event
 
     def labels(self, timeout: float | None = 5.0) -> Iterator[Label]:
         """Live labels (subscribes to them)."""

@@ -117,3 +117,12 @@ def test_the_sort_command_refuses_what_cannot_work(tmp_path: Path) -> None:
     for args, code, says in cases:
         r = runner.invoke(main, args)
         assert r.exit_code == code and says in r.output, (args, r.exit_code, r.output)
+
+
+def test_keeping_a_gate_open_moves_its_own_close_not_another_gates_at_the_same_time() -> None:
+    s = GateSchedule([Gate("wood", 0, travel_ms=100, hold_ms=100), Gate("cork", 1, travel_ms=100, hold_ms=100)])
+    s.decided(decided(1, "cork", 1000), 0)  # cork closes at 1100
+    s.decided(decided(2, "wood", 1000), 0)  # wood closes at 1100 too
+    s.decided(decided(3, "wood", 1150), 0)  # wood stays open to 1250
+    moves = [(m.t_ns // MS, m.outlet, m.open) for m in s.due(5000 * MS)]
+    assert sorted(moves) == [(900, "cork", True), (900, "wood", True), (1100, "cork", False), (1250, "wood", False)]

@@ -83,8 +83,7 @@ class GateSchedule:
         if len(self.gates) != len(gates):
             raise ValueError("two gates for one outlet")
         self._moves: list[GateMove] = []
-        self._open_until: dict[str, int] = {}  # a gate's planned close time while it is (to be) open
-        self._closes: dict[str, GateMove] = {}  # the close move each open gate has scheduled
+        self._closes: dict[str, GateMove] = {}  # the close move of each gate that is (to be) open
         self.late: list[tuple[int, str, float]] = []  # (item, outlet, ms late) for decisions too late to open in time
 
     def decided(self, d: SortDecision, now_ns: int) -> float | None:
@@ -96,12 +95,12 @@ class GateSchedule:
         open_at = d.fire_ns - round(g.travel_ms * 1e6)
         close_at = d.fire_ns + round(g.hold_ms * 1e6)
         late = (now_ns - open_at) / 1e6 if now_ns > open_at else None
-        planned_close = self._open_until.get(g.outlet)
-        if planned_close is not None and open_at <= planned_close:
+        planned = self._closes.get(g.outlet)
+        if planned is not None and open_at <= planned.t_ns:
             # Still (to be) open for the item before: stay open for this one too.
-            if close_at > planned_close:
-                old = self._closes.pop(g.outlet)
-                self._moves.remove(old)
+            if close_at > planned.t_ns:
+                # (By identity: moves compare by time alone, another gate's may share it.)
+                self._moves = [m for m in self._moves if m is not planned]
                 heapq.heapify(self._moves)
                 self._schedule_close(g.outlet, close_at, d.item)
         else:
@@ -114,7 +113,6 @@ class GateSchedule:
     def _schedule_close(self, outlet: str, t_ns: int, item: int) -> None:
         move = GateMove(t_ns, outlet, False, item)
         self._closes[outlet] = move
-        self._open_until[outlet] = t_ns
         heapq.heappush(self._moves, move)
 
     def due(self, now_ns: int) -> list[GateMove]:
@@ -124,7 +122,6 @@ class GateSchedule:
             m = heapq.heappop(self._moves)
             if not m.open and self._closes.get(m.outlet) is m:
                 del self._closes[m.outlet]
-                del self._open_until[m.outlet]
             out.append(m)
         return out
 
