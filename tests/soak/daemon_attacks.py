@@ -743,20 +743,19 @@ def attack_main(name: str, cfg: AttackConfig) -> int:
     return 0
 
 
-def attacker_priority() -> None:
-    """In an attack's child process: an ordinary user's niceness (0), whatever --client-nice gave the harness."""
-    os.setpriority(os.PRIO_PROCESS, 0, 0)
-
-
 class AttackProcess:
     """An attack in its own process, started and stopped from the measuring one."""
 
     def __init__(self, name: str, cfg: AttackConfig, log: Path) -> None:
         self.name = name
+        self._log = log
         self._stderr = log.open("ab")
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "_attack", name, "--config",
                                       json.dumps(asdict(cfg))], stdout=subprocess.PIPE, stderr=self._stderr,
-                                     text=True, preexec_fn=attacker_priority)  # fmt: skip
+                                     text=True)  # fmt: skip
+        # An ordinary user's niceness (0), whatever --client-nice gave the harness. (Set from here:
+        # a preexec_fn is not safe in a process with threads, as the harness is.)
+        os.setpriority(os.PRIO_PROCESS, self.proc.pid, 0)
         assert self.proc.stdout is not None
         line = self.proc.stdout.readline().strip()
         if line != "ready":
@@ -781,8 +780,9 @@ class AttackProcess:
             if line.startswith("{"):
                 result: dict[str, Any] = json.loads(line)
                 return result
+        tail = self._log.read_text(errors="replace")[-600:] if self._log.exists() else ""
         return {"attack": self.name, "seconds": 0.0, "counts": {}, "peaks": {}, "notes": {"error": "no result"},
-                "headline": f"no result (exit {self.proc.returncode})"}  # fmt: skip
+                "headline": f"no result (exit {self.proc.returncode}); its stderr ends: {tail!r}"}  # fmt: skip
 
 
 # --- the daemon under test ------------------------------------------------------------------
@@ -850,9 +850,10 @@ class DaemonUnderTest:
 
     def start(self) -> None:
         with self.log.open("ab") as log:
-            nice = self.nice  # absolute, whatever the harness's own (--client-nice)
-            self.proc = subprocess.Popen(self.command(), stdout=log, stderr=subprocess.STDOUT,
-                                         preexec_fn=lambda: os.setpriority(os.PRIO_PROCESS, 0, nice))  # fmt: skip
+            self.proc = subprocess.Popen(self.command(), stdout=log, stderr=subprocess.STDOUT)
+        # Absolute, whatever the harness's own (--client-nice); set from here: a preexec_fn is not
+        # safe in a process with threads.
+        os.setpriority(os.PRIO_PROCESS, self.proc.pid, self.nice)
         deadline = time.monotonic() + 30.0
         while True:
             if self.proc.poll() is not None:
@@ -1662,7 +1663,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return attack_main(args.name, AttackConfig(**json.loads(args.config)))
     run: Callable[[argparse.Namespace], int] = bench if args.command == "bench" else soak
     if args.client_nice:
-        os.setpriority(os.PRIO_PROCESS, 0, args.client_nice)  # the attacks reset theirs: attacker_priority
+        os.setpriority(os.PRIO_PROCESS, 0, args.client_nice)  # (AttackProcess sets each attack back to 0)
     return run(args)
 
 
