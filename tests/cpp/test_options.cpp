@@ -114,6 +114,24 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(p.cl->log_level, "debug");
 }
 
+TEST(Options, TheResetButtonReachesItsOptionsWithOrWithoutALine) {
+  const auto p = parse({"--table", "t", "--gpio", "libgpiod", "--reset-button", "pinctrl-rp1:GPIO5",
+                        "--reset-button-active-low", "--reset-button-bias", "pull-up", "--reset-button-debounce-ms",
+                        "35"});
+  ASSERT_TRUE(p.cl.has_value());
+  const auto& o = p.cl->daemon;
+  EXPECT_EQ(o.button.line, "pinctrl-rp1:GPIO5");
+  EXPECT_TRUE(o.button.active_low);
+  EXPECT_EQ(o.button.bias, "pull-up");
+  EXPECT_EQ(o.button.debounce_ms, 35.0);
+  EXPECT_FALSE(o.line.enabled());  // GPIO for the button alone: no sorting line
+  const auto both = parse({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
+                           "--reset-button", "sim:button"});
+  ASSERT_TRUE(both.cl.has_value());
+  EXPECT_TRUE(both.cl->daemon.line.enabled());
+  EXPECT_TRUE(both.cl->daemon.button.enabled());
+}
+
 TEST(Options, TheConfigurationFileHasTheFlagsKeysAndTheCommandLineWins) {
   const auto cfg = temp_file("cfg.toml", "table = \"/usr/share/t.tmx\"\nprofile = \"segmentation\"\nsmooth = 7\n"
                                          "candidates = [\"cork\", \"paper\"]\nlog-level = \"warn\"\n");
@@ -189,6 +207,11 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   expect_usage_error({"--table", "t", "--peer-request-rate", "0"});            // out of range
   expect_usage_error({"--table", "t", "--peer-connect-rate", "nan"});          // not a number in range
   expect_usage_error({"--table", "t", "--control-group", "no-such-group-here"});  // no such group
+  expect_usage_error({"--table", "t", "--reset-button", "sim:button"});        // a button without --gpio
+  expect_usage_error({"--table", "t", "--gpio", "sim"});                       // GPIO for nothing
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--line-speed", "500"});  // a line without its barrier
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--reset-button", "sim:b", "--reset-button-bias", "up"});
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--reset-button", "sim:b", "--reset-button-debounce-ms", "-1"});
   std::filesystem::remove(short_token);
 }
 

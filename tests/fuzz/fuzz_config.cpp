@@ -2,8 +2,9 @@
 // TOML/INI reader behind parse_command_line). Each input is written to a
 // file and parsed as the daemon would at start: any input ends in options or
 // a usage error, never a crash, a hang or unbounded memory. The sorting
-// line's values are parsed further at start (outlets, GPIO line names,
-// bias): those parsers take what the file gave them here too.
+// line's and the reset button's values and the simulated source's spec are
+// parsed further at start (outlets, GPIO line names, bias, sim keys): those
+// parsers take what the file gave them here too.
 #include <unistd.h>
 
 #include <cstdint>
@@ -12,6 +13,7 @@
 #include <string>
 
 #include "tofmat/daemon/options.hpp"
+#include "tofmat/daemon/sim_source.hpp"
 #include "tofmat/daemon/sorting_line.hpp"
 #include "tofmat/gpio/gpio.hpp"
 
@@ -40,15 +42,26 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     } catch (const std::invalid_argument&) {
     }
   }
-  for (const auto* text : {&line.barrier, &line.encoder_a, &line.encoder_b, &line.alarm}) {
+  const auto& button = cl->daemon.button;
+  for (const auto* text : {&line.barrier, &line.encoder_a, &line.encoder_b, &line.alarm, &button.line}) {
     try {
       tofmat::gpio::LineSpec::parse(*text);
     } catch (const std::invalid_argument&) {
     }
   }
-  try {
-    tofmat::gpio::parse_bias(line.barrier_bias);
-  } catch (const std::invalid_argument&) {
+  for (const auto* bias : {&line.barrier_bias, &button.bias}) {
+    try {
+      tofmat::gpio::parse_bias(*bias);
+    } catch (const std::invalid_argument&) {
+    }
+  }
+  const std::string& source = cl->daemon.source;
+  const auto colon = source.find(':');
+  if (source.substr(0, colon) == "sim") {  // (as make_source splits it)
+    try {
+      tofmat::daemon::parse_sim_spec(colon == std::string::npos ? "" : source.substr(colon + 1));
+    } catch (const std::invalid_argument&) {
+    }
   }
   return 0;
 }

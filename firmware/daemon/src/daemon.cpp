@@ -68,7 +68,7 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
   // --gpio sim: one simulated chip, the line's and the simulated belt's (sim:belt drives its barrier).
-  const auto gpio_backend = options_.line.enabled() ? make_gpio_backend(options_.line.gpio) : nullptr;
+  const auto gpio_backend = options_.line.gpio.empty() ? nullptr : make_gpio_backend(options_.line.gpio);
   options_.source_options.sim_gpio = std::dynamic_pointer_cast<gpio::SimGpio>(gpio_backend);
   source_ = make_source(options_.source, options_.source_options);
   if (options_.line.enabled()) {
@@ -86,6 +86,11 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
     hooks.publish = [this](const protocol::Message& m, const std::string& stream) { server_->publish(stream, m); };
     line_ = std::make_unique<SortingLine>(options_.line, gpio_backend, table->materials(), std::move(hooks));
   }
+  if (options_.button.enabled())
+    button_ = std::make_unique<ResetButton>(options_.button, gpio_backend, [this](std::uint64_t t) {
+      pipeline_->reset();
+      publish_reset("button", t);
+    });
   Emitter emit;
   emit.label = [this](const protocol::LabelEvent& e) {
     if (line_) line_->label(e);
@@ -135,6 +140,18 @@ void Daemon::start() {
       }
     });
   }
+  if (button_) {
+    // A broken button leaves the labels served: it is reported (log, status).
+    button_thread_ = std::thread([this] {
+      ::pthread_setname_np(::pthread_self(), "tofmatd-button");
+      try {
+        button_->run(stop_);
+      } catch (const std::exception& e) {
+        spdlog::error("the reset button stopped: {}", e.what());
+        button_->stopped(e.what());
+      }
+    });
+  }
   source_thread_ = std::thread([this] {
     ::pthread_setname_np(::pthread_self(), "tofmatd-source");
     SourceCallbacks cb;
@@ -174,6 +191,12 @@ void Daemon::start() {
     spdlog::warn("the source is SIMULATED: its labels are not a camera's (every label and status say so)");
 }
 
+void Daemon::publish_reset(const char* by, std::uint64_t timestamp_ns) {
+  protocol::Message m;
+  m.meta = {{"event", "reset"}, {"by", by}, {"timestamp_ns", timestamp_ns}};
+  server_->publish("reset", m);
+}
+
 void Daemon::fail(const std::string& why) {
   spdlog::critical("{}", why);
   failed_ = true;
@@ -184,7 +207,8 @@ void Daemon::stop() {
   stop_ = true;
   if (server_) server_->wake();
   if (line_) line_->wake();
-  for (auto* t : {&source_thread_, &pipeline_thread_, &server_thread_, &line_thread_})
+  if (button_) button_->wake();
+  for (auto* t : {&source_thread_, &pipeline_thread_, &server_thread_, &line_thread_, &button_thread_})
     if (t->joinable()) t->join();
 }
 
@@ -216,6 +240,7 @@ nlohmann::json Daemon::status() const {
   s["uptime_s"] = static_cast<double>(protocol::monotonic_ns() - started_ns_) * 1e-9;
   s["last_reload"] = last_reload_;
   if (line_) s["line"] = line_->status();
+  if (button_) s["button"] = button_->status();
   return s;
 }
 
@@ -229,6 +254,7 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
       r.result = status();
     } else if (req.cmd == "reset") {
       pipeline_->reset();
+      publish_reset("command", protocol::monotonic_ns());
     } else if (req.cmd == "set_profile") {
       pipeline_->set_profile(protocol::get_string(a, "name", protocol::kMaxNameBytes));
     } else if (req.cmd == "set_roi") {

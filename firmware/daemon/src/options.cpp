@@ -209,7 +209,8 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       },
       "NUMBER >= 0");
   app.add_option("--gpio", line.gpio,
-                 "the sorting line's GPIO: libgpiod (the board's chips) | sim (a simulated chip); none by default")
+                 "GPIO of the sorting line and the reset button: libgpiod (the board's chips) | sim (a simulated "
+                 "chip); none by default")
       ->check(CLI::IsMember({"libgpiod", "sim"}));
   app.add_option("--line-barrier", line.barrier, "the light barrier's input, CHIP:LINE (chip label or /dev path)");
   app.add_flag("--line-barrier-active-low", line.barrier_active_low, "the barrier's line is low while the beam is interrupted");
@@ -248,6 +249,16 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                  "a burst's label is confident when its Eq. (12) distance is at most this (mm^2; 0: any)")
       ->capture_default_str()
       ->check(non_negative);
+  auto& button = o.button;
+  app.add_option("--reset-button", button.line,
+                 "the front panel's button, CHIP:LINE: a press resets the accumulation (as the reset command)");
+  app.add_flag("--reset-button-active-low", button.active_low, "the button's line is low while it is pressed");
+  app.add_option("--reset-button-bias", button.bias, "as-is | disabled | pull-up | pull-down")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"as-is", "disabled", "pull-up", "pull-down"}));
+  app.add_option("--reset-button-debounce-ms", button.debounce_ms, "a press counts when held this long")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1000.0));
   app.add_option("--log-level", cl.log_level, "trace | debug | info | warn | error")
       ->capture_default_str()
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
@@ -259,9 +270,16 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.profile.backend = parse_backend(backend);
     o.profile.candidates = candidates;
     if (!roi.empty()) o.profile.roi = parse_roi(roi);
-    if (!line.enabled() && (!line.barrier.empty() || !line.outlets.empty() || line.speed_mm_s > 0 ||
-                            !line.encoder_a.empty() || !line.alarm.empty()))
-      throw CLI::ValidationError("--gpio", "the sorting line's options need --gpio libgpiod (or sim)");
+    const bool line_options = !line.barrier.empty() || !line.outlets.empty() || line.speed_mm_s > 0 ||
+                              !line.encoder_a.empty() || !line.encoder_b.empty() || !line.alarm.empty() ||
+                              !line.reject.empty();
+    if (line.gpio.empty() && (line_options || button.enabled()))
+      throw CLI::ValidationError("--gpio", "the sorting line's and the reset button's options need --gpio libgpiod (or sim)");
+    if (!line.gpio.empty() && !line_options && !button.enabled())
+      throw CLI::ValidationError("--gpio", "--gpio drives a sorting line (--line-barrier ...) or a reset button "
+                                           "(--reset-button): give one of them");
+    if (line_options && line.barrier.empty())
+      throw CLI::ValidationError("--line-barrier", "the sorting line needs its light barrier, CHIP:LINE");
     o.server.tcp = tcp;
     if (tcp.empty() && !token_file.empty())
       throw CLI::ValidationError("--token-file", "a token is for TCP clients: give --tcp too, or leave the token out");

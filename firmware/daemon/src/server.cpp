@@ -51,7 +51,7 @@ Bytes encoded(const protocol::Message& m) { return std::make_shared<const std::v
 
 bool valid_stream(const std::string& s) {
   return s == "labels" || s == "label_map" || s == "device" || s == "depth:80" || s == "depth:16" ||
-         s == "depth:120" || s == "depth:combined" || s == "sort" || s == "line";
+         s == "depth:120" || s == "depth:combined" || s == "sort" || s == "line" || s == "reset";
 }
 
 struct Server::Connection {

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <set>
 #include <stdexcept>
 #include <thread>
 
@@ -117,6 +118,10 @@ SimSpec parse_sim_spec(const std::string& text) {
       s.unplug_at = to_int(key, value, 0, 1 << 30);
     } else if (key == "replug_ms") {
       s.replug_ms = to_int(key, value, 0, 3600000);
+    } else if (key == "presses") {
+      for (const auto& f : split(value, '+')) s.presses.push_back(static_cast<std::uint64_t>(to_int(key, f, 0, 1 << 30)));
+      if (s.presses.empty() || s.presses.size() > 64)
+        throw std::invalid_argument("sim: presses= needs 1 to 64 frame numbers joined by +");
     } else if (key == "speed") {
       s.belt.speed_mm_s = to_number(key, value);
     } else if (key == "rate") {
@@ -194,6 +199,19 @@ std::unique_ptr<Source> make_sim_source(const SimSpec& spec, const SourceOptions
   // (The belt's frames show it as it is when they are taken: by the clock, not the frame count.)
   sim::SimulatedKinect::SceneAt scene_at = [s](std::uint64_t frame) { return sim_scene_at(s, frame); };
   if (belt) scene_at = [belt](std::uint64_t frame) { return belt->scene(frame, protocol::monotonic_ns()); };
+  if (!spec.presses.empty()) {
+    if (!options.sim_gpio)
+      throw std::invalid_argument("sim: presses= presses a button on the simulated GPIO chip: it needs --gpio sim");
+    // A finger on the button at the frame, off it three frames (100 ms) later.
+    auto gpio = options.sim_gpio;
+    gpio->drive(kSimButtonLine, true, protocol::monotonic_ns());  // released (pulled up)
+    const std::set<std::uint64_t> presses(spec.presses.begin(), spec.presses.end());
+    scene_at = [inner = std::move(scene_at), gpio, presses](std::uint64_t frame) {
+      if (presses.count(frame)) gpio->drive(kSimButtonLine, false, protocol::monotonic_ns());
+      if (frame >= 3 && presses.count(frame - 3)) gpio->drive(kSimButtonLine, true, protocol::monotonic_ns());
+      return inner(frame);
+    };
+  }
   auto kinect = std::make_shared<sim::SimulatedKinect>(renderer, scene_at, spec.realtime);
   if (spec.unplug_at >= 0) {
     sim::KinectFaults faults;

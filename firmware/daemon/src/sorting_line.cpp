@@ -22,8 +22,6 @@ double number(const std::string& key, const std::string& value, const std::strin
   throw std::invalid_argument("outlet \"" + outlet + "\": " + key + " \"" + value + "\" is not a number");
 }
 
-std::uint64_t ms_to_ns(double ms) { return static_cast<std::uint64_t>(std::llround(ms * 1e6)); }
-
 }  // namespace
 
 std::shared_ptr<gpio::Backend> make_gpio_backend(const std::string& name) {

@@ -1,7 +1,8 @@
-// Internal: the small text parsers of tofmatd's source and outlet specs
+// Internal: the small text parsers of tofmatd's source and outlet specs, and ms to ns
 // ("sim:belt,speed=500,...", "wood:position=600,materials=a+b,...").
 #pragma once
 #include <cmath>
+#include <cstdint>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -28,5 +29,8 @@ inline std::optional<double> whole_number(const std::string& text) {
   }
   return std::nullopt;
 }
+
+// A configured time in ms (checked finite and >= 0 by the caller) in ns.
+inline std::uint64_t ms_to_ns(double ms) { return static_cast<std::uint64_t>(std::llround(ms * 1e6)); }
 
 }  // namespace tofmat::daemon

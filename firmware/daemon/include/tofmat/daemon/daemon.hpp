@@ -10,6 +10,7 @@
 #include <thread>
 
 #include "tofmat/daemon/pipeline.hpp"
+#include "tofmat/daemon/reset_button.hpp"
 #include "tofmat/daemon/server.hpp"
 #include "tofmat/daemon/sorting_line.hpp"
 #include "tofmat/daemon/source.hpp"
@@ -30,6 +31,8 @@ struct DaemonOptions {
   std::size_t queue_frames = 2;
   // The sorting line on GPIO (line.gpio "" = none): needs the sorting profile.
   LineOptions line;
+  // The front panel's reset button on GPIO (line.gpio's backend).
+  ButtonOptions button;
 };
 
 // A table file (.tmx) or a folder of the real database's .npy files.
@@ -58,10 +61,13 @@ class Daemon {
   std::unique_ptr<Server> server_;
   std::unique_ptr<Source> source_;
   std::unique_ptr<SortingLine> line_;  // null without a sorting line
+  std::unique_ptr<ResetButton> button_;  // null without a reset button
   std::atomic<bool> stop_{false};
   std::atomic<bool> failed_{false};
   void fail(const std::string& why);
-  std::thread source_thread_, pipeline_thread_, server_thread_, line_thread_;
+  // A `reset` event: the accumulation started over (`by`: "button" or "command").
+  void publish_reset(const char* by, std::uint64_t timestamp_ns);
+  std::thread source_thread_, pipeline_thread_, server_thread_, line_thread_, button_thread_;
   std::uint64_t started_ns_ = 0;
   mutable std::mutex state_mutex_;
   DeviceState device_state_ = DeviceState::kOpening;

@@ -42,9 +42,15 @@ struct SimSpec {
   std::string library = "tanaka2017";
   std::int64_t unplug_at = -1;
   int replug_ms = 500;
+  // Frames at which the simulated front-panel button (line "button" of the
+  // simulated GPIO chip, low while pressed) is pressed, for 100 ms each.
+  std::vector<std::uint64_t> presses;
   // belt: its own keys (materials, depth, yaw and seed are the ones above)
   BeltSpec belt;
 };
+
+// The simulated GPIO chip's line that sim's presses= drives.
+inline constexpr const char* kSimButtonLine = "button";
 
 // The text after "sim:" (may be empty). Throws std::invalid_argument.
 SimSpec parse_sim_spec(const std::string& text);

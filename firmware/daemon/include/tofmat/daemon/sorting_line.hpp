@@ -54,7 +54,7 @@ struct LineOptions {
   std::string alarm;                 // CHIP:LINE ("" = none)
   double margin_ms = 20, alarm_hold_ms = 5000;
   double max_distance = 0;           // a label is confident at most this far (Eq. 12, mm^2; 0 = any final label)
-  bool enabled() const { return !gpio.empty(); }
+  bool enabled() const { return !gpio.empty() && !barrier.empty(); }  // (options check the rest)
 };
 
 class SortingLine {

@@ -1,0 +1,88 @@
+#include "tofmat/daemon/reset_button.hpp"
+
+#include <poll.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <vector>
+
+#include "spec_text.hpp"
+
+namespace tofmat::daemon {
+
+ResetButton::ResetButton(const ButtonOptions& options, std::shared_ptr<gpio::Backend> backend,
+                         std::function<void(std::uint64_t)> on_press)
+    : options_(options),
+      backend_(std::move(backend)),
+      on_press_(std::move(on_press)),
+      filter_({ms_to_ns(options.debounce_ms), ms_to_ns(options.hold_off_ms)}),
+      wake_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
+  if (!wake_fd_) throw std::runtime_error("reset button: eventfd failed");
+  for (const double v : {options.debounce_ms, options.hold_off_ms})
+    if (!(v >= 0 && v <= 60'000) || !std::isfinite(v))
+      throw std::invalid_argument("reset button: debounce and hold-off must be 0 to 60000 ms");
+  input_ = backend_->request_input(gpio::LineSpec::parse(options.line),
+                                   {options.active_low, gpio::parse_bias(options.bias)}, "tofmatd-button");
+}
+
+void ResetButton::wake() {
+  const std::uint64_t one = 1;
+  [[maybe_unused]] const auto n = ::write(wake_fd_.get(), &one, sizeof one);
+}
+
+void ResetButton::run(const std::atomic<bool>& stop) {
+  std::vector<gpio::EdgeEvent> edges;
+  std::vector<line::ItemStart> pressed;
+  pollfd fds[2] = {{wake_fd_.get(), POLLIN, 0}, {input_->fd(), POLLIN, 0}};
+  while (!stop.load()) {
+    // A press is confirmed `debounce` after its edge: wake then, or every
+    // 200 ms (stop).
+    std::uint64_t now = protocol::monotonic_ns();
+    std::uint64_t until = now + 200'000'000ull;
+    if (const auto d = filter_.next_deadline()) until = std::min(until, std::max(*d, now));
+    const std::uint64_t wait = until - now;
+    timespec ts{static_cast<time_t>(wait / 1'000'000'000ull), static_cast<long>(wait % 1'000'000'000ull)};
+    if (::ppoll(fds, 2, &ts, nullptr) < 0 && errno != EINTR)
+      throw std::runtime_error(std::string("reset button: poll failed: ") + std::strerror(errno));
+    if (fds[0].revents & POLLIN) {
+      std::uint64_t v;
+      [[maybe_unused]] const auto n = ::read(wake_fd_.get(), &v, sizeof v);
+    }
+    edges.clear();
+    input_->read_events(edges, 64);
+    pressed.clear();
+    for (const auto& e : edges)
+      if (const auto p = filter_.edge(e.timestamp_ns, e.rising)) pressed.push_back(*p);
+    if (const auto p = filter_.advance(protocol::monotonic_ns())) pressed.push_back(*p);
+    for (const auto& p : pressed) {
+      if (p.too_close) {  // the same finger again, or a bounce past the debounce
+        ++ignored_;
+        continue;
+      }
+      ++presses_;
+      spdlog::info("reset button ({}): the accumulation starts over", options_.line);
+      on_press_(p.timestamp_ns);
+    }
+  }
+}
+
+void ResetButton::stopped(const std::string& why) {
+  std::lock_guard<std::mutex> lock(error_mutex_);
+  error_ = why;
+}
+
+nlohmann::json ResetButton::status() const {
+  nlohmann::json s = {{"line", options_.line}, {"presses", presses_.load()}, {"ignored", ignored_.load()}};
+  std::lock_guard<std::mutex> lock(error_mutex_);
+  if (!error_.empty()) s["error"] = error_;
+  return s;
+}
+
+}  // namespace tofmat::daemon
