@@ -319,6 +319,43 @@ def sort_cmd(address: str, token_file: Path | None, gates: tuple[str, ...], bus:
     click.echo(f"{r.decisions} decisions, {len(r.moves)} gate moves, {len(r.late)} too late to open in time")
 
 
+@main.command("panel")
+@_client_options
+@click.option("--bus", help="I2C bus of the SSD1306 (number or /dev path).")
+@click.option("--oled-address", default="0x3c", show_default=True, help="The SSD1306's I2C address.")
+@click.option("--simulated", is_flag=True, help="Draw on a simulated SSD1306 instead of a real bus.")
+@click.option("--png", type=click.Path(dir_okay=False, path_type=Path),
+              help="With --simulated: write what the panel shows at the end to this PNG.")  # fmt: skip
+@click.option("--seconds", type=click.FloatRange(0.1, None), help="Stop after this long (default: run until stopped).")
+@user_errors
+def panel_cmd(address: str, token_file: Path | None, bus: str | None, oled_address: str, simulated: bool,
+              png: Path | None, seconds: float | None) -> None:  # fmt: skip
+    """The box's front panel: tofmatd's label, confidence and state on an SSD1306 OLED."""
+    from .client import Client
+    from .hw import SSD1306, FakeSSD1306Bus, open_bus
+    from .tools.panel_agent import run_panel
+
+    if simulated == (bus is not None):
+        raise click.UsageError("give --bus N (the SSD1306's I2C bus) or --simulated")
+    if png is not None and not simulated:
+        raise click.UsageError("--png saves the simulated panel's picture: it needs --simulated")
+    try:
+        addr = int(oled_address, 0)
+    except ValueError as e:
+        raise click.BadParameter(f"--oled-address: {e}") from e
+    token = token_file.read_text().splitlines()[0].strip() if token_file else None
+    fake = FakeSSD1306Bus(addr) if simulated else None
+    i2c = fake or open_bus(int(bus) if bus and bus.isdigit() else str(bus))
+    display = SSD1306(i2c, addr)
+    try:
+        r = run_panel(lambda: Client(address, token=token, reconnect=False), display, seconds, echo=click.echo)
+    except KeyboardInterrupt:
+        return
+    click.echo(f"panel: {r.draws} frames drawn; showing: {' | '.join(r.shown or [])}")
+    if fake is not None and png is not None:
+        click.echo(f"panel: picture in {fake.save_png(png)}")
+
+
 @main.command()
 @_client_options
 @click.option("--top", default=3, show_default=True, help="Ranking entries shown.")

@@ -37,7 +37,7 @@ from ._tofmat import (
 )
 
 DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
-STREAMS = ("labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined", "sort", "line")
+STREAMS = ("labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined", "sort", "line", "reset")
 
 
 @dataclass(frozen=True)
@@ -141,7 +141,16 @@ class LineEvent:
     timestamp_ns: int
 
 
-Event = Label | LabelMap | DepthImage | DeviceEvent | SortDecision | LineEvent
+@dataclass(frozen=True)
+class ResetEvent:
+    """The accumulation started over (stream "reset"): the front panel's button was pressed
+    (``by == "button"``) or a client sent the reset command (``by == "command"``)."""
+
+    by: str
+    timestamp_ns: int
+
+
+Event = Label | LabelMap | DepthImage | DeviceEvent | SortDecision | LineEvent | ResetEvent
 
 
 def _event(meta: dict[str, Any], blob: bytes) -> Event:
@@ -197,6 +206,8 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event:
         )
     if name == "line":
         return LineEvent(meta["kind"], meta["message"], bool(meta["alarm"]), meta["timestamp_ns"])
+    if name == "reset":
+        return ResetEvent(meta["by"], meta["timestamp_ns"])
     raise ProtocolError(f"unknown event {name!r} from tofmatd")
 
 
@@ -410,6 +421,7 @@ __all__ = [
     "DeviceEvent",
     "SortDecision",
     "LineEvent",
+    "ResetEvent",
     "Event",
     "Label",
     "LabelMap",
