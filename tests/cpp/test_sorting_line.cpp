@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <map>
 #include <thread>
 
 #include "tofmat/daemon/sorting_line.hpp"
@@ -135,6 +136,59 @@ TEST(SortingLine, AnItemIsPushedAtItsOutletOnTimeFromTheBarriersTimestamp) {
   const auto status = h.line->status();
   EXPECT_EQ(status["items"], 1);
   EXPECT_EQ(status["sorted"], 1);
+}
+
+// A belt with an encoder on the simulated chip: one count (one edge of
+// either channel) per mm, in real time, forwards (A leads) or backwards.
+struct EncoderBelt {
+  explicit EncoderBelt(std::shared_ptr<gpio::SimGpio> g) : gpio(std::move(g)) {}
+  void move(int mm, bool forward = true, int ms_per_mm = 1) {
+    for (int k = 0; k < mm; ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(ms_per_mm));
+      const bool on_a = forward ? a == b : a != b;  // (the next state of A-leads-B, or of B-leads-A)
+      bool& ch = on_a ? a : b;
+      ch = !ch;
+      const auto now = protocol::monotonic_ns();
+      gpio->drive(on_a ? "enc_a" : "enc_b", ch, now);
+      position += forward ? 1 : -1;
+      if (!reached.count(position)) reached[position] = now;
+    }
+  }
+  void stand(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
+  std::shared_ptr<gpio::SimGpio> gpio;
+  bool a = false, b = false;
+  int position = 0;
+  std::map<int, std::uint64_t> reached;  // position -> when the belt first got there
+};
+
+TEST(SortingLine, WithAnEncoderThePusherWaitsWhileTheBeltStandsOrRunsBack) {
+  auto o = options();
+  o.speed_mm_s = 0;
+  o.encoder_a = "sim:enc_a";
+  o.encoder_b = "sim:enc_b";
+  o.encoder_counts_per_mm = 1;
+  Harness h(o);
+  EncoderBelt belt(h.gpio);
+  h.item(protocol::monotonic_ns(), 2);  // the item's leading edge at the barrier, belt at 0 mm
+  belt.move(60);                        // past the camera (50 mm)
+  ASSERT_TRUE(h.wait_for([&] { return !h.bursts.empty(); }, 1000)) << "no burst";
+  EXPECT_GE(h.bursts[0] + 2 * kMs, belt.reached.at(50)) << "the burst starts when the belt has carried the item there";
+  h.label(41, "cork");  // the cork outlet: 200 mm past the barrier
+  belt.move(60);        // 120 mm
+  belt.move(10, false);  // the belt jolts back: 110 mm
+  belt.stand(300);
+  EXPECT_EQ(h.gpio->changes("push_cork").size(), 1u) << "fired while the item was still 90 mm away";
+  const auto stood_until = protocol::monotonic_ns();
+  belt.move(100);  // 210 mm: past the outlet
+  ASSERT_TRUE(h.wait_for([&] { return h.sorts.size() >= 2; }, 1000)) << "never fired";  // (decided, fired)
+  const auto changes = h.gpio->changes("push_cork");
+  ASSERT_GE(changes.size(), 2u);
+  EXPECT_GT(changes[1].timestamp_ns, stood_until);
+  const double off_ms = (static_cast<double>(changes[1].timestamp_ns) - static_cast<double>(belt.reached.at(200))) / 1e6;
+  EXPECT_GT(off_ms, -3.0) << "fired before the item was at its outlet";
+  EXPECT_LT(off_ms, 15.0) << "fired " << off_ms << " ms after the item was at its outlet";
+  EXPECT_EQ(h.sort_events("decided").at(0)["outlet"], "cork");
+  EXPECT_EQ(h.line->status()["encoder_errors"], 0);
 }
 
 TEST(SortingLine, NoLabelGoesToRejectAndRaisesTheAlarmOutput) {
