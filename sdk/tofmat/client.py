@@ -60,7 +60,7 @@ class Label:
     timestamp_ns: int  # CLOCK_MONOTONIC when the daemon had the whole frame
     received_ns: int  # CLOCK_MONOTONIC when this client read it
     profile: str
-    state: str  # "tracking", "no_target", "final"
+    state: str  # "tracking", "no_target", "final", "mixed" (a sorting burst whose frames disagreed)
     material: str | None  # None when state is "no_target"
     index: int
     distance: float
@@ -116,7 +116,7 @@ class SortDecision:
     """The sorting line's decision for one item (stream "sort"): once when its outlet is chosen
     (``state == "decided"``, ``fire_ns`` planned) and once when the pusher was driven
     (``state == "fired"``). ``reason`` is "sorted" or why it went to reject: too_close, camera_busy,
-    camera_lost, no_target, not_confident, no_outlet, late, full."""
+    camera_lost, no_target, mixed, not_confident, no_outlet, late, full."""
 
     state: str
     item: int

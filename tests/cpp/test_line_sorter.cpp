@@ -190,13 +190,22 @@ TEST(Sorter, UnconfidentUnknownAndUnsortedMaterialsGoToReject) {
   l.item_at(2000 * kMs);
   l.run_to(2500 * kMs);
   l.label(3, "");
-  l.run_to(5000 * kMs);
-  EXPECT_EQ(l.bursts.size(), 3u);
+  l.item_at(2500 * kMs);
+  l.run_to(3000 * kMs);
+  // A burst whose frames disagreed (the next item in the ROI): its material
+  // has an outlet and the label is confident, but it is never sorted.
+  BurstLabel mixed{104, "wood", true, 12.5, "wood"};
+  mixed.mixed = true;
+  l.sorter.label(mixed, l.now);
+  l.run_to(6000 * kMs);
+  EXPECT_EQ(l.bursts.size(), 4u);
   EXPECT_EQ(l.of(1, "decided").at(0).reason, Reason::kNotConfident);
   EXPECT_EQ(l.of(2, "decided").at(0).reason, Reason::kNoOutlet);
   EXPECT_EQ(l.of(3, "decided").at(0).reason, Reason::kNoTarget);
-  for (std::uint64_t i = 1; i <= 3; ++i) EXPECT_EQ(l.of(i, "fired").at(0).outlet, "reject") << i;
-  EXPECT_EQ(l.sorter.counts().rejected, 3u);
+  EXPECT_EQ(l.of(4, "decided").at(0).reason, Reason::kMixed);
+  EXPECT_STREQ(reason_name(Reason::kMixed), "mixed");
+  for (std::uint64_t i = 1; i <= 4; ++i) EXPECT_EQ(l.of(i, "fired").at(0).outlet, "reject") << i;
+  EXPECT_EQ(l.sorter.counts().rejected, 4u);
   EXPECT_TRUE(l.alarms.empty()) << "no fault of the line";
   EXPECT_TRUE(l.faults.empty());
 }

@@ -432,6 +432,42 @@ TEST_P(SortingBackends, OnlyTheBurstsFramesThatShowTheItemCount) {
   EXPECT_EQ(log.labels[0].material, "silicone");
 }
 
+// The belt packed tight: the burst's last frame catches the next item in
+// the ROI (issue 17). Only the frames that agree with the burst's majority
+// are classified together; a burst with no majority is "mixed".
+TEST_P(SortingBackends, AFrameShowingAnotherItemIsLeftOutAndNoMajorityIsMixed) {
+  ProfileConfig c = config_of("sorting", GetParam());
+  auto profile = make_profile(c, real_table());
+  EventLog log;
+  const auto emit = log.emitter();
+  FrameMaker frames;
+  // The next item across the ROI's downstream three quarters.
+  Patch next = item("acryl");
+  next.region.x0 = kCentreRoi.x0 + (kCentreRoi.x1 - kCentreRoi.x0) / 4;
+  profile->trigger(4);
+  for (std::uint64_t k = 0; k < 3; ++k) profile->process(frames.draw(k, {item("copper")}, 3.0), emit);
+  profile->process(frames.draw(3, {item("copper"), next}, 3.0), emit);
+  ASSERT_EQ(log.labels.size(), 1u);
+  EXPECT_EQ(log.labels[0].state, "final");
+  EXPECT_EQ(log.labels[0].material, "copper");
+  // The same three clean frames alone: the same label, to the last digit
+  // (the mixed frame added nothing).
+  auto clean = make_profile(c, real_table());
+  clean->trigger(3);
+  for (std::uint64_t k = 0; k < 3; ++k) clean->process(frames.draw(k, {item("copper")}, 3.0), emit);
+  ASSERT_EQ(log.labels.size(), 2u);
+  EXPECT_EQ(log.labels[1].distance, log.labels[0].distance);
+  EXPECT_EQ(log.labels[1].valid, log.labels[0].valid);
+
+  // Two frames of each: no majority.
+  profile->trigger(4);
+  for (std::uint64_t k = 10; k < 12; ++k) profile->process(frames.draw(k, {item("copper")}, 3.0), emit);
+  for (std::uint64_t k = 12; k < 14; ++k) profile->process(frames.draw(k, {item("acryl")}, 3.0), emit);
+  ASSERT_EQ(log.labels.size(), 3u);
+  EXPECT_EQ(log.labels[2].state, "mixed");
+  EXPECT_FALSE(log.labels[2].material.empty()) << "what the frames together say, for the record";
+}
+
 TEST_P(SortingBackends, ResetDisarmsATrigger) {
   ProfileConfig c = config_of("sorting", GetParam());
   c.burst = 2;

@@ -162,9 +162,10 @@ void SortingLine::label(const protocol::LabelEvent& e) {
   if (!e.trigger || e.state == "tracking") return;
   line::BurstLabel l;
   l.trigger = *e.trigger;
-  l.material = e.state == "final" ? e.material : "";
+  l.material = e.state == "final" || e.state == "mixed" ? e.material : "";
+  l.mixed = e.state == "mixed";
   l.distance = e.distance;
-  l.confident = !l.material.empty() && (options_.max_distance <= 0 || e.distance <= options_.max_distance);
+  l.confident = !l.material.empty() && !l.mixed && (options_.max_distance <= 0 || e.distance <= options_.max_distance);
   if (e.truth) l.truth = e.truth->material;
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);

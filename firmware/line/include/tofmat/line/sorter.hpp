@@ -49,7 +49,18 @@ struct SorterConfig {
 void validate(const SorterConfig& config);
 
 // Why an item went where it went.
-enum class Reason { kSorted, kTooClose, kCameraBusy, kCameraLost, kNoTarget, kNotConfident, kNoOutlet, kLate, kFull };
+enum class Reason {
+  kSorted,
+  kTooClose,
+  kCameraBusy,
+  kCameraLost,
+  kNoTarget,
+  kMixed,
+  kNotConfident,
+  kNoOutlet,
+  kLate,
+  kFull
+};
 const char* reason_name(Reason r);
 
 // A label for a burst, as the pipeline gave it.
@@ -59,6 +70,7 @@ struct BurstLabel {
   bool confident = false;
   double distance = 0;
   std::optional<std::string> truth;  // a simulated item's real material (passed on, never used)
+  bool mixed = false;  // the burst's frames disagreed (another item in the ROI): never sorted
 };
 
 struct SortEvent {

@@ -72,7 +72,7 @@ struct LabelEvent {
   std::uint64_t frame = 0;         // the source's frame sequence number
   std::uint64_t timestamp_ns = 0;  // CLOCK_MONOTONIC when the frame was complete in the daemon
   std::string profile;
-  std::string state;               // "tracking", "no_target", "final" (sorting burst)
+  std::string state;               // "tracking", "no_target", "final" or "mixed" (sorting burst)
   std::string material;            // "" when state is no_target
   std::int32_t index = -1;         // into the daemon's table materials
   double distance = 0.0;           // Eq. (12), mm^2
