@@ -164,6 +164,11 @@ demo: setup build-python $(SIM_TABLE)
 demo-line: setup build-python $(SIM_TABLE)
 	$(TOFMAT) line-demo --table $(SIM_TABLE)
 
+# The simulated sorting line over belt speeds, loads and seeds (docs/benchmarks.md): about 20 min.
+.PHONY: bench-line
+bench-line: setup build-python $(SIM_TABLE)
+	$(TOFMAT) bench-line --table $(SIM_TABLE)
+
 bench: setup check-db build-python $(TABLE)
 	$(TOFMAT) bench --table $(TABLE)
 

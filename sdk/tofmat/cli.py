@@ -231,10 +231,12 @@ def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None
 @click.option("--rate", default=60.0, show_default=True, type=click.FloatRange(1, 600), help="Items offered a minute.")
 @click.option("--burst", default=4, show_default=True, type=click.IntRange(1, 30), help="Frames per item.")
 @click.option("--seed", default=1, show_default=True, type=click.IntRange(0, 2**30))
+@click.option("--gates/--no-gates", default=True, show_default=True,
+              help="Run tofmat sort beside it: a flap per outlet on a simulated PCA9685.")  # fmt: skip
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, not every item.")
 @user_errors
 def line_demo(table_path: Path | None, materials: str, seconds: float, speed: float, rate: float, burst: int,
-              seed: int, quiet: bool) -> None:  # fmt: skip
+              seed: int, gates: bool, quiet: bool) -> None:  # fmt: skip
     """tofmatd sorting a simulated belt: barrier, camera, outlets; items/min, right outlet, margins."""
     from .tools.line_demo import LineSetup, run_line, summary
     from .tools.live_demo import ensure_sim_table
@@ -243,11 +245,53 @@ def line_demo(table_path: Path | None, materials: str, seconds: float, speed: fl
     setup = LineSetup(tuple(csv_list(materials) or []), speed_mm_s=speed, rate_per_min=rate, burst=burst, seed=seed)
     click.echo(f"starting tofmatd --source {setup.source()} --gpio sim (a simulated line, {seconds:g} s)")
     try:
-        result = run_line(table, setup, seconds, echo=None if quiet else click.echo)
+        result = run_line(table, setup, seconds, echo=None if quiet else click.echo, gates=gates)
     except RuntimeError as e:
         raise click.ClickException(str(e)) from e
     click.echo("")
     for line in summary(setup, result):
+        click.echo(line)
+
+
+def _numbers(kind: type, text: str, what: str) -> list[Any]:
+    try:
+        values = [kind(v) for v in csv_list(text) or []]
+    except ValueError as e:
+        raise click.BadParameter(f"{what}: {e}") from e
+    if not values or any(v <= 0 for v in values):
+        raise click.BadParameter(f"{what}: expected a comma-separated list of positive numbers, got {text!r}")
+    return values
+
+
+@main.command("bench-line")
+@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@click.option("--speeds", default="200,500,1000", show_default=True, help="Belt speeds, mm/s.")
+@click.option("--loads", default="0.6,0.8,0.9,1.0,1.2", show_default=True,
+              help="Offered rates as fractions of what the belt carries packed tight.")  # fmt: skip
+@click.option("--bursts", default="4", show_default=True, help="Frames per item.")
+@click.option("--seeds", default=3, show_default=True, type=click.IntRange(1, 50))
+@click.option("--seconds", default=20.0, show_default=True, type=click.FloatRange(5, 3600), help="Per run.")
+@click.option("--item", default=160.0, show_default=True, type=click.FloatRange(10, 1000), help="Item length, mm.")
+@user_errors
+def bench_line_cmd(table_path: Path | None, speeds: str, loads: str, bursts: str, seeds: int, seconds: float,
+                   item: float) -> None:  # fmt: skip
+    """The simulated sorting line over speeds and rates: the highest rate with 99 % to the right outlet."""
+    from .tools.line_bench import format_markdown, run_grid
+    from .tools.line_demo import LineSetup
+    from .tools.live_demo import ensure_sim_table
+
+    speed_list = _numbers(float, speeds, "--speeds")
+    load_list = _numbers(float, loads, "--loads")
+    burst_list = _numbers(int, bursts, "--bursts")
+    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
+    base = LineSetup(("acryl", "copper", "fabric", "silicone", "cork"), item_mm=item)
+    try:
+        cells = run_grid(table, base, speed_list, load_list, seeds, seconds, burst_list, click.echo)
+    except RuntimeError as e:
+        raise click.ClickException(str(e)) from e
+    click.echo("")
+    for line in format_markdown(cells, seeds, seconds):
         click.echo(line)
 
 

@@ -20,7 +20,7 @@ import pytest
 
 import tofmat
 from tofmat.client import daemon_binary, sim_data_dir
-from tofmat.tools.line_demo import LineResult, LineSetup, run_line
+from tofmat.tools.line_demo import LineResult, LineSetup, run_line, summary
 
 from conftest import Daemon
 
@@ -42,7 +42,7 @@ def line_table(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def line_run(line_table: Path) -> tuple[LineSetup, LineResult]:
     setup = LineSetup(MATERIALS, speed_mm_s=500.0, rate_per_min=90.0, burst=4, seed=3)
-    return setup, run_line(line_table, setup, seconds=12.0)
+    return setup, run_line(line_table, setup, seconds=12.0, gates=True)
 
 
 def test_every_item_is_decided_once_and_pushed_once_on_time(line_run: tuple[LineSetup, LineResult]) -> None:
@@ -75,6 +75,19 @@ def test_items_go_to_their_own_outlet_or_to_reject(line_run: tuple[LineSetup, Li
     assert r.wrong() <= 1, "items sorted to a wrong material's outlet"
     margins = r.margins_ms()
     assert margins.min() >= 20.0, "a sorted item's decision came under the margin"
+
+
+def test_the_demos_gates_are_open_when_their_items_arrive(line_run: tuple[LineSetup, LineResult]) -> None:
+    # `tofmat sort` beside the line (line-demo's default): a flap per material's outlet on a simulated
+    # PCA9685, which records every move; each pushed item found its flap open, none came too late.
+    setup, r = line_run
+    assert r.gates is not None
+    ok, pushed = r.gates_open_in_time()
+    assert pushed >= 5 and ok == pushed, (ok, pushed)
+    assert r.gates.late == [] and r.gate_chip_errors == 0
+    moved = {m.outlet for _, m in r.gates.moves}
+    assert moved <= set(setup.materials) and len(moved) >= 2
+    assert any(line.startswith("gates (tofmat sort, simulated PCA9685)") for line in summary(setup, r))
 
 
 def test_the_daemons_counts_agree(line_run: tuple[LineSetup, LineResult]) -> None:
@@ -132,3 +145,39 @@ def test_the_line_refuses_what_cannot_work(tmp_path: Path, line_table: Path) -> 
     p = subprocess.run(base + ["--profile", "sorting", *real], capture_output=True, text=True, timeout=60)
     assert p.returncode == 1
     assert "pinctrl-rp1:barrier" in p.stderr and ("no GPIO chip" in p.stderr or "no chip labelled" in p.stderr)
+
+
+def test_bench_line_reports_the_highest_rate_that_sorts_99_percent_right() -> None:
+    # The benchmark's summary on made-up runs: pooled over seeds, the fastest row at >= 99 % right.
+    from tofmat.client import SortDecision
+    from tofmat.tools.line_bench import Cell, capacity_per_min, format_markdown
+
+    def run(right: int, wrong: int, per_s: float) -> LineResult:
+        r = LineResult(seconds=20.0)
+        for k in range(right + wrong):
+            truth = "acryl" if k < right else "cork"
+            r.decided.append(SortDecision("decided", k + 1, round(k * 1e9 / per_s), "acryl", 1.0, "acryl", "sorted",
+                                          0, None, 900.0, truth))  # fmt: skip
+        return r
+
+    base = LineSetup(("acryl", "cork"), speed_mm_s=500.0)
+    assert capacity_per_min(base) == pytest.approx(60 * 500 / 180)
+    cells = [Cell(base, 0.6, [run(100, 0, 1.5), run(100, 0, 1.5)]),
+             Cell(base, 0.9, [run(199, 1, 2.5), run(100, 0, 2.5)]),  # 299 of 300: 99.7 %
+             Cell(base, 1.0, [run(98, 2, 2.75), run(100, 0, 2.75)])]  # 198 of 200: exactly 99 %  # fmt: skip
+    out = "\n".join(format_markdown(cells, seeds=2, seconds=20.0))
+    assert "| 500 | 4 | 0.90 |" in out and "| 99.7 % | 99.5 % | 1 |" in out
+    assert "at least 99 % right up to 165 items/min sorted (offered 60, load 1.00)" in out
+    worse = [Cell(base, 1.0, [run(97, 3, 2.75)])]
+    assert "below 99 % right at every rate tried" in "\n".join(format_markdown(worse, seeds=1, seconds=20.0))
+
+
+def test_bench_line_refuses_lists_that_are_not_numbers() -> None:
+    from click.testing import CliRunner
+
+    from tofmat.cli import main
+
+    for args, says in ((["--speeds", "fast"], "--speeds: could not convert"), (["--loads", "0.5,-1"], "positive"),
+                       (["--bursts", "2.5"], "--bursts: invalid literal"), (["--speeds", ""], "positive")):  # fmt: skip
+        r = CliRunner().invoke(main, ["bench-line", *args])
+        assert r.exit_code == 2 and says in r.output, (args, r.output)

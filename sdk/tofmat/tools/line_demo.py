@@ -12,6 +12,7 @@ before its outlet each decision came) and the time from the barrier to the decis
 from __future__ import annotations
 
 import tempfile
+import threading
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -20,8 +21,11 @@ from typing import Callable
 
 import numpy as np
 
-from ..client import LineEvent, SortDecision
+from ..client import Client, LineEvent, SortDecision
+from ..hw import PCA9685, FakePCA9685Bus, Servo
+from ..line import Gate
 from .live_demo import connect, start_daemon, stop_daemon_or_raise
+from .sort_agent import AgentResult, run_sort_agent
 
 FRAME_S = 1.0 / 30.0
 
@@ -88,10 +92,19 @@ class LineResult:
     fired: list[SortDecision] = field(default_factory=list)
     faults: list[LineEvent] = field(default_factory=list)
     status: dict[str, object] = field(default_factory=dict)
+    gates: AgentResult | None = None  # `tofmat sort` on a simulated PCA9685, when asked for
+    gate_chip_errors: int = 0
 
     @property
     def items(self) -> int:
         return len(self.decided)
+
+    def per_min(self) -> float:
+        """Items a minute through the barrier, from the first decided item's edge to the last's."""
+        if len(self.decided) < 2:
+            return 0.0
+        span = self.decided[-1].trigger_ns - self.decided[0].trigger_ns
+        return 60e9 * (len(self.decided) - 1) / span if span > 0 else 0.0
 
     def right(self) -> int:
         """Items sent to their own material's outlet (the simulator's truth)."""
@@ -113,6 +126,15 @@ class LineResult:
     def decision_ms(self) -> np.ndarray:
         return np.array([(d.decided_ns - d.trigger_ns) / 1e6 for d in self.decided if d.material], dtype=float)
 
+    def gates_open_in_time(self) -> tuple[int, int]:
+        """(items whose outlet's flap was open when they got there, items pushed at a flap's outlet)."""
+        if self.gates is None:
+            return 0, 0
+        flaps = {m.outlet for _, m in self.gates.moves}
+        pushed = [f for f in self.fired if f.outlet in flaps and f.fire_ns is not None]
+        ok = sum(1 for f in pushed if f.outlet and f.fire_ns and self.gates.open_when_fired(f.outlet, f.fire_ns))
+        return ok, len(pushed)
+
     def fire_error_ms(self) -> np.ndarray:
         """How late each pusher fired against its plan (the decision's fire_ns)."""
         planned = {d.item: d.fire_ns for d in self.decided if d.fire_ns is not None}
@@ -120,15 +142,52 @@ class LineResult:
                          if f.fire_ns is not None and f.item in planned], dtype=float)  # fmt: skip
 
 
-def run_line(table: Path, setup: LineSetup, seconds: float, echo: Callable[[str], None] | None = None) -> LineResult:
-    """Runs tofmatd on the simulated line for ``seconds`` after the first item and collects its decisions."""
+class _GateAgent:
+    """`tofmat sort` beside the line, on a thread: a flap on a servo (a simulated PCA9685, on the
+    monotonic clock) in front of each material's outlet, moved for tofmatd's decisions."""
+
+    def __init__(self, socket: Path, setup: LineSetup, result: LineResult) -> None:
+        self.bus = FakePCA9685Bus(clock=lambda: time.monotonic_ns() / 1e9)
+        pca = PCA9685(self.bus)
+        pca.set_frequency(50)
+        self.gates = [Gate(m, k, travel_ms=120.0, hold_ms=100.0) for k, m in enumerate(setup.materials)]
+        self.servos = {g.outlet: Servo(pca, g.channel) for g in self.gates}
+        self.socket, self.result = socket, result
+        self.stop = threading.Event()
+        self.failure: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="tofmat-sort", daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            with Client(self.socket, reconnect=False) as c:
+                self.result.gates = run_sort_agent(c, self.servos, self.gates, stop=self.stop.is_set)
+            self.result.gate_chip_errors = len(self.bus.errors)
+        except Exception as e:  # (raised by finish(), on the caller's thread)
+            self.failure = e
+
+    def finish(self) -> None:
+        self.stop.set()
+        self.thread.join(10.0)
+        if self.failure is not None:
+            raise RuntimeError(f"the gate agent failed: {self.failure}") from self.failure
+
+
+def run_line(
+    table: Path, setup: LineSetup, seconds: float, echo: Callable[[str], None] | None = None, gates: bool = False
+) -> LineResult:
+    """Runs tofmatd on the simulated line for ``seconds`` after the first item and collects its decisions;
+    with ``gates``, `tofmat sort` moves a simulated flap for each material's outlet too."""
     result = LineResult()
     say = echo or (lambda _line: None)
     with tempfile.TemporaryDirectory(prefix="tofmat-line-") as tmp:
         socket, log = Path(tmp) / "tofmatd.sock", Path(tmp) / "tofmatd.log"
         daemon = start_daemon(table, socket, setup.source(), log, profile="sorting", extra=setup.daemon_args())
+        agent: _GateAgent | None = None
         try:
             with connect(socket, daemon) as client:
+                if gates:
+                    agent = _GateAgent(socket, setup, result)
                 client.subscribe("sort", "line")
                 t_end: float | None = None
                 for event in client.events(timeout=10.0):
@@ -152,7 +211,11 @@ def run_line(table: Path, setup: LineSetup, seconds: float, echo: Callable[[str]
                         break
                 result.seconds = seconds
                 result.status = client.status()
+                if agent is not None:
+                    agent.finish()
         finally:
+            if agent is not None:
+                agent.stop.set()
             stop_daemon_or_raise(daemon, log, say)
     return result
 
@@ -163,13 +226,19 @@ def summary(setup: LineSetup, r: LineResult) -> list[str]:
 
     margins, decision, fire = r.margins_ms(), r.decision_ms(), r.fire_error_ms()
     rejects = ", ".join(f"{k} {v}" for k, v in sorted(r.reasons().items()) if k != "sorted") or "none"
+    gates = []
+    if r.gates is not None:
+        ok, pushed = r.gates_open_in_time()
+        gates = [f"gates (tofmat sort, simulated PCA9685): {len(r.gates.moves)} flap moves; open when their item "
+                 f"arrived {ok} of {pushed}; too late to open {len(r.gates.late)}; chip errors {r.gate_chip_errors}"]  # fmt: skip
     return [
         f"line: {len(setup.materials)} materials at {setup.speed_mm_s:g} mm/s, {setup.rate_per_min:g} items/min "
         f"offered, burst {setup.burst} frames",
-        f"items: {r.items} in {r.seconds:.0f} s ({60.0 * r.items / r.seconds if r.seconds else 0:.0f}/min); "
+        f"items: {r.items} in {r.seconds:.0f} s ({r.per_min():.0f}/min); "
         f"to the right outlet {r.right()} ({100.0 * r.right_fraction():.1f} %), to a wrong one {r.wrong()}; "
         f"rejects: {rejects}",
         f"timing margin (fire time - decision): p50 {pct(margins, 50)} ms, p1 {pct(margins, 1)} ms; "
         f"barrier -> decision p50 {pct(decision, 50)} ms, p99 {pct(decision, 99)} ms; "
         f"pushers late against plan p50 {pct(fire, 50) if fire.size else '-'} ms, max {fire.max() if fire.size else 0:.1f} ms",
+        *gates,
     ]

@@ -35,9 +35,11 @@ def run_sort_agent(
     gates: list[Gate],
     seconds: float | None = None,
     echo: Callable[[str], None] | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> AgentResult:
-    """Closes every gate, follows the decisions for ``seconds`` (None: until the daemon goes), and
-    closes every gate again when it stops."""
+    """Closes every gate, follows the decisions for ``seconds`` (None: until the daemon goes, or
+    ``stop()`` says so, which is asked at least once a second), and closes every gate again when it
+    stops."""
     say = echo or (lambda _line: None)
     schedule = GateSchedule(gates)
     result = AgentResult()
@@ -47,7 +49,7 @@ def run_sort_agent(
     try:
         client.subscribe("sort", "line")
         end = None if seconds is None else time.monotonic_ns() + round(seconds * 1e9)
-        while end is None or time.monotonic_ns() < end:
+        while (end is None or time.monotonic_ns() < end) and not (stop and stop()):
             now = time.monotonic_ns()
             for move in schedule.due(now):
                 g = by_outlet[move.outlet]
