@@ -106,6 +106,7 @@ class PyConnection {
   pyb::dict hello() const {
     pyb::dict d;
     d["protocol"] = client_->hello().protocol;
+    d["minor"] = client_->hello().minor;
     d["server"] = client_->hello().server;
     d["capabilities"] = client_->hello().capabilities;
     d["auth_required"] = client_->hello().auth_required;
@@ -156,6 +157,7 @@ void register_client(pyb::module_& m) {
       .def_property_readonly("connected", &PyConnection::connected)
       .def("close", &PyConnection::close);
   m.attr("PROTOCOL_VERSION") = protocol::kProtocolVersion;
+  m.attr("PROTOCOL_MINOR") = protocol::kProtocolMinor;
 }
 
 }  // namespace tofmat::py

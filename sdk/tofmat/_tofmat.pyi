@@ -291,6 +291,7 @@ class sim:
 
 # --- tofmatd client (bindings/client_bindings.cpp) and recorder (record_bindings.cpp) ---
 PROTOCOL_VERSION: int
+PROTOCOL_MINOR: int
 
 class ClientError(Exception):
     kind: str  # refused, timeout, version, auth, protocol, closed, command

@@ -153,7 +153,9 @@ class ResetEvent:
 Event = Label | LabelMap | DepthImage | DeviceEvent | SortDecision | LineEvent | ResetEvent
 
 
-def _event(meta: dict[str, Any], blob: bytes) -> Event:
+def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
+    """The typed event, or None for an event this client does not know (a later minor version's:
+    skipped, as docs/protocol.md's Versions asks of clients)."""
     name = meta["event"]
     now = time.monotonic_ns()
     if name == "label":
@@ -208,7 +210,7 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event:
         return LineEvent(meta["kind"], meta["message"], bool(meta["alarm"]), meta["timestamp_ns"])
     if name == "reset":
         return ResetEvent(meta["by"], meta["timestamp_ns"])
-    raise ProtocolError(f"unknown event {name!r} from tofmatd")
+    return None
 
 
 class Client:
@@ -329,8 +331,11 @@ class Client:
 
     # --- streams -----------------------------------------------------------------------------
     def subscribe(self, *streams: str) -> None:
+        """Subscribe to streams: the ones this client knows (``STREAMS``) or any the daemon offers in
+        its hello's capabilities (a later minor version's; their events are skipped unless known)."""
+        offered = set(self.hello.get("capabilities", []))
         for s in streams:
-            if s not in STREAMS:
+            if s not in STREAMS and s not in offered:
                 raise ValueError(f"unknown stream {s!r}; one of {', '.join(STREAMS)}")
         self._call("subscribe", {"streams": list(streams)})
         self._streams.update(streams)
@@ -346,15 +351,22 @@ class Client:
     def next_event(self, timeout: float | None) -> Event | None:
         """The next event of the subscribed streams, or None if none comes within ``timeout``
         seconds (None: wait for one): for a program that keeps a schedule of its own (tofmat sort)."""
+        deadline = None if timeout is None else time.monotonic() + max(0.0, timeout)
         while True:
+            left = -1.0 if deadline is None else max(0.0, deadline - time.monotonic())
             try:
-                item = self._connection().next_event(-1.0 if timeout is None else max(0.0, timeout))
+                item = self._connection().next_event(left)
             except ConnectionClosedError:
                 if not self._reconnect or self._conn is None:
                     raise
                 self._reopen()
                 continue
-            return None if item is None else _event(*item)
+            if item is None:
+                return None
+            event = _event(*item)
+            if event is not None:
+                return event
+            # (an event of a later minor version: skipped, the wait goes on)
 
     def events(self, timeout: float | None = None) -> Iterator[Event]:
         """Events of the subscribed streams, in order. Raises DaemonTimeoutError when none comes

@@ -403,12 +403,28 @@ TEST(Messages, HelloRoundTrip) {
   EXPECT_EQ(m.type, MessageType::kHello);
   const Hello d = decode_hello(m);
   EXPECT_EQ(d.protocol, kProtocolVersion);
+  EXPECT_EQ(d.minor, kProtocolMinor);
   EXPECT_EQ(d.server, h.server);
   EXPECT_EQ(d.capabilities, h.capabilities);
   EXPECT_TRUE(d.auth_required);
   h.auth_required = false;
   h.capabilities.clear();
   EXPECT_FALSE(decode_hello(through_reader(encode_hello(h))).auth_required);
+}
+
+TEST(Messages, AHelloWithoutAMinorIsMinorZeroAndUnknownFieldsAreIgnored) {
+  // A daemon that predates minor versions, and one from a later minor with
+  // fields this client does not know: both are read.
+  Message m = encode_hello(Hello{});
+  m.meta.erase("minor");
+  m.meta["a_later_field"] = {{"anything", 1}};
+  const Hello d = decode_hello(through_reader(m));
+  EXPECT_EQ(d.minor, 0u);
+  EXPECT_EQ(d.protocol, kProtocolVersion);
+  m.meta["minor"] = 999;
+  EXPECT_EQ(decode_hello(through_reader(m)).minor, 999u);
+  m.meta["minor"] = "four";
+  EXPECT_THROW(decode_hello(m), ProtocolError);
 }
 
 TEST(Messages, RequestRoundTrip) {
@@ -812,8 +828,11 @@ TEST(Messages, DepthBounds) {
   m.blob.resize(20);
   EXPECT_CONTAINS(err(m), "carries 20 bytes");
   m = good;
-  m.meta["kind"] = "60";
+  m.meta["kind"] = "";
   EXPECT_CONTAINS(err(m), "depth kind");
+  m = good;
+  m.meta["kind"] = "corrected";  // a kind of a later minor version: a name like any other
+  EXPECT_EQ(decode_depth(m).kind, "corrected");
   m = good;
   m.meta["dtype"] = "float64";
   EXPECT_CONTAINS(err(m), "dtype");

@@ -309,7 +309,10 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       }
     }
     c.ready = true;
-    r.result = {{"protocol", protocol::kProtocolVersion}, {"client_id", c.id}, {"role", role_name(c.role)}};
+    r.result = {{"protocol", protocol::kProtocolVersion},
+                {"minor", protocol::kProtocolMinor},
+                {"client_id", c.id},
+                {"role", role_name(c.role)}};
     return reply(c, r);
   }
   if (c.role != Role::kControl && !is_reading_command(req.cmd)) {

@@ -108,7 +108,7 @@ bool valid_depth_kind(const std::string& kind) {
 Message encode_hello(const Hello& h) {
   Message m;
   m.type = MessageType::kHello;
-  m.meta = {{"protocol", h.protocol}, {"server", h.server}, {"capabilities", h.capabilities},
+  m.meta = {{"protocol", h.protocol}, {"minor", h.minor}, {"server", h.server}, {"capabilities", h.capabilities},
             {"auth_required", h.auth_required}};
   return m;
 }
@@ -117,6 +117,7 @@ Hello decode_hello(const Message& m) {
   expect(m, MessageType::kHello, "hello");
   Hello h;
   h.protocol = static_cast<std::uint32_t>(get_uint(m.meta, "protocol", 0xffff));
+  h.minor = m.meta.contains("minor") ? static_cast<std::uint32_t>(get_uint(m.meta, "minor", 0xffff)) : 0;
   h.server = get_string(m.meta, "server", kMaxTextBytes);
   h.capabilities = get_string_list(m.meta, "capabilities", 64, kMaxNameBytes);
   h.auth_required = get_bool(m.meta, "auth_required");
@@ -260,8 +261,10 @@ DepthEvent decode_depth(const Message& m) {
   DepthEvent e;
   e.frame = get_uint(m.meta, "frame", UINT64_MAX);
   e.timestamp_ns = get_uint(m.meta, "timestamp_ns", UINT64_MAX);
+  // (Any kind name: a later minor version may add kinds, and a client takes
+  // them as names. The daemon sends and serves only valid_depth_kind's.)
   e.kind = get_string(m.meta, "kind", kMaxNameBytes);
-  if (!valid_depth_kind(e.kind)) throw ProtocolError("unknown depth kind \"" + e.kind + "\"");
+  if (e.kind.empty()) throw ProtocolError("depth kind must not be empty");
   e.x0 = get_side(m.meta, "x0");
   e.y0 = get_side(m.meta, "y0");
   e.width = get_side(m.meta, "width");

@@ -32,6 +32,7 @@ inline constexpr const char* kPermission = "permission";      // a control comma
 
 struct Hello {
   std::uint32_t protocol = kProtocolVersion;
+  std::uint32_t minor = kProtocolMinor;   // (0 from a daemon that predates minor versions)
   std::string server;                     // "tofmatd 0.1.0"
   std::vector<std::string> capabilities;  // streams and commands offered
   bool auth_required = false;             // TCP: the hello request must carry the token

@@ -18,7 +18,14 @@ namespace tofmat::protocol {
 
 using Json = nlohmann::json;
 
+// The protocol's major version, in every message's header: a client and a
+// daemon of different majors refuse each other at hello.
 inline constexpr std::uint16_t kProtocolVersion = 1;
+// Its minor version, in the hello and the hello's reply: each minor only
+// adds (fields, events, streams, commands, values), and clients ignore what
+// they do not know, so a client of any minor talks to a daemon of any other
+// (docs/protocol.md, Versions; its change list says what each one added).
+inline constexpr std::uint16_t kProtocolMinor = 4;
 inline constexpr char kMagic[4] = {'T', 'M', 'A', 'T'};
 inline constexpr std::size_t kHeaderBytes = 12;
 // The metadata of any message (the largest, a hello or status with 255

@@ -1,0 +1,136 @@
+"""Protocol versions (docs/protocol.md, Versions): the header carries the major, the hello the minor,
+and a client ignores what a later minor adds. A scripted daemon of a later minor sends an event,
+a field, a stream and a depth kind this client has never heard of: the client reads on.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import struct
+import threading
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pytest
+
+import tofmat
+from tofmat import _tofmat
+from tofmat.client import DepthImage, Label, ResetEvent
+
+HELLO, REQUEST, REPLY, EVENT = 1, 2, 3, 4
+
+
+def frame(kind: int, meta: dict[str, Any], blob: bytes = b"") -> bytes:
+    body = json.dumps(meta).encode()
+    payload = struct.pack("<I", len(body)) + body + blob
+    return b"TMAT" + struct.pack("<HBBI", 1, kind, 0, len(payload)) + payload
+
+
+def read_message(conn: socket.socket) -> dict[str, Any]:
+    def exactly(n: int) -> bytes:
+        data = b""
+        while len(data) < n:
+            chunk = conn.recv(n - len(data))
+            if not chunk:
+                raise ConnectionError("client went away")
+            data += chunk
+        return data
+
+    header = exactly(12)
+    (length,) = struct.unpack("<I", header[8:12])
+    payload = exactly(length)
+    (meta_len,) = struct.unpack("<I", payload[:4])
+    return dict(json.loads(payload[4 : 4 + meta_len]))
+
+
+LABEL = {"event": "label", "frame": 7, "timestamp_ns": 1, "profile": "handheld", "state": "tracking",
+         "material": "cork", "index": 0, "distance": 1.5, "valid": 9, "bins_covered": 1,
+         "ranking": [{"material": "cork", "distance": 1.5}]}  # fmt: skip
+
+
+def scripted_daemon(path: Path, minor: int, after_subscribe: Callable[[socket.socket], None]) -> threading.Thread:
+    """A daemon of protocol 1.`minor` that answers hello and subscribe, then runs the script."""
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(str(path))
+    server.listen(1)
+
+    def serve() -> None:
+        conn, _ = server.accept()
+        with conn, server:
+            conn.sendall(frame(HELLO, {"protocol": 1, "minor": minor, "server": "tofmatd 9.9",
+                                       "capabilities": ["labels", "sparkles", "depth"], "auth_required": False,
+                                       "a_later_field": [1, 2]}))  # fmt: skip
+            while True:
+                try:
+                    req = read_message(conn)
+                except ConnectionError:
+                    return
+                result: dict[str, Any] = {"protocol": 1, "minor": minor, "client_id": 1, "role": "control"}
+                if req["cmd"] == "subscribe":
+                    result = {"streams": req["args"]["streams"]}
+                conn.sendall(frame(REPLY, {"id": req["id"], "ok": True, "result": result, "later": True}))
+                if req["cmd"] == "subscribe":
+                    after_subscribe(conn)
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    return t
+
+
+def test_this_client_says_its_minor_and_the_daemon_says_its_own(start: Any) -> None:
+    assert _tofmat.PROTOCOL_VERSION == 1 and _tofmat.PROTOCOL_MINOR >= 4
+    d = start("sim:static,material=acryl")
+    with d.client() as c:
+        assert c.hello["protocol"] == 1 and c.hello["minor"] == _tofmat.PROTOCOL_MINOR
+
+
+def test_a_client_reads_on_past_what_a_later_minor_added(tmp_path: Path) -> None:
+    def script(conn: socket.socket) -> None:
+        conn.sendall(frame(EVENT, {"event": "sparkle", "glitter": 3}))  # an event of a later minor
+        conn.sendall(frame(EVENT, {**LABEL, "confidence_band": [0.1, 0.9]}))  # a field of a later minor
+        depth = np.arange(4, dtype="<f4").tobytes()
+        conn.sendall(frame(EVENT, {"event": "depth", "frame": 8, "timestamp_ns": 2, "kind": "corrected", "x0": 0,
+                                   "y0": 0, "width": 2, "height": 2, "dtype": "float32"}, depth))  # fmt: skip
+        conn.sendall(frame(EVENT, {"event": "reset", "by": "foot_pedal", "timestamp_ns": 3}))
+
+    sock = tmp_path / "later.sock"
+    t = scripted_daemon(sock, minor=99, after_subscribe=script)
+    with tofmat.Client(sock, reconnect=False) as c:
+        assert c.hello["minor"] == 99
+        c.subscribe("labels", "sparkles")  # a stream this client does not know, but the daemon offers
+        with pytest.raises(ValueError, match="unknown stream"):
+            c.subscribe("nothing_anyone_offers")
+        events = [c.next_event(5.0) for _ in range(3)]
+        assert isinstance(events[0], Label) and events[0].material == "cork"
+        assert isinstance(events[1], DepthImage) and events[1].kind == "corrected"
+        assert events[1].depth_mm.shape == (2, 2)
+        assert isinstance(events[2], ResetEvent) and events[2].by == "foot_pedal"
+        assert c.next_event(0.2) is None
+    t.join(5.0)
+
+
+def test_a_daemon_that_predates_minor_versions_is_minor_zero(tmp_path: Path) -> None:
+    sock = tmp_path / "older.sock"
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(str(sock))
+    server.listen(1)
+
+    def serve() -> None:
+        conn, _ = server.accept()
+        with conn, server:
+            conn.sendall(frame(HELLO, {"protocol": 1, "server": "tofmatd 0.0.9", "capabilities": ["labels"],
+                                       "auth_required": False}))  # fmt: skip
+            req = read_message(conn)
+            conn.sendall(frame(REPLY, {"id": req["id"], "ok": True, "result": {"protocol": 1, "client_id": 1}}))
+            try:
+                read_message(conn)
+            except ConnectionError:
+                pass
+
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    with tofmat.Client(sock, reconnect=False) as c:
+        assert c.hello["minor"] == 0 and c.role == "control"  # (no role field: every client controls)
+    t.join(5.0)
