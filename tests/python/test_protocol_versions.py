@@ -50,8 +50,11 @@ LABEL = {"event": "label", "frame": 7, "timestamp_ns": 1, "profile": "handheld",
          "ranking": [{"material": "cork", "distance": 1.5}]}  # fmt: skip
 
 
-def scripted_daemon(path: Path, minor: int, after_subscribe: Callable[[socket.socket], None]) -> threading.Thread:
-    """A daemon of protocol 1.`minor` that answers hello and subscribe, then runs the script."""
+def scripted_daemon(
+    path: Path, minor: int | None, after_subscribe: Callable[[socket.socket], None] = lambda _conn: None
+) -> threading.Thread:
+    """A daemon of protocol 1.`minor` (None: one that predates minor versions and roles) that answers
+    hello and subscribe, then runs the script."""
     server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     server.bind(str(path))
     server.listen(1)
@@ -59,18 +62,21 @@ def scripted_daemon(path: Path, minor: int, after_subscribe: Callable[[socket.so
     def serve() -> None:
         conn, _ = server.accept()
         with conn, server:
-            conn.sendall(frame(HELLO, {"protocol": 1, "minor": minor, "server": "tofmatd 9.9",
-                                       "capabilities": ["labels", "sparkles", "depth"], "auth_required": False,
-                                       "a_later_field": [1, 2]}))  # fmt: skip
+            hello: dict[str, Any] = {"protocol": 1, "server": "tofmatd 0.0.9", "capabilities": ["labels"],
+                                     "auth_required": False}  # fmt: skip
+            result: dict[str, Any] = {"protocol": 1, "client_id": 1}
+            if minor is not None:
+                hello |= {"minor": minor, "server": "tofmatd 9.9", "capabilities": ["labels", "sparkles", "depth"],
+                          "a_later_field": [1, 2]}  # fmt: skip
+                result |= {"minor": minor, "role": "control"}
+            conn.sendall(frame(HELLO, hello))
             while True:
                 try:
                     req = read_message(conn)
                 except ConnectionError:
                     return
-                result: dict[str, Any] = {"protocol": 1, "minor": minor, "client_id": 1, "role": "control"}
-                if req["cmd"] == "subscribe":
-                    result = {"streams": req["args"]["streams"]}
-                conn.sendall(frame(REPLY, {"id": req["id"], "ok": True, "result": result, "later": True}))
+                answer = {"streams": req["args"]["streams"]} if req["cmd"] == "subscribe" else result
+                conn.sendall(frame(REPLY, {"id": req["id"], "ok": True, "result": answer, "later": True}))
                 if req["cmd"] == "subscribe":
                     after_subscribe(conn)
 
@@ -113,24 +119,7 @@ def test_a_client_reads_on_past_what_a_later_minor_added(tmp_path: Path) -> None
 
 def test_a_daemon_that_predates_minor_versions_is_minor_zero(tmp_path: Path) -> None:
     sock = tmp_path / "older.sock"
-    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    server.bind(str(sock))
-    server.listen(1)
-
-    def serve() -> None:
-        conn, _ = server.accept()
-        with conn, server:
-            conn.sendall(frame(HELLO, {"protocol": 1, "server": "tofmatd 0.0.9", "capabilities": ["labels"],
-                                       "auth_required": False}))  # fmt: skip
-            req = read_message(conn)
-            conn.sendall(frame(REPLY, {"id": req["id"], "ok": True, "result": {"protocol": 1, "client_id": 1}}))
-            try:
-                read_message(conn)
-            except ConnectionError:
-                pass
-
-    t = threading.Thread(target=serve, daemon=True)
-    t.start()
+    t = scripted_daemon(sock, minor=None)
     with tofmat.Client(sock, reconnect=False) as c:
         assert c.hello["minor"] == 0 and c.role == "control"  # (no role field: every client controls)
     t.join(5.0)
