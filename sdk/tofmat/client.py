@@ -15,10 +15,11 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import numpy.typing as npt
@@ -239,6 +240,8 @@ class Client:
         self._reconnect = reconnect
         self._reconnect_timeout = reconnect_timeout
         self._streams: set[str] = set()
+        # Events that came while label_map()/depth() waited for theirs: next_event() hands them out first.
+        self._pending: deque[Event] = deque(maxlen=1024)
         self.reconnects = 0
         self._conn: _tofmat.ClientConnection | None = _tofmat.ClientConnection(self.address, self._token, timeout)
 
@@ -351,6 +354,11 @@ class Client:
     def next_event(self, timeout: float | None) -> Event | None:
         """The next event of the subscribed streams, or None if none comes within ``timeout``
         seconds (None: wait for one): for a program that keeps a schedule of its own (tofmat sort)."""
+        if self._pending:
+            return self._pending.popleft()
+        return self._next_from_daemon(timeout)
+
+    def _next_from_daemon(self, timeout: float | None) -> Event | None:
         deadline = None if timeout is None else time.monotonic() + max(0.0, timeout)
         while True:
             left = -1.0 if deadline is None else max(0.0, deadline - time.monotonic())
@@ -386,23 +394,39 @@ class Client:
                 yield e
 
     def label_map(self, timeout: float | None = 5.0) -> LabelMap:
-        """The next per-pixel label map (segmentation profile)."""
+        """The next per-pixel label map (segmentation profile). Other events that come meanwhile are
+        kept for next_event() and events(), not dropped."""
         if "label_map" not in self._streams:
             self.subscribe("label_map")
-        for e in self.events(timeout):
-            if isinstance(e, LabelMap):
-                return e
-        raise AssertionError("unreachable")
+        return self._wait_for(lambda e: isinstance(e, LabelMap), timeout)  # type: ignore[return-value]
 
     def depth(self, kind: str = "combined", timeout: float | None = 5.0) -> DepthImage:
-        """The next depth image of the profile's region: "80", "16", "120" or "combined"."""
+        """The next depth image of the profile's region: "80", "16", "120" or "combined". Other
+        events that come meanwhile are kept for next_event() and events(), not dropped."""
         stream = f"depth:{kind}"
         if stream not in self._streams:
             self.subscribe(stream)
-        for e in self.events(timeout):
-            if isinstance(e, DepthImage) and e.kind == kind:
+        return self._wait_for(lambda e: isinstance(e, DepthImage) and e.kind == kind, timeout)  # type: ignore[return-value]
+
+    def _wait_for(self, wanted: Callable[[Event], bool], timeout: float | None) -> Event:
+        """The first event (kept back ones first) that is ``wanted``; the others are kept, in order."""
+        for k, e in enumerate(self._pending):
+            if wanted(e):
+                del self._pending[k]
                 return e
-        raise AssertionError("unreachable")
+        deadline = None if timeout is None else time.monotonic() + timeout
+        kept: list[Event] = []
+        try:
+            while True:
+                left = None if deadline is None else max(0.0, deadline - time.monotonic())
+                event = self._next_from_daemon(left)
+                if event is None:
+                    raise DaemonTimeoutError(f"no event from tofmatd within {timeout} s")
+                if wanted(event):
+                    return event
+                kept.append(event)
+        finally:
+            self._pending.extend(kept)
 
 
 def daemon_binary() -> Path:

@@ -123,3 +123,29 @@ def test_a_daemon_that_predates_minor_versions_is_minor_zero(tmp_path: Path) -> 
     with tofmat.Client(sock, reconnect=False) as c:
         assert c.hello["minor"] == 0 and c.role == "control"  # (no role field: every client controls)
     t.join(5.0)
+
+
+def test_waiting_for_a_depth_image_keeps_the_events_that_came_first(tmp_path: Path) -> None:
+    # depth() and label_map() wait for their event; what comes meanwhile is kept, in order.
+    depth_meta = {"event": "depth", "frame": 8, "timestamp_ns": 2, "kind": "combined", "x0": 0, "y0": 0,
+                  "width": 2, "height": 1, "dtype": "float32"}  # fmt: skip
+
+    def script(conn: socket.socket) -> None:
+        conn.sendall(frame(EVENT, LABEL))
+        conn.sendall(frame(EVENT, {"event": "reset", "by": "button", "timestamp_ns": 3}))
+        conn.sendall(frame(EVENT, depth_meta, np.array([1.0, 2.0], "<f4").tobytes()))
+        conn.sendall(frame(EVENT, {**LABEL, "frame": 9}))
+
+    sock = tmp_path / "d.sock"
+    t = scripted_daemon(sock, minor=4, after_subscribe=script)
+    with tofmat.Client(sock, reconnect=False) as c:
+        c.subscribe("labels", "depth")
+        image = c.depth("combined", timeout=5.0)
+        assert image.frame == 8 and image.depth_mm.tolist() == [[1.0, 2.0]]
+        got = [c.next_event(5.0) for _ in range(3)]
+        assert isinstance(got[0], Label) and got[0].frame == 7
+        assert isinstance(got[1], ResetEvent)
+        assert isinstance(got[2], Label) and got[2].frame == 9
+        with pytest.raises(tofmat.DaemonTimeoutError):
+            c.label_map(timeout=0.2)
+    t.join(5.0)
