@@ -1,15 +1,11 @@
 #include "tofmat/daemon/reset_button.hpp"
 
 #include <poll.h>
-#include <sys/eventfd.h>
-#include <unistd.h>
 
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <stdexcept>
 #include <vector>
 
@@ -22,9 +18,7 @@ ResetButton::ResetButton(const ButtonOptions& options, std::shared_ptr<gpio::Bac
     : options_(options),
       backend_(std::move(backend)),
       on_press_(std::move(on_press)),
-      filter_({ms_to_ns(options.debounce_ms), ms_to_ns(options.hold_off_ms)}),
-      wake_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
-  if (!wake_fd_) throw std::runtime_error("reset button: eventfd failed");
+      filter_({ms_to_ns(options.debounce_ms), ms_to_ns(options.hold_off_ms)}) {
   for (const double v : {options.debounce_ms, options.hold_off_ms})
     if (!(v >= 0 && v <= 60'000) || !std::isfinite(v))
       throw std::invalid_argument("reset button: debounce and hold-off must be 0 to 60000 ms");
@@ -33,8 +27,7 @@ ResetButton::ResetButton(const ButtonOptions& options, std::shared_ptr<gpio::Bac
 }
 
 void ResetButton::wake() {
-  const std::uint64_t one = 1;
-  [[maybe_unused]] const auto n = ::write(wake_fd_.get(), &one, sizeof one);
+  wake_fd_.wake();
 }
 
 void ResetButton::run(const std::atomic<bool>& stop) {
@@ -44,17 +37,10 @@ void ResetButton::run(const std::atomic<bool>& stop) {
   while (!stop.load()) {
     // A press is confirmed `debounce` after its edge: wake then, or every
     // 200 ms (stop).
-    std::uint64_t now = protocol::monotonic_ns();
-    std::uint64_t until = now + 200'000'000ull;
-    if (const auto d = filter_.next_deadline()) until = std::min(until, std::max(*d, now));
-    const std::uint64_t wait = until - now;
-    timespec ts{static_cast<time_t>(wait / 1'000'000'000ull), static_cast<long>(wait % 1'000'000'000ull)};
-    if (::ppoll(fds, 2, &ts, nullptr) < 0 && errno != EINTR)
-      throw std::runtime_error(std::string("reset button: poll failed: ") + std::strerror(errno));
-    if (fds[0].revents & POLLIN) {
-      std::uint64_t v;
-      [[maybe_unused]] const auto n = ::read(wake_fd_.get(), &v, sizeof v);
-    }
+    std::uint64_t until = protocol::monotonic_ns() + 200'000'000ull;
+    if (const auto d = filter_.next_deadline()) until = std::min(until, *d);
+    protocol::poll_until(fds, 2, until);
+    if (fds[0].revents & POLLIN) wake_fd_.drain();
     edges.clear();
     input_->read_events(edges, 64);
     pressed.clear();

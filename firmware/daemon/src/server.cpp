@@ -3,7 +3,6 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
-#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -81,8 +80,6 @@ struct Server::Connection {
 
 Server::Server(ServerOptions options, Handler handler)
     : options_(std::move(options)), handler_(std::move(handler)), access_(access_options(options_)) {
-  wake_fd_ = protocol::Fd(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC));
-  if (!wake_fd_) throw protocol::SocketError("eventfd failed", errno);
   if (!options_.socket_path.empty()) {
     unix_ = protocol::listen_unix(options_.socket_path, options_.socket_mode);
     // The file we bound, to remove it at the end only if it is still this one.
@@ -119,8 +116,7 @@ Server::~Server() {
 }
 
 void Server::wake() {
-  const std::uint64_t one = 1;
-  [[maybe_unused]] const auto n = ::write(wake_fd_.get(), &one, sizeof one);
+  wake_fd_.wake();
 }
 
 void Server::publish(const std::string& stream, const protocol::Message& message) {
@@ -483,10 +479,7 @@ void Server::run(const std::atomic<bool>& stop) {
     const int timeout_ms = more ? 0 : static_cast<int>((resume - before + 999'999) / 1'000'000);
     const int r = ::poll(fds.data(), fds.size(), timeout_ms);
     if (r < 0 && errno != EINTR) throw protocol::SocketError("poll failed", errno);
-    if (fds[0].revents & POLLIN) {
-      std::uint64_t v;
-      [[maybe_unused]] const auto n = ::read(wake_fd_.get(), &v, sizeof v);
-    }
+    if (fds[0].revents & POLLIN) wake_fd_.drain();
     std::size_t k = 1;
     if (unix_ && (fds[k++].revents & POLLIN)) accept_from(unix_.get(), false);
     if (tcp_ && (fds[k++].revents & POLLIN)) accept_from(tcp_.get(), true);

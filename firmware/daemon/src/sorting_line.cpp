@@ -1,7 +1,6 @@
 #include "tofmat/daemon/sorting_line.hpp"
 
 #include <poll.h>
-#include <sys/eventfd.h>
 #include <unistd.h>
 
 #include <spdlog/spdlog.h>
@@ -76,10 +75,8 @@ SortingLine::SortingLine(const LineOptions& options, std::shared_ptr<gpio::Backe
     : options_(options),
       backend_(std::move(backend)),
       hooks_(std::move(hooks)),
-      filter_({ms_to_ns(options.debounce_ms), ms_to_ns(options.min_gap_ms)}),
-      wake_fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
+      filter_({ms_to_ns(options.debounce_ms), ms_to_ns(options.min_gap_ms)}) {
   const auto bad = [](const std::string& what) { throw std::invalid_argument("sorting line: " + what); };
-  if (!wake_fd_) bad("eventfd failed");
   if (options.barrier.empty()) bad("--line-barrier is needed (the light barrier's CHIP:LINE)");
   const bool encoder = !options.encoder_a.empty() || !options.encoder_b.empty();
   if (encoder == (options.speed_mm_s > 0))
@@ -154,8 +151,7 @@ SortingLine::SortingLine(const LineOptions& options, std::shared_ptr<gpio::Backe
 SortingLine::~SortingLine() = default;
 
 void SortingLine::wake() {
-  const std::uint64_t one = 1;
-  [[maybe_unused]] const auto n = ::write(wake_fd_.get(), &one, sizeof one);
+  wake_fd_.wake();
 }
 
 void SortingLine::label(const protocol::LabelEvent& e) {
@@ -165,7 +161,7 @@ void SortingLine::label(const protocol::LabelEvent& e) {
   l.material = e.state == "final" || e.state == "mixed" ? e.material : "";
   l.mixed = e.state == "mixed";
   l.distance = e.distance;
-  l.confident = !l.material.empty() && !l.mixed && (options_.max_distance <= 0 || e.distance <= options_.max_distance);
+  l.confident = !l.material.empty() && (options_.max_distance <= 0 || e.distance <= options_.max_distance);
   if (e.truth) l.truth = e.truth->material;
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
@@ -235,16 +231,10 @@ void SortingLine::run(const std::atomic<bool>& stop) {
     // Wake for the schedule's next step (to the nanosecond: ppoll), and at
     // least every 200 ms (status, stop).
     std::uint64_t until = now + 200'000'000ull;
-    if (const auto w = sorter_->next_wake(now)) until = std::min(until, std::max(*w, now));
-    if (const auto d = filter_.next_deadline()) until = std::min(until, std::max(*d, now));
-    const std::uint64_t wait = until - now;
-    timespec ts{static_cast<time_t>(wait / 1'000'000'000ull), static_cast<long>(wait % 1'000'000'000ull)};
-    if (::ppoll(fds.data(), fds.size(), &ts, nullptr) < 0 && errno != EINTR)
-      throw std::runtime_error(std::string("sorting line: poll failed: ") + std::strerror(errno));
-    if (fds[0].revents & POLLIN) {
-      std::uint64_t v;
-      [[maybe_unused]] const auto n = ::read(wake_fd_.get(), &v, sizeof v);
-    }
+    if (const auto w = sorter_->next_wake(now)) until = std::min(until, *w);
+    if (const auto d = filter_.next_deadline()) until = std::min(until, *d);
+    protocol::poll_until(fds.data(), fds.size(), until);
+    if (fds[0].revents & POLLIN) wake_fd_.drain();
     // Every input's edges, in the order they happened (the barrier's item
     // needs the belt's position at its edge).
     edges.clear();

@@ -7,6 +7,7 @@
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/eventfd.h>
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
@@ -57,6 +58,20 @@ bool poll_one(int fd, short events, int timeout_ms) {
 }
 
 }  // namespace
+
+WakeFd::WakeFd() : fd_(::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {
+  if (!fd_) throw SocketError("eventfd failed", errno);
+}
+
+void WakeFd::wake() {
+  const std::uint64_t one = 1;
+  [[maybe_unused]] const auto n = ::write(fd_.get(), &one, sizeof one);  // (full: a wake is pending anyway)
+}
+
+void WakeFd::drain() {
+  std::uint64_t v;
+  [[maybe_unused]] const auto n = ::read(fd_.get(), &v, sizeof v);
+}
 
 Fd::~Fd() { reset(); }
 
@@ -236,6 +251,13 @@ std::uint64_t monotonic_ns() {
   timespec ts{};
   ::clock_gettime(CLOCK_MONOTONIC, &ts);
   return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
+}
+
+void poll_until(::pollfd* fds, std::size_t count, std::uint64_t until_ns) {
+  const std::uint64_t now = monotonic_ns(), wait = until_ns > now ? until_ns - now : 0;
+  timespec ts{static_cast<time_t>(wait / 1'000'000'000ull), static_cast<long>(wait % 1'000'000'000ull)};
+  if (::ppoll(fds, static_cast<nfds_t>(count), &ts, nullptr) < 0 && errno != EINTR)
+    throw SocketError(std::string("poll failed: ") + std::strerror(errno), errno);
 }
 
 }  // namespace tofmat::protocol

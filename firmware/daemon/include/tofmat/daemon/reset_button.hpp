@@ -54,7 +54,7 @@ class ResetButton {
   std::unique_ptr<gpio::InputLine> input_;
   std::function<void(std::uint64_t)> on_press_;
   line::TriggerFilter filter_;
-  protocol::Fd wake_fd_;
+  protocol::WakeFd wake_fd_;
   std::atomic<std::uint64_t> presses_{0}, ignored_{0};
   mutable std::mutex error_mutex_;
   std::string error_;

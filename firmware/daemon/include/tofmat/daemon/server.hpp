@@ -97,7 +97,8 @@ class Server {
 
   ServerOptions options_;
   Handler handler_;
-  protocol::Fd unix_, tcp_, wake_fd_;
+  protocol::Fd unix_, tcp_;
+  protocol::WakeFd wake_fd_;
   std::pair<std::uint64_t, std::uint64_t> socket_file_{0, 0};  // (device, inode) of the socket file bound
   std::uint16_t tcp_port_ = 0;
   std::map<std::uint64_t, std::unique_ptr<Connection>> connections_;  // server thread only

@@ -96,7 +96,7 @@ class SortingLine {
   line::EncoderMotion* encoder_ = nullptr;  // motion_, when it is an encoder
   line::TriggerFilter filter_;
   std::unique_ptr<line::Sorter> sorter_;
-  protocol::Fd wake_fd_;
+  protocol::WakeFd wake_fd_;
   // From other threads, under inbox_mutex_.
   mutable std::mutex inbox_mutex_;
   std::vector<line::BurstLabel> labels_;

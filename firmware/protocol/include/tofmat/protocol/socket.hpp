@@ -7,6 +7,8 @@
 #include <stdexcept>
 #include <string>
 
+struct pollfd;  // <poll.h>
+
 namespace tofmat::protocol {
 
 class SocketError : public std::runtime_error {
@@ -38,6 +40,19 @@ class Fd {
 
  private:
   int fd_ = -1;
+};
+
+// An eventfd that wakes a thread blocked in poll from any other thread (the
+// server's, the sorting line's and the reset button's stop and inbox).
+class WakeFd {
+ public:
+  WakeFd();  // throws SocketError
+  int get() const { return fd_.get(); }
+  void wake();   // any thread; never blocks
+  void drain();  // the polling thread, once poll says it is readable
+
+ private:
+  Fd fd_;
 };
 
 // "host:port" (TCP) or anything else (a Unix socket path). A path containing
@@ -72,5 +87,9 @@ bool wait_writable(int fd, int timeout_ms);
 void write_all(int fd, const std::uint8_t* data, std::size_t size, int timeout_ms);
 
 std::uint64_t monotonic_ns();  // CLOCK_MONOTONIC: timestamps both sides compare
+// Waits (ppoll, to the nanosecond) until one of `fds` is ready or
+// monotonic_ns() reaches `until_ns`; a signal ends the wait early. Throws
+// SocketError if the poll fails.
+void poll_until(::pollfd* fds, std::size_t count, std::uint64_t until_ns);
 
 }  // namespace tofmat::protocol
