@@ -321,10 +321,22 @@ def _client_options(fn: F) -> F:
     return fn
 
 
+def _token(token_file: Path | None) -> str | None:
+    """The daemon's TCP token: the first line of its file, without the blanks around it."""
+    return token_file.read_text().splitlines()[0].strip() if token_file else None
+
+
+def _i2c_bus(bus: str) -> Any:
+    """A real I2C bus by number ("1": /dev/i2c-1) or device path (smbus2, `tofmat[hw]`)."""
+    from .hw import open_bus
+
+    return open_bus(int(bus) if bus.isdigit() else bus)
+
+
 def _connect(address: str, token_file: Path | None) -> Any:
     from .client import Client, ClientError
 
-    token = token_file.read_text().splitlines()[0].strip() if token_file else None
+    token = _token(token_file)
     try:
         return Client(address, token=token)
     except ClientError as e:
@@ -343,9 +355,9 @@ def _connect(address: str, token_file: Path | None) -> Any:
 def sort_cmd(address: str, token_file: Path | None, gates: tuple[str, ...], bus: str | None, pca_address: str,
              simulated: bool, seconds: float | None) -> None:  # fmt: skip
     """The diverter agent: moves each outlet's gate (a servo on a PCA9685) for tofmatd's sort decisions."""
-    from .hw import PCA9685, FakePCA9685Bus, Servo, open_bus
+    from .hw import FakePCA9685Bus
     from .line import parse_gate
-    from .tools.sort_agent import run_sort_agent
+    from .tools.sort_agent import gate_servos, run_sort_agent
 
     if simulated == (bus is not None):
         raise click.UsageError("give --bus N (the PCA9685's I2C bus) or --simulated")
@@ -354,10 +366,7 @@ def sort_cmd(address: str, token_file: Path | None, gates: tuple[str, ...], bus:
         addr = int(pca_address, 0)
     except ValueError as e:
         raise click.BadParameter(str(e)) from e
-    i2c = FakePCA9685Bus(addr) if simulated else open_bus(int(bus) if bus and bus.isdigit() else str(bus))
-    pca = PCA9685(i2c, addr)
-    pca.set_frequency(50)
-    servos = {g.outlet: Servo(pca, g.channel) for g in parsed}
+    servos = gate_servos(FakePCA9685Bus(addr) if simulated else _i2c_bus(str(bus)), parsed, addr)
     with _connect(address, token_file) as client:
         r = run_sort_agent(client, servos, parsed, seconds, echo=click.echo)
     click.echo(f"{r.decisions} decisions, {len(r.moves)} gate moves, {len(r.late)} too late to open in time")
@@ -376,7 +385,7 @@ def panel_cmd(address: str, token_file: Path | None, bus: str | None, oled_addre
               png: Path | None, seconds: float | None) -> None:  # fmt: skip
     """The box's front panel: tofmatd's label, confidence and state on an SSD1306 OLED."""
     from .client import Client
-    from .hw import SSD1306, FakeSSD1306Bus, open_bus
+    from .hw import SSD1306, FakeSSD1306Bus
     from .tools.panel_agent import run_panel
 
     if simulated == (bus is not None):
@@ -387,9 +396,9 @@ def panel_cmd(address: str, token_file: Path | None, bus: str | None, oled_addre
         addr = int(oled_address, 0)
     except ValueError as e:
         raise click.BadParameter(f"--oled-address: {e}") from e
-    token = token_file.read_text().splitlines()[0].strip() if token_file else None
+    token = _token(token_file)
     fake = FakeSSD1306Bus(addr) if simulated else None
-    i2c = fake or open_bus(int(bus) if bus and bus.isdigit() else str(bus))
+    i2c = fake or _i2c_bus(str(bus))
     display = SSD1306(i2c, addr)
     try:
         r = run_panel(lambda: Client(address, token=token, reconnect=False), display, seconds, echo=click.echo)

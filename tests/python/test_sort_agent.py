@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 
 from tofmat.client import SortDecision
-from tofmat.hw import PCA9685, FakePCA9685Bus, Servo
+from tofmat.hw import FakePCA9685Bus
 from tofmat.line import Gate, GateSchedule, parse_gate
 from tofmat.tools.line_demo import LineSetup
-from tofmat.tools.sort_agent import run_sort_agent
+from tofmat.tools.sort_agent import gate_servos, run_sort_agent
 
 from conftest import Daemon
 
@@ -82,10 +82,8 @@ def test_the_agent_has_each_gate_open_when_its_item_arrives(start: object, tmp_p
     setup = LineSetup(materials, rate_per_min=90.0)
     d: Daemon = start(setup.source(), "--profile", "sorting", *setup.daemon_args(), table=table)  # type: ignore[operator]
     bus = FakePCA9685Bus(clock=lambda: time.monotonic_ns() / 1e9)
-    pca = PCA9685(bus)
-    pca.set_frequency(50)
     gates = [Gate(m, k, travel_ms=120, hold_ms=100) for k, m in enumerate(materials)]
-    servos = {g.outlet: Servo(pca, g.channel) for g in gates}
+    servos = gate_servos(bus, gates)
     with d.client() as c:
         r = run_sort_agent(c, servos, gates, seconds=10.0)
     sorted_items = [f for f in r.fired if f.outlet in servos and f.fire_ns is not None]

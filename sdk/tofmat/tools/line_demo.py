@@ -22,10 +22,10 @@ from typing import Callable
 import numpy as np
 
 from ..client import Client, LineEvent, SortDecision
-from ..hw import PCA9685, FakePCA9685Bus, Servo
+from ..hw import FakePCA9685Bus
 from ..line import Gate
 from .live_demo import connect, start_daemon, stop_daemon_or_raise
-from .sort_agent import AgentResult, run_sort_agent
+from .sort_agent import AgentResult, gate_servos, run_sort_agent
 
 FRAME_S = 1.0 / 30.0
 
@@ -148,10 +148,8 @@ class _GateAgent:
 
     def __init__(self, socket: Path, setup: LineSetup, result: LineResult) -> None:
         self.bus = FakePCA9685Bus(clock=lambda: time.monotonic_ns() / 1e9)
-        pca = PCA9685(self.bus)
-        pca.set_frequency(50)
         self.gates = [Gate(m, k, travel_ms=120.0, hold_ms=100.0) for k, m in enumerate(setup.materials)]
-        self.servos = {g.outlet: Servo(pca, g.channel) for g in self.gates}
+        self.servos = gate_servos(self.bus, self.gates)
         self.socket, self.result = socket, result
         self.stop = threading.Event()
         self.failure: BaseException | None = None

@@ -12,8 +12,18 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from ..client import Client, LineEvent, SortDecision
-from ..hw import Servo
+from ..hw import PCA9685, I2CBus, Servo
 from ..line import Gate, GateMove, GateSchedule
+
+
+SERVO_HZ = 50  # hobby servos: a pulse every 20 ms
+
+
+def gate_servos(bus: I2CBus, gates: list[Gate], address: int = 0x40) -> dict[str, Servo]:
+    """Each gate's servo, by outlet, on the PCA9685 at ``address`` on ``bus`` (set to 50 Hz)."""
+    pca = PCA9685(bus, address)
+    pca.set_frequency(SERVO_HZ)
+    return {g.outlet: Servo(pca, g.channel) for g in gates}
 
 
 @dataclass
