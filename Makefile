@@ -62,7 +62,18 @@ build-python:
 check-db:
 	@test -d "$(DB)" || { echo "error: real database not found at $(DB) (set DB=...)" >&2; exit 1; }
 
-test: setup check-db build-cpp build-python typecheck test-cpp test-sanitize test-python
+test: setup check-db lint build-cpp build-python typecheck test-cpp test-sanitize test-python
+
+# Formatting and linting with the ecosystem's tools, configured in the repo: ruff for
+# Python (ruff.toml). `make format` applies the formatters.
+.PHONY: lint lint-python format
+lint: lint-python
+lint-python:
+	$(PYTHON) -m ruff format --check --diff .
+	$(PYTHON) -m ruff check .
+format:
+	$(PYTHON) -m ruff format .
+	$(PYTHON) -m ruff check --fix .
 
 # The SDK is fully typed (the extension through sdk/tofmat/_tofmat.pyi).
 typecheck:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """tofmat: material classification from Time-of-Flight depth distortion.
 
 Implements Tanaka et al., "Material Classification using Frequency- and
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
+from ._extras import MissingExtraError
 from ._tofmat import (
     SPEED_OF_LIGHT_MM_PER_NS,
     BinSpec,
@@ -32,17 +34,15 @@ from ._tofmat import (
     read_npy,
     unambiguous_range_mm,
 )
-
-from ._extras import MissingExtraError
-from .client import (  # noqa: E402  (after the extension it wraps)
+from .client import (
     AuthenticationError,
     Client,
     ClientError,
     CommandError,
-    NotPermittedError,
     ConnectionClosedError,
     DaemonTimeoutError,
     DaemonUnavailableError,
+    NotPermittedError,
     ProtocolError,
     ProtocolVersionError,
 )
@@ -53,28 +53,28 @@ except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0+unknown"
 
 __all__ = [
-    "AuthenticationError",
-    "Client",
-    "ClientError",
-    "CommandError",
-    "NotPermittedError",
-    "ConnectionClosedError",
-    "DaemonTimeoutError",
-    "DaemonUnavailableError",
-    "ProtocolError",
-    "ProtocolVersionError",
     "SPEED_OF_LIGHT_MM_PER_NS",
+    "AuthenticationError",
     "BinSpec",
     "ClassificationResult",
     "Classifier",
+    "Client",
+    "ClientError",
+    "CommandError",
+    "ConnectionClosedError",
+    "DaemonTimeoutError",
+    "DaemonUnavailableError",
     "DepthBinAccumulator",
     "ExemplarTable",
     "FormatError",
     "MissingExtraError",
+    "NotPermittedError",
+    "ProtocolError",
+    "ProtocolVersionError",
     "RankedMatch",
     "UsbError",
+    "__version__",
     "depth_from_phase_mm",
     "read_npy",
     "unambiguous_range_mm",
-    "__version__",
 ]

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Optional dependencies: what needs which extra, and one clear error when it is not installed.
 
 The core (``import tofmat``, the client, tables, the classifier and their commands) needs numpy and

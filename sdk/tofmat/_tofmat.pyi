@@ -1,6 +1,8 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # Type stubs for the C++ extension (bindings/). Keep in step with bindings/*.cpp.
+from collections.abc import Sequence
 from os import PathLike
-from typing import Any, Sequence, overload
+from typing import Any, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -277,7 +279,6 @@ class sim:
         incidence_deg: float = 0.0,
         method: str = "interp",
     ) -> npt.NDArray[np.float32]: ...
-
     @staticmethod
     def stage_sweep(
         renderer: sim.Renderer,

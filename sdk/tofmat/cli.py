@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The `tofmat` command line."""
 
 from __future__ import annotations
@@ -5,13 +6,14 @@ from __future__ import annotations
 import json
 import logging
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable, TypeVar
+from typing import Any, TypeVar
 
 import click
 import numpy as np
 
-from . import Classifier, ClassificationResult, ExemplarTable, __version__
+from . import ClassificationResult, Classifier, ExemplarTable, __version__
 from ._extras import MissingExtraError, require_pyplot
 from .tools.tables import open_table
 
@@ -63,9 +65,13 @@ def table() -> None:
 
 @table.command("import")
 @click.argument("directory", type=click.Path(exists=True, file_okay=False, path_type=Path))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file to write (.tmx).")
+@click.option(
+    "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file to write (.tmx)."
+)
 @click.option("--bin-start", default=600.0, show_default=True, help="Left edge of the first bin, mm.")
-@click.option("--bin-stop", default=1200.0, show_default=True, help="Left edge of the last bin, mm (numpy.linspace convention).")
+@click.option(
+    "--bin-stop", default=1200.0, show_default=True, help="Left edge of the last bin, mm (numpy.linspace convention)."
+)
 @user_errors
 def table_import(directory: Path, output: Path, bin_start: float, bin_stop: float) -> None:
     """Import a folder of <material>.npy curves into a compact table file."""
@@ -83,7 +89,7 @@ def table_summary(path: Path, t: ExemplarTable) -> dict[str, Any]:
         "path": str(path),
         "bytes": path.stat().st_size if path.is_file() else None,
         "materials": t.materials,
-        "valid_elements": dict(zip(t.materials, t.valid_counts)),
+        "valid_elements": dict(zip(t.materials, t.valid_counts, strict=True)),
         "rows": [{"freq_mhz": f, "ref_freq_mhz": r} for f, r in t.rows],
         "bins": {"start_mm": t.bins.start_mm, "width_mm": t.bins.width_mm, "count": t.bins.count},
         "quant_step_mm": t.quant_step_mm,
@@ -102,12 +108,17 @@ def table_info(path: Path, as_json: bool) -> None:
         click.echo(json.dumps(s, indent=2))
         return
     b = t.bins
-    click.echo(f"{path}: {len(t)} materials x {t.n_rows} rows x {t.n_bins} bins" + (f", {s['bytes']} bytes" if s["bytes"] else ""))
-    click.echo(f"bins: {b.count} from {b.start_mm:g} mm, width {b.width_mm:.6g} mm (to {b.start_mm + b.count * b.width_mm:g} mm)")
+    click.echo(
+        f"{path}: {len(t)} materials x {t.n_rows} rows x {t.n_bins} bins"
+        + (f", {s['bytes']} bytes" if s["bytes"] else "")
+    )
+    click.echo(
+        f"bins: {b.count} from {b.start_mm:g} mm, width {b.width_mm:.6g} mm (to {b.start_mm + b.count * b.width_mm:g} mm)"
+    )
     click.echo("rows: " + ", ".join(f"d({f} MHz) - d({r} MHz)" for f, r in t.rows))
     click.echo(f"quantisation step: {t.quant_step_mm:g} mm" if t.quant_step_mm else "not quantised (float values)")
     per_mat = t.n_rows * t.n_bins
-    for name, n in zip(t.materials, t.valid_counts):
+    for name, n in zip(t.materials, t.valid_counts, strict=True):
         click.echo(f"  {name:<14s} {n:5d}/{per_mat} valid")
 
 
@@ -117,12 +128,21 @@ def result_dict(r: ClassificationResult, top: int) -> dict[str, Any]:
         "index": r.index,
         "distance": r.distance,
         "valid": r.valid,
-        "ranking": [{"material": m.material, "index": m.index, "distance": m.distance, "valid": m.valid} for m in r.ranking[:top]],
+        "ranking": [
+            {"material": m.material, "index": m.index, "distance": m.distance, "valid": m.valid}
+            for m in r.ranking[:top]
+        ],
     }
 
 
 @main.command()
-@click.option("--table", "table_path", required=True, type=click.Path(exists=True, path_type=Path), help="Table file (.tmx) or folder of .npy curves.")
+@click.option(
+    "--table",
+    "table_path",
+    required=True,
+    type=click.Path(exists=True, path_type=Path),
+    help="Table file (.tmx) or folder of .npy curves.",
+)
 @click.argument("query", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--materials", help="Comma-separated candidate materials (default: all).")
 @click.option("--top", default=5, show_default=True, help="Ranking entries to print.")
@@ -168,7 +188,13 @@ def plot_table_cmd(path: Path, output: Path) -> None:
 
 
 @main.command()
-@click.option("--table", "table_path", required=True, type=click.Path(exists=True, path_type=Path), help="Table file or .npy folder.")
+@click.option(
+    "--table",
+    "table_path",
+    required=True,
+    type=click.Path(exists=True, path_type=Path),
+    help="Table file or .npy folder.",
+)
 @click.option("--windows", default="1,3,10,30,100", show_default=True, help="Window lengths in bins.")
 @click.option("--noise", default=0.3, show_default=True, help="Gaussian noise sigma, mm.")
 @click.option("--per-material", default=40, show_default=True, help="Windows per material and length.")
@@ -188,7 +214,13 @@ def bench(table_path: Path, windows: str, noise: float, per_material: int, seed:
 
 
 @main.command("sweeps")
-@click.option("--table", "table_path", required=True, type=click.Path(exists=True, path_type=Path), help="Table file or .npy folder.")
+@click.option(
+    "--table",
+    "table_path",
+    required=True,
+    type=click.Path(exists=True, path_type=Path),
+    help="Table file or .npy folder.",
+)
 @click.option("--sweeps", default=8, show_default=True)
 @click.option("--sweep-bins", default=60, show_default=True, help="Depth bins one sweep passes through.")
 @click.option("--frames-per-bin", default=2, show_default=True)
@@ -459,7 +491,9 @@ def status(address: str, token_file: Path | None) -> None:
 
 
 @main.command()
-@click.option("--source", required=True, help="kinect[:SERIAL] | sim[:SCENE,...] | replay:FILE (named: never a default)")
+@click.option(
+    "--source", required=True, help="kinect[:SERIAL] | sim[:SCENE,...] | replay:FILE (named: never a default)"
+)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Recording file.")
 @click.option("--frames", default=30, show_default=True, help="Frames to record (2.6 MB each).")
 @click.option("--timeout", default=60.0, show_default=True, help="Seconds to wait for them.")
@@ -492,8 +526,9 @@ def devices(as_json: bool) -> None:
         state = "ok" if d["accessible"] else f"not usable: {d['problem']}"
         click.echo(f"Kinect v2 045e:{d['product_id']:04x} at USB {d['port']} serial {d['serial'] or '?'} ({state})")
     if not found:
-        raise click.ClickException("no Kinect v2 found (USB 045e:02d8 or 045e:02c4); is it plugged into a USB 3 port "
-                                   "and powered?")
+        raise click.ClickException(
+            "no Kinect v2 found (USB 045e:02d8 or 045e:02c4); is it plugged into a USB 3 port and powered?"
+        )
     if not any(d["accessible"] for d in found):
         raise click.ClickException(f"no usable Kinect v2: {found[0]['problem']}")
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The Python client of tofmatd, built on the C++ client (firmware/protocol) through pybind11.
 
 >>> import tofmat
@@ -16,10 +17,11 @@ import json
 import os
 import time
 from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,7 +40,18 @@ from ._tofmat import (
 )
 
 DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
-STREAMS = ("labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined", "sort", "line", "reset")
+STREAMS = (
+    "labels",
+    "label_map",
+    "device",
+    "depth:80",
+    "depth:16",
+    "depth:120",
+    "depth:combined",
+    "sort",
+    "line",
+    "reset",
+)
 
 
 @dataclass(frozen=True)
@@ -452,18 +465,18 @@ __all__ = [
     "ConnectionClosedError",
     "DaemonTimeoutError",
     "DaemonUnavailableError",
-    "NotPermittedError",
     "DepthImage",
     "DeviceEvent",
-    "SortDecision",
-    "LineEvent",
-    "ResetEvent",
     "Event",
     "Label",
     "LabelMap",
+    "LineEvent",
+    "NotPermittedError",
     "ProtocolError",
     "ProtocolVersionError",
     "Rank",
+    "ResetEvent",
+    "SortDecision",
     "Truth",
     "daemon_binary",
 ]

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Diagnostics behind the session drift (docs/simulator.md, "Each capture's nuisance terms").
 
 With the device fixed at a fit (by default the offsets-only fit of 2026-11-23, git ee163b5), every
@@ -59,7 +60,7 @@ def install(family: str, knots: int) -> None:
         if kind == "mixture":
             w = np.asarray(material["w"], float)
             k = np.ones_like(omega, dtype=complex)
-            for wk, tk in zip(w, taus_ns):
+            for wk, tk in zip(w, taus_ns, strict=True):
                 k = k + wk / (1.0 + 1j * omega * tk)
             return rho * k / (1.0 + w.sum())
         lg = np.log10(np.maximum(np.abs(omega) / (2 * math.pi), 1e-9))
@@ -142,7 +143,7 @@ def fitted_state(names: list[str], dev: dict[str, Any], lib: dict[str, Any]) -> 
         st[("lt2", i)] = math.log10(m.get("tau2_ps", 1000.0))
         st[("noise", i)], st[("lr", i)] = m.get("noise_mm", 0.0), math.log10(m["albedo"])
         st[("o0", i)], st[("o1", i)] = m["fit"]["offsets_mm"]
-        for k, t in zip(cal.SESSION_KEYS, m["fit"].get("session", (0.0, 0.0, 0.0))):
+        for k, t in zip(cal.SESSION_KEYS, m["fit"].get("session", (0.0, 0.0, 0.0)), strict=True):
             st[(k, i)] = t
     return st, kinds
 
@@ -181,8 +182,10 @@ def main() -> None:
         got.append(best)
         print(f"{names[i]:12s} {kinds[i]:11s} {base[i]:.3f}  {a.family} {best:.3f}", flush=True)
     g = np.array(got)
-    print(f"median: fitted kinds {np.median(base):.3f} mm, {a.family} {np.median(g):.3f} mm, "
-          f"the better of the two per material {np.median(np.minimum(g, base)):.3f} mm")
+    print(
+        f"median: fitted kinds {np.median(base):.3f} mm, {a.family} {np.median(g):.3f} mm, "
+        f"the better of the two per material {np.median(np.minimum(g, base)):.3f} mm"
+    )
 
 
 if __name__ == "__main__":

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The box's Debian packages (make package), checked as an administrator would use them.
 
 `make package-test` runs this file with TOFMAT_DEB_AMD64 and TOFMAT_DEB_ARM64 naming the two

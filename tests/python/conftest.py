@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Shared fixtures of the Python test suite.
 
 The real Kinect v2 database (29 materials) is the ground truth of the project: tests that
@@ -11,9 +12,9 @@ import os
 import signal
 import subprocess
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -121,8 +122,9 @@ class Daemon:
 def start(tmp_path: Path, sim_table: Path) -> Iterator[Callable[..., Daemon]]:
     started: list[Daemon] = []
 
-    def _start(source: str, *args: str, table: Path | None = None, name: str = "d",
-               socket_dir: Path | None = None) -> Daemon:
+    def _start(
+        source: str, *args: str, table: Path | None = None, name: str = "d", socket_dir: Path | None = None
+    ) -> Daemon:
         sock, log = (socket_dir or tmp_path) / f"{name}.sock", tmp_path / f"{name}.log"
         cmd = [str(daemon_binary()), "--source", source, "--table", str(table or sim_table), "--socket", str(sock),
                "--sim-data", str(sim_data_dir()), *args]  # fmt: skip

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Classifier API and Eq. (12) partial matching, against an independent numpy reference."""
 
 from __future__ import annotations
@@ -29,7 +30,10 @@ def eq12_reference(query: np.ndarray, features: np.ndarray) -> tuple[np.ndarray,
 
 
 def check_against_reference(
-    result: tofmat.ClassificationResult, query: np.ndarray, table: tofmat.ExemplarTable, candidates: list[int] | None = None
+    result: tofmat.ClassificationResult,
+    query: np.ndarray,
+    table: tofmat.ExemplarTable,
+    candidates: list[int] | None = None,
 ) -> None:
     d, n = eq12_reference(query, table.features)
     cand = list(range(len(table))) if candidates is None else candidates
@@ -97,10 +101,12 @@ def test_classify_batch_equals_classify(real_table, real_clf, rng) -> None:
     qs = np.where(keep, qs, np.nan).astype(np.float32)
     batch = real_clf.classify_batch(qs)
     assert isinstance(batch, list) and len(batch) == n
-    for q, b in zip(qs, batch):
+    for q, b in zip(qs, batch, strict=True):
         s = real_clf.classify(q)
         assert (b.material, b.index, b.distance, b.valid) == (s.material, s.index, s.distance, s.valid)
-        assert [(m.index, m.distance, m.valid) for m in b.ranking] == [(m.index, m.distance, m.valid) for m in s.ranking]
+        assert [(m.index, m.distance, m.valid) for m in b.ranking] == [
+            (m.index, m.distance, m.valid) for m in s.ranking
+        ]
     assert real_clf.classify_batch(np.empty((0, 2, 200), np.float32)) == []
 
 
@@ -301,7 +307,9 @@ def test_candidate_without_common_element_is_skipped_real_table(real_table, real
     names = [x.material for x in r.ranking]
     assert "paper" not in names
     assert r.material == "alumi"
-    assert len(names) == sum(1 for i in range(len(real_table)) if not np.isnan(real_table.features[i][:, missing]).all())
+    assert len(names) == sum(
+        1 for i in range(len(real_table)) if not np.isnan(real_table.features[i][:, missing]).all()
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -386,7 +394,9 @@ def test_candidate_sharing_no_element_is_skipped_and_none_is_error() -> None:
     with pytest.raises(ValueError, match="shares no valid element"):
         clf.classify(q)
     with pytest.raises(ValueError, match="shares no valid element"):
-        tofmat.Classifier(t, materials=["left"]).classify(np.where(np.arange(n_bins) >= 4, 1.0, np.nan)[None].astype(np.float32))
+        tofmat.Classifier(t, materials=["left"]).classify(
+            np.where(np.arange(n_bins) >= 4, 1.0, np.nan)[None].astype(np.float32)
+        )
 
 
 def test_ties_are_broken_by_the_lower_index() -> None:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The `tofmat` command line, run as a user runs it: a subprocess of the installed entry point."""
 
 from __future__ import annotations
@@ -129,7 +130,9 @@ def test_classify_batch_query(cli_table: Path, real_table, tmp_path: Path, rng) 
 
 def test_classify_with_materials(cli_table: Path, real_table, tmp_path: Path) -> None:
     np.save(tmp_path / "q.npy", real_table.features[real_table.index_of("copper")])
-    out = json.loads(run("classify", "--table", cli_table, tmp_path / "q.npy", "--json", "--materials", "pvc,epvc").stdout)
+    out = json.loads(
+        run("classify", "--table", cli_table, tmp_path / "q.npy", "--json", "--materials", "pvc,epvc").stdout
+    )
     assert out["material"] in ("pvc", "epvc")
     assert {x["material"] for x in out["ranking"]} == {"pvc", "epvc"}
     p = run("classify", "--table", cli_table, tmp_path / "q.npy", "--materials", "pvc,granite", ok=False)
@@ -188,7 +191,9 @@ def test_table_import_errors_are_one_line(tmp_path: Path) -> None:
 
 
 def test_table_import_into_missing_folder_is_one_line(db_dir: Path, tmp_path: Path) -> None:
-    assert_clean_error(run("table", "import", db_dir, "-o", tmp_path / "no" / "x.tmx", ok=False), "no", "cannot", "No such")
+    assert_clean_error(
+        run("table", "import", db_dir, "-o", tmp_path / "no" / "x.tmx", ok=False), "no", "cannot", "No such"
+    )
 
 
 def test_plot_table_writes_png(cli_table: Path, tmp_path: Path) -> None:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """tofmatd end to end: the daemon on the simulated camera, the Python client over its socket.
 
 Every test starts its own tofmatd (the binary shipped in the SDK) on a fresh socket and stops it
@@ -9,8 +10,8 @@ a hung test.
 from __future__ import annotations
 
 import json
-import re
 import os
+import re
 import shutil
 import signal
 import socket
@@ -18,18 +19,17 @@ import struct
 import subprocess
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pytest
+from conftest import SIM_TABLE_MATERIALS as MATERIALS
+from conftest import Daemon
 
 import tofmat
 from tofmat.client import DeviceEvent, Label, LabelMap, daemon_binary, sim_data_dir
-
-from conftest import SIM_TABLE_MATERIALS as MATERIALS
-from conftest import Daemon
 
 
 def sweep(materials: list[str], frames: int = 30, gap: int = 6, extra: str = "") -> str:
@@ -186,7 +186,7 @@ def test_client_killed_mid_message(start: Callable[..., Daemon], tmp_path: Path)
         time.sleep(0.3)
         p.kill()
         p.wait()
-        seen = [label.frame for _, label in zip(range(10), good.labels(timeout=30))]
+        seen = [label.frame for _, label in zip(range(10), good.labels(timeout=30), strict=True)]
         assert len(seen) == 10
         assert good.status()["clients"]["clients"] == 1
 
@@ -278,7 +278,9 @@ def test_sighup_with_a_corrupt_table_keeps_the_old_one(start: Callable[..., Daem
 # --- commands and profiles --------------------------------------------------------------------
 
 
-def test_commands_refuse_bad_input_and_keep_serving(start: Callable[..., Daemon], tmp_path: Path, sim_table: Path) -> None:
+def test_commands_refuse_bad_input_and_keep_serving(
+    start: Callable[..., Daemon], tmp_path: Path, sim_table: Path
+) -> None:
     d = start(sweep(["cork"]))
     with d.client() as c:
         with pytest.raises(tofmat.CommandError) as e:
@@ -341,7 +343,7 @@ def test_segmentation_label_map(start: Callable[..., Daemon]) -> None:
         assert set(np.unique(m.labels)) <= {0, 1, 2, LabelMap.NO_LABEL}
         # One position per pixel (m = 1) is the weakest feature (the paper's 57 %): most pixels, not all.
         assert m.truth_accuracy is not None and m.truth_accuracy > 0.7
-        for material, (x0, x1) in zip(("acryl", "cork", "paper"), ((16, 168), (180, 332), (344, 496))):
+        for material, (x0, x1) in zip(("acryl", "cork", "paper"), ((16, 168), (180, 332), (344, 496)), strict=True):
             region = m.labels[32:204, x0:x1]
             labelled = region[region != LabelMap.NO_LABEL]
             assert np.bincount(labelled).argmax() == m.materials.index(material)
@@ -460,7 +462,14 @@ def test_load_table_reads_only_regular_files_inside_the_table_directory(start: C
     with d.client() as c:
         # Outside the directory: the same refusal whether the file exists or not.
         texts = []
-        for name in (str(secret), str(tmp_path / "nothing.tmx"), "../secret.tmx", "../nothing.tmx", "link.tmx", "/etc/shadow"):
+        for name in (
+            str(secret),
+            str(tmp_path / "nothing.tmx"),
+            "../secret.tmx",
+            "../nothing.tmx",
+            "link.tmx",
+            "/etc/shadow",
+        ):
             with pytest.raises(tofmat.CommandError) as e:
                 c.load_table(name)
             assert e.value.code == "invalid_argument" and "not in the table directory" in str(e.value), str(e.value)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """tofmatd against clients of other local users (issue 16, cases 7 and 8).
 
 The daemon runs as this test's user (root in CI); the other user is a forked child that drops to
@@ -19,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from conftest import Daemon
 
 import tofmat
-from conftest import Daemon
 
 OTHER_UID = 12345  # no such user here: a plain uid, no supplementary groups
 SOURCE = "sim:static,material=cork,depth=900,realtime=1"

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Issue 16's attacks on tofmatd, each while a well-behaved subscriber is measured.
 
 This runs tests/soak/daemon_attacks.py's bench for a few seconds an attack (the figures it prints are

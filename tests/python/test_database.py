@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The real 29-material Kinect v2 database: import, content, and classification accuracy."""
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ def test_materials_are_the_file_names(real_table: tofmat.ExemplarTable, db_files
 
 def test_missing_bins_only_in_paper_plaster_fakeapple(real_table: tofmat.ExemplarTable) -> None:
     full = real_table.n_rows * real_table.n_bins
-    counts = dict(zip(real_table.materials, real_table.valid_counts))
+    counts = dict(zip(real_table.materials, real_table.valid_counts, strict=True))
     for name, n in counts.items():
         if name in MATERIALS_WITH_MISSING:
             assert n < full, name
@@ -86,7 +87,9 @@ def test_every_full_curve_classifies_as_itself(real_table: tofmat.ExemplarTable,
         assert all(m.distance > 0 for m in r.ranking[1:]), name
 
 
-def _window_accuracy(table: tofmat.ExemplarTable, clf: tofmat.Classifier, length: int, seed: int) -> tuple[float, int, int]:
+def _window_accuracy(
+    table: tofmat.ExemplarTable, clf: tofmat.Classifier, length: int, seed: int
+) -> tuple[float, int, int]:
     """Accuracy over random_windows(per_material=40, noise 0.3 mm), windows with no valid element dropped."""
     rng = np.random.default_rng(seed)
     windows = list(random_windows(table, length, 0.3, 40, rng))
@@ -97,7 +100,7 @@ def _window_accuracy(table: tofmat.ExemplarTable, clf: tofmat.Classifier, length
     for w in kept:
         assert np.count_nonzero(~np.isnan(w.query).all(axis=0)) <= length
     results = clf.classify_batch(np.stack([w.query for w in kept]))
-    correct = sum(r.index == w.material for r, w in zip(results, kept))
+    correct = sum(r.index == w.material for r, w in zip(results, kept, strict=True))
     return correct / len(kept), correct, len(kept)
 
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The SDK's dependency split: the core (numpy, click) works without the optional extras.
 
 `pip install ./sdk` installs numpy and click only; scipy and matplotlib come with the `sim`, `plot`
@@ -22,8 +23,8 @@ import sys
 import textwrap
 import time
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pytest

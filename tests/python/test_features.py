@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Depth bins (BinSpec, DepthBinAccumulator) and per-frequency depth, Eq. (1)."""
 
 from __future__ import annotations
@@ -41,7 +42,9 @@ def test_depth_from_phase_wraps_modulo_2pi(rng) -> None:
         for phase in rng.uniform(0, 2 * math.pi, 20):
             d = tofmat.depth_from_phase_mm(float(phase), f)
             for k in (-3, -1, 1, 2, 10):
-                assert tofmat.depth_from_phase_mm(float(phase + 2 * math.pi * k), f) == pytest.approx(d, rel=1e-9, abs=1e-9)
+                assert tofmat.depth_from_phase_mm(float(phase + 2 * math.pi * k), f) == pytest.approx(
+                    d, rel=1e-9, abs=1e-9
+                )
     assert tofmat.depth_from_phase_mm(-math.pi, 120.0) == pytest.approx(625.0)
     assert tofmat.depth_from_phase_mm(3 * math.pi, 120.0) == pytest.approx(625.0)
     assert tofmat.depth_from_phase_mm(0.0, 120.0) == 0.0
@@ -97,12 +100,22 @@ def test_binspec_lower_edges_belong_to_their_bin() -> None:
     for b in (tofmat.BinSpec.linspace(600.0, 1200.0, 200), tofmat.BinSpec(0.3, 0.1, 1000)):
         edges = b.edges_mm
         wrong = [j for j in range(b.count) if b.index_of(float(edges[j])) != j]
-        assert wrong == [], f"{b}: index_of(edges_mm[j]) != j for {len(wrong)} bins, first j={wrong[:5]} " \
-                            f"(index_of(edges_mm[{wrong[0] if wrong else 0}]) = {b.index_of(float(edges[wrong[0]])) if wrong else ''})"
+        assert wrong == [], (
+            f"{b}: index_of(edges_mm[j]) != j for {len(wrong)} bins, first j={wrong[:5]} "
+            f"(index_of(edges_mm[{wrong[0] if wrong else 0}]) = {b.index_of(float(edges[wrong[0]])) if wrong else ''})"
+        )
 
 
 @pytest.mark.parametrize(
-    "args", [(600.0, 0.0, 10), (600.0, -1.0, 10), (600.0, math.nan, 10), (math.inf, 1.0, 10), (600.0, 1.0, 0), (600.0, 1.0, 65536)]
+    "args",
+    [
+        (600.0, 0.0, 10),
+        (600.0, -1.0, 10),
+        (600.0, math.nan, 10),
+        (math.inf, 1.0, 10),
+        (600.0, 1.0, 0),
+        (600.0, 1.0, 65536),
+    ],
 )
 def test_binspec_rejects_bad_specs(args) -> None:
     with pytest.raises(ValueError):
@@ -172,7 +185,7 @@ def test_accumulator_add_many(rng) -> None:
     np.testing.assert_allclose(acc.query(), expected, rtol=1e-6, atol=1e-6)
     # add_many equals repeated add.
     acc2 = tofmat.DepthBinAccumulator(bins, 2)
-    for d, v in zip(depths, values):
+    for d, v in zip(depths, values, strict=True):
         acc2.add(float(d), v)
     np.testing.assert_array_equal(acc2.query(), acc.query())
 

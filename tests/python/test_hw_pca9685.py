@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """tofmat.hw.PCA9685 and Servo against the simulated chip (FakePCA9685Bus), and opening a real bus.
 
 The fake models the PCA9685 at register level from the chip's facts (its register constants are its
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from tofmat.hw import FakeChipError, FakePCA9685Bus, ManualClock, PCA9685, Servo, open_bus
+from tofmat.hw import PCA9685, FakeChipError, FakePCA9685Bus, ManualClock, Servo, open_bus
 
 ADDR = 0x40
 MODE1, MODE2, PRE_SCALE = 0x00, 0x01, 0xFE
@@ -76,7 +77,7 @@ def test_fake_ignores_prescale_written_while_awake(bus: FakePCA9685Bus, clock: M
 def test_fake_without_auto_increment_puts_a_block_in_the_first_register(bus: FakePCA9685Bus) -> None:
     bus.write_byte_data(ADDR, MODE1, 0x01)  # awake, AI clear: as a driver that never set AI leaves it
     bus.write_i2c_block_data(ADDR, led(0), [0, 0, 205, 0])  # meant: ON 0, OFF 205
-    assert list(bus.registers[led(0):led(0) + 4]) == [0, 0, 0, 0x10]  # every byte went to LED0_ON_L
+    assert list(bus.registers[led(0) : led(0) + 4]) == [0, 0, 0, 0x10]  # every byte went to LED0_ON_L
     assert bus.pulse_us(0) is None  # still full off: the pulse never arrived
     assert bus.read_i2c_block_data(ADDR, led(0) + 3, 3) == [0x10] * 3  # reads repeat one register too
     bus.write_byte_data(ADDR, MODE1, 0x01 | AI)
@@ -274,7 +275,7 @@ def test_servo_calibration(pca50: PCA9685, bus: FakePCA9685Bus) -> None:
         assert gate.angle == angle
     before = len(bus.history)
     for angle in (-45.1, 46, math.nan):
-        with pytest.raises(ValueError, match="outside the calibrated range|finite"):
+        with pytest.raises(ValueError, match=r"outside the calibrated range|finite"):
             gate.move_to(angle)
     assert len(bus.history) == before and gate.angle == 22.5  # refused, not clamped: the chip untouched
     gate.release()

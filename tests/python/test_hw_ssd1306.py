@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """tofmat.hw.SSD1306 and render_text against the simulated panel (FakeSSD1306Bus).
 
 The fake decodes the command stream and keeps the display memory as the chip would (its command
@@ -170,10 +171,10 @@ def test_text_lands_in_its_rows(panel: SSD1306, bus: FakeSSD1306Bus) -> None:
         band = set(range(i * step, (i + 1) * step - 1))  # the last row of each line stays blank
         alone = render_text([""] * i + [line])
         assert lit_rows(alone) and lit_rows(alone) <= band, line
-        assert np.array_equal(image[i * step:(i + 1) * step], alone[i * step:(i + 1) * step])
-    assert not image[len(lines) * step:].any()  # nothing below the last line
+        assert np.array_equal(image[i * step : (i + 1) * step], alone[i * step : (i + 1) * step])
+    assert not image[len(lines) * step :].any()  # nothing below the last line
     # The same line one line lower is the same pixels one line-height lower.
-    assert np.array_equal(render_text(["", "tracking"])[step:], render_text(["tracking"])[:H - step])
+    assert np.array_equal(render_text(["", "tracking"])[step:], render_text(["tracking"])[: H - step])
     panel.show(image)
     assert np.array_equal(bus.frame(), image)
     assert H // step >= 5

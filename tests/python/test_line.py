@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The sorting line end to end on the simulated belt (issue 17): tofmatd --gpio sim with
 --source sim:belt, watched through the Python client's `sort` and `line` streams.
 
@@ -12,18 +13,16 @@ from __future__ import annotations
 
 import subprocess
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
+from conftest import Daemon
 
 import tofmat
 from tofmat.client import daemon_binary, sim_data_dir
 from tofmat.tools.line_demo import LineResult, LineSetup, run_line, summary
-
-from conftest import Daemon
-
 
 MATERIALS = ("acryl", "copper", "silicone")  # (told apart at one depth: tofmat.tools.line_demo.LineSetup)
 
@@ -46,7 +45,7 @@ def line_run(line_table: Path) -> tuple[LineSetup, LineResult]:
 
 
 def test_every_item_is_decided_once_and_pushed_once_on_time(line_run: tuple[LineSetup, LineResult]) -> None:
-    setup, r = line_run
+    _setup, r = line_run
     assert r.items >= 12, f"only {r.items} items in 12 s at 90/min"
     items = [d.item for d in r.decided]
     assert items == sorted(set(items)), "an item decided twice, or out of order"
@@ -116,7 +115,9 @@ def test_the_camera_lost_mid_run_sends_items_to_reject_until_it_is_back(line_tab
     assert r.status["device"]["state"] == "streaming"
 
 
-def test_a_clients_trigger_is_refused_while_the_barrier_triggers(start: Callable[..., Daemon], line_table: Path) -> None:
+def test_a_clients_trigger_is_refused_while_the_barrier_triggers(
+    start: Callable[..., Daemon], line_table: Path
+) -> None:
     setup = LineSetup(MATERIALS)
     d = start(setup.source(), "--profile", "sorting", *setup.daemon_args(), table=line_table)
     with d.client() as c:
@@ -142,7 +143,7 @@ def test_the_line_refuses_what_cannot_work(tmp_path: Path, line_table: Path) -> 
     real = [a.replace("sim:", "pinctrl-rp1:") if a.startswith("sim:") or "line=sim:" in a else a for a in args]
     real = [a.replace("line=sim:", "line=pinctrl-rp1:") for a in real]
     real[real.index("sim")] = "libgpiod"
-    p = subprocess.run(base + ["--profile", "sorting", *real], capture_output=True, text=True, timeout=60)
+    p = subprocess.run([*base, "--profile", "sorting", *real], capture_output=True, text=True, timeout=60)
     assert p.returncode == 1
     assert "pinctrl-rp1:barrier" in p.stderr and ("no GPIO chip" in p.stderr or "no chip labelled" in p.stderr)
 

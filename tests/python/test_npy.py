@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The core's .npy reader (tofmat.read_npy) and folder import (ExemplarTable.from_npy_dir)."""
 
 from __future__ import annotations
@@ -126,8 +127,14 @@ def test_rejects_truncated_header(tmp_path, keep) -> None:
         (npy_bytes(PY2_HEADER.replace("<f8", "|O"), np.ones(6).tobytes()), r"dtype"),
         (npy_bytes(PY2_HEADER.replace("False", "True"), np.ones(6).tobytes()), r"Fortran"),
         (npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (), }", np.ones(1).tobytes()), r"0-dim"),
-        (npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 1, 1, 1, 1), }", np.ones(1).tobytes()), r"dimensions"),
-        (npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (2, 3), 'x': 1}", np.ones(6).tobytes()), r"unknown key"),
+        (
+            npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (1, 1, 1, 1, 1), }", np.ones(1).tobytes()),
+            r"dimensions",
+        ),
+        (
+            npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (2, 3), 'x': 1}", np.ones(6).tobytes()),
+            r"unknown key",
+        ),
         (npy_bytes("{'descr': '<f8', 'shape': (2, 3)}", np.ones(6).tobytes()), r"lacks"),
         (npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (99999999999999999999999, 3), }", b""), r"large"),
         (npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (65536, 65536, 65536, 65536), }", b""), r"large"),

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The box's front panel (issue 17): `tofmat panel` on a simulated SSD1306, tofmatd's reset button
 on the simulated GPIO chip.
 
@@ -11,12 +12,12 @@ from __future__ import annotations
 import re
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
-import pytest
 from click.testing import CliRunner
+from conftest import Daemon
 
 import tofmat
 from tofmat.cli import main
@@ -25,10 +26,16 @@ from tofmat.hw import SSD1306, FakeSSD1306Bus, render_text
 from tofmat.panel import COLUMNS, PanelView
 from tofmat.tools.panel_agent import run_panel
 
-from conftest import Daemon
-
 SEC = 1_000_000_000
-BUTTON = ["--gpio", "sim", "--reset-button", "sim:button", "--reset-button-active-low", "--reset-button-bias", "pull-up"]
+BUTTON = [
+    "--gpio",
+    "sim",
+    "--reset-button",
+    "sim:button",
+    "--reset-button-active-low",
+    "--reset-button-bias",
+    "pull-up",
+]
 
 
 def label(material: str | None, distance: float, runner_up: float | None, state: str = "tracking") -> Label:
@@ -144,7 +151,9 @@ def test_tofmat_panel_simulated_writes_its_picture(start: Callable[..., Daemon],
     d = start("sim:static,material=acryl")
     d.client().close()
     png = tmp_path / "panel.png"
-    r = CliRunner().invoke(main, ["panel", "--address", str(d.socket), "--simulated", "--seconds", "2", "--png", str(png)])
+    r = CliRunner().invoke(
+        main, ["panel", "--address", str(d.socket), "--simulated", "--seconds", "2", "--png", str(png)]
+    )
     assert r.exit_code == 0, r.output
     assert "showing: acryl |" in r.output and png.stat().st_size > 100
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Protocol versions (docs/protocol.md, Versions): the header carries the major, the hello the minor,
 and a client ignores what a later minor adds. A scripted daemon of a later minor sends an event,
 a field, a stream and a depth kind this client has never heard of: the client reads on.
@@ -9,8 +10,9 @@ import json
 import socket
 import struct
 import threading
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pytest

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The shipped calibration (firmware/sim/data: kinect2_tanaka2017 + tanaka2017) against the real
 database, through both implementations of the model, and the calibration tool's outputs and errors.
 
@@ -57,7 +58,7 @@ def test_recorded_rms_is_what_the_shipped_parameters_give(real: Any) -> None:
     assert all(g.get("session_drift") for g in dev["frequencies"])
     numpy_curves = cal.simulated_curves(dev, [mats[n] for n in names], offsets, bins, "bin", sessions=sessions)
     rms = cal.rms_per_material(numpy_curves, Y)
-    for n, r in zip(names, rms):
+    for n, r in zip(names, rms, strict=True):
         assert r == pytest.approx(mats[n]["fit"]["rms_mm"], abs=1e-6), n
     assert float(np.median(rms)) == pytest.approx(dev["fit"]["median_rms_mm"], abs=1e-6)
     # the states carry part of the fit: the nominal waveform alone fits worse
@@ -116,10 +117,11 @@ def test_write_outputs_gives_files_the_simulator_loads(tmp_path: Path) -> None:
     assert written["version"] == 2 and all("rms_mm" in x["fit"] for x in written["materials"])
     assert [x["fit"]["session"] for x in written["materials"]] == [m["fit"]["session"] for m in lib["materials"]]
     assert [g.get("session_drift") for g in written_dev["frequencies"]] == [
-        g.get("session_drift") for g in dev["frequencies"]]
+        g.get("session_drift") for g in dev["frequencies"]
+    ]
     assert Path(paths["log"]).read_text().strip() == "test"
     # A parameter the simulator refuses makes the tool fail at once, not when someone renders.
-    res.materials = [dict(mats[0], albedo=-1.0)] + mats[1:]
+    res.materials = [dict(mats[0], albedo=-1.0), *mats[1:]]
     with pytest.raises(tofmat.FormatError, match="albedo"):
         cal.write_outputs(res, tmp_path / "bad")
     assert math.isfinite(res.median_rms_mm)

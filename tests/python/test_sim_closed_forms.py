@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Numerical stability of the material responses' closed forms (docs/simulator-model.md, 1).
 
 `tofmat.sim.Material.response(freq_hz, incidence_deg)` (C++ doubles) against mpmath evaluations
@@ -88,8 +89,11 @@ def test_exponential_against_mpmath(albedo: float, subsurface: float) -> None:
         for f in FREQS_HZ:
             x = omega_exact(f) * tau_exact(tau_ps)
             k = 1 / mpmath.mpc(1, x)
-            assert_close(m.response(f, 0.0), response_ref(albedo, mpmath.mpf(subsurface), k),
-                         f"exponential tau {tau_ps} ps f {f} Hz albedo {albedo} b {subsurface}")
+            assert_close(
+                m.response(f, 0.0),
+                response_ref(albedo, mpmath.mpf(subsurface), k),
+                f"exponential tau {tau_ps} ps f {f} Hz albedo {albedo} b {subsurface}",
+            )
 
 
 @pytest.mark.parametrize("gamma_k", GAMMA_K)
@@ -101,8 +105,11 @@ def test_gamma_against_mpmath(gamma_k: float, albedo: float, subsurface: float) 
         for f in FREQS_HZ:
             y = omega_exact(f) * tau_exact(tau_ps) / mpmath.mpf(gamma_k)
             k = mpmath.power(mpmath.mpc(1, y), -mpmath.mpf(gamma_k))  # principal branch = the spec's form
-            assert_close(m.response(f, 0.0), response_ref(albedo, mpmath.mpf(subsurface), k),
-                         f"gamma k {gamma_k} tau {tau_ps} ps f {f} Hz albedo {albedo} b {subsurface}")
+            assert_close(
+                m.response(f, 0.0),
+                response_ref(albedo, mpmath.mpf(subsurface), k),
+                f"gamma k {gamma_k} tau {tau_ps} ps f {f} Hz albedo {albedo} b {subsurface}",
+            )
 
 
 def test_gamma_principal_branch_is_the_spec_form() -> None:
@@ -124,8 +131,9 @@ def test_gamma_k1_is_the_exponential() -> None:
 
 
 # The slab: arguments as the implementation forms them (see the module docstring).
-def slab_args(tau_ps: float, thickness_mm: float, n: float, path_factor: float, freq_hz: float,
-              incidence_deg: float) -> tuple[float, float, float]:
+def slab_args(
+    tau_ps: float, thickness_mm: float, n: float, path_factor: float, freq_hz: float, incidence_deg: float
+) -> tuple[float, float, float]:
     """(T/tau, omega T, omega tau) as doubles, in material_response's order of operations."""
     alpha = incidence_deg * math.pi / 180.0
     sin_t = math.sin(alpha) / n
@@ -144,30 +152,40 @@ def slab_ref(t_over_tau: float, omega_t: float, omega_tau: float, backing: float
 
 SLAB_CASES = [
     # thickness_mm, n, path_factor: T = path_factor * 2 * thickness * n / c
-    (1e-9, 1.5, 1.0),   # T = 1e-20 s: T/tau 1e-8 .. 1e-13 (the expm1 path)
-    (1e-4, 1.5, 1.0),   # T = 1e-15 s
-    (0.1, 1.5, 1.0),    # T = 1e-12 s
-    (1.0, 1.33, 3.0),   # T = 2.7e-11 s
-    (20.0, 1.5, 1.0),   # T = 2e-10 s
-    (1e3, 2.0, 1e4),    # T = 1.3e-4 s: T/tau >= 1300, backing term underflows to 0
+    (1e-9, 1.5, 1.0),  # T = 1e-20 s: T/tau 1e-8 .. 1e-13 (the expm1 path)
+    (1e-4, 1.5, 1.0),  # T = 1e-15 s
+    (0.1, 1.5, 1.0),  # T = 1e-12 s
+    (1.0, 1.33, 3.0),  # T = 2.7e-11 s
+    (20.0, 1.5, 1.0),  # T = 2e-10 s
+    (1e3, 2.0, 1e4),  # T = 1.3e-4 s: T/tau >= 1300, backing term underflows to 0
 ]
 
 
 @pytest.mark.parametrize("thickness_mm, n, path_factor", SLAB_CASES)
 @pytest.mark.parametrize("backing", [0.0, 0.5, 3.0])
 @pytest.mark.parametrize("albedo", [1e-6, 1.0])
-def test_slab_against_mpmath(thickness_mm: float, n: float, path_factor: float, backing: float,
-                             albedo: float) -> None:
+def test_slab_against_mpmath(thickness_mm: float, n: float, path_factor: float, backing: float, albedo: float) -> None:
     for tau_ps in TAU_PS:
-        m = material("slab", albedo=albedo, subsurface=1.0, tau_ps=tau_ps, refractive_index=n,
-                     thickness_mm=thickness_mm, path_factor=path_factor, backing=backing)
+        m = material(
+            "slab",
+            albedo=albedo,
+            subsurface=1.0,
+            tau_ps=tau_ps,
+            refractive_index=n,
+            thickness_mm=thickness_mm,
+            path_factor=path_factor,
+            backing=backing,
+        )
         for f in FREQS_HZ:
             for inc in (0.0, 45.0):
                 tt, wt, wtau = slab_args(tau_ps, thickness_mm, n, path_factor, f, inc)
                 b_eff = fresnel_b_eff(1.0, n, inc)
                 want = response_ref(albedo, b_eff, slab_ref(tt, wt, wtau, backing))
-                assert_close(m.response(f, inc), want,
-                             f"slab d {thickness_mm} n {n} pf {path_factor} beta {backing} tau {tau_ps} f {f} inc {inc}")
+                assert_close(
+                    m.response(f, inc),
+                    want,
+                    f"slab d {thickness_mm} n {n} pf {path_factor} beta {backing} tau {tau_ps} f {f} inc {inc}",
+                )
 
 
 def test_slab_tiny_transit_has_no_cancellation() -> None:
@@ -186,8 +204,16 @@ def test_slab_tiny_transit_has_no_cancellation() -> None:
 def test_slab_huge_transit_backing_underflows_cleanly() -> None:
     # T/tau ~ 1e8: exp(-z) is 0 in double; the slab equals the exponential (backing invisible).
     for backing in (0.0, 10.0):
-        s = material("slab", albedo=1.0, subsurface=1.0, tau_ps=1.0, refractive_index=2.0, thickness_mm=1e3,
-                     path_factor=1e4, backing=backing)
+        s = material(
+            "slab",
+            albedo=1.0,
+            subsurface=1.0,
+            tau_ps=1.0,
+            refractive_index=2.0,
+            thickness_mm=1e3,
+            path_factor=1e4,
+            backing=backing,
+        )
         e = material("exponential", albedo=1.0, subsurface=1.0, tau_ps=1.0)
         for f in FREQS_HZ:
             a, b = s.response(f, 0.0), e.response(f, 0.0)
@@ -196,8 +222,12 @@ def test_slab_huge_transit_backing_underflows_cleanly() -> None:
 
 
 def test_zero_subsurface_is_exactly_the_albedo() -> None:
-    for kind, extra in (("opaque", {}), ("exponential", {"tau_ps": 50.0}), ("gamma", {"tau_ps": 50.0}),
-                        ("slab", {"tau_ps": 50.0, "thickness_mm": 1.0})):
+    for kind, extra in (
+        ("opaque", {}),
+        ("exponential", {"tau_ps": 50.0}),
+        ("gamma", {"tau_ps": 50.0}),
+        ("slab", {"tau_ps": 50.0, "thickness_mm": 1.0}),
+    ):
         m = material(kind, albedo=0.42, subsurface=0.0, **extra)
         for f in FREQS_HZ:
             for inc in (0.0, 60.0):

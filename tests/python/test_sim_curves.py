@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Noise-free distortion curves (docs/simulator-model.md, section 4): tofmat.sim.distortion_curves.
 
 The expected values are computed here from the spec's formulas (material responses taken from
@@ -60,8 +61,9 @@ def shift_mm(m: sim.Material, freq_mhz: float) -> float:
 # ------------------------------------------------------------------------------------------------
 # Spec model, computed here (section 3 and 4)
 # ------------------------------------------------------------------------------------------------
-def spec_rows_and_combined(harmonics: list[tuple[int, float]], amplitude: float, m: sim.Material,
-                           ranges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def spec_rows_and_combined(
+    harmonics: list[tuple[int, float]], amplitude: float, m: sim.Material, ranges: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(rows (2, n), combined (n)) for a device with the given harmonics (otherwise ideal)."""
     g = {1: 1.0 + 0j}
     g.update({h: amplitude * complex(math.cos(p), math.sin(p)) for h, p in harmonics})
@@ -122,10 +124,11 @@ def test_exponential_material_gives_the_closed_form_offset(method: str) -> None:
     # 450 * 300 / 299.79 + (80 s80 + 16 s16 + 120 s120) / 216, which passes 600 mm for "milk".
     c = sim.distortion_curves(sim.DeviceProfile.ideal_kinect2(), EXPONENTIALS, BINS, 0.0, method)
     centres = np.asarray(BINS.centres_mm)
-    for m, curve in zip(EXPONENTIALS, c):
+    for m, curve in zip(EXPONENTIALS, c, strict=True):
         want = (shift_mm(m, 16.0) - shift_mm(m, 120.0), shift_mm(m, 80.0) - shift_mm(m, 120.0))
-        comb_start = 450.0 * C_DEV / C_TRUE + (80 * shift_mm(m, 80.0) + 16 * shift_mm(m, 16.0) +
-                                               120 * shift_mm(m, 120.0)) / 216
+        comb_start = (
+            450.0 * C_DEV / C_TRUE + (80 * shift_mm(m, 80.0) + 16 * shift_mm(m, 16.0) + 120 * shift_mm(m, 120.0)) / 216
+        )
         for r in range(2):
             row = curve[r]
             reached = centres > comb_start + BINS.width_mm
@@ -160,7 +163,7 @@ def test_incidence_reduces_the_distortion() -> None:
 # ------------------------------------------------------------------------------------------------
 # A device with harmonics: both methods against the spec computed here, and against each other
 # ------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("m", [OPAQUE, EXPONENTIALS[0], EXPONENTIALS[2]] + OTHERS, ids=lambda m: m.name)
+@pytest.mark.parametrize("m", [OPAQUE, EXPONENTIALS[0], EXPONENTIALS[2], *OTHERS], ids=lambda m: m.name)
 def test_curves_match_the_spec_model(m: sim.Material) -> None:
     # Same sweep, same decode, same unwrapping, computed independently: the curves agree to
     # float32 (values up to ~100 mm: 1e-5) and double rounding: bound 1e-3 mm.
@@ -179,7 +182,7 @@ def test_curves_match_the_spec_model(m: sim.Material) -> None:
     assert np.nanmax(np.abs(got_i)) > 5.0  # the harmonics do distort an opaque target's rows
 
 
-@pytest.mark.parametrize("m", [OPAQUE] + EXPONENTIALS + OTHERS, ids=lambda m: m.name)
+@pytest.mark.parametrize("m", [OPAQUE, *EXPONENTIALS, *OTHERS], ids=lambda m: m.name)
 def test_interp_and_bin_agree(m: sim.Material) -> None:
     # Harmonics 2, 3, 4 of amplitude 0.05: ripples of up to ~50 mm with slopes up to ~0.3. The bin
     # mean of 12 samples has its centroid within half a step (0.125 mm) of the bin centre, so the

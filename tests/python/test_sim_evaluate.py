@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The paper-protocol evaluation on small synthetic libraries (fast)."""
 
 from __future__ import annotations
@@ -124,8 +125,14 @@ def test_session_offsets_make_frequency_features_harder_but_not_depth_ones() -> 
     r = renderer(mats, noise=False)
     names = [m["name"] for m in mats]
     clean, _ = ev.evaluate(r, names, orientations=(0.0, 15.0, 30.0), stage_mm=STAGE, seed=4)  # type: ignore[misc]
-    shifted, _ = ev.evaluate(r, names, orientations=(0.0, 15.0, 30.0), stage_mm=STAGE, seed=4,  # type: ignore[misc]
-                             session_offsets_mm=(8.0, 2.0))
+    shifted, _ = ev.evaluate(
+        r,
+        names,
+        orientations=(0.0, 15.0, 30.0),
+        stage_mm=STAGE,
+        seed=4,  # type: ignore[misc]
+        session_offsets_mm=(8.0, 2.0),
+    )
     assert shifted.accuracy["frequency"] < clean.accuracy["frequency"]
     assert shifted.accuracy["depth"] == clean.accuracy["depth"]
 

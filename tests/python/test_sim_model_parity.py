@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The C++ simulator and the calibration's NumPy model compute the same forward model.
 
 docs/simulator-model.md is the contract; the calibration fits parameters with
@@ -29,7 +30,7 @@ def full_device(full_well: float | None = 1.0) -> dict[str, Any]:
     drift_rng = np.random.default_rng(8)
     d: dict[str, Any] = {"name": "parity", "version": 2, "range_ref_mm": 1000.0, "saturation": {"sharpness": 12.0},
                          "frequencies": [{"freq_mhz": f, "signal_scale": r}
-                                         for f, r in zip((80.0, 16.0, 120.0), M.SIGNAL_SCALE_DEFAULT)]}  # fmt: skip
+                                         for f, r in zip((80.0, 16.0, 120.0), M.SIGNAL_SCALE_DEFAULT, strict=True)]}  # fmt: skip
     for g, grp in enumerate(d["frequencies"]):
         grp["harmonics"] = [
             {"h": h, "amplitude": 0.0 if h % 3 == 0 else float(rng.uniform(0.005, 0.08)),
@@ -96,7 +97,7 @@ def test_sessions_match_the_numpy_model(state: tuple[float, float, float]) -> No
     device = full_device(0.6)
     cpp_dev = sim.DeviceProfile.from_dict(device).in_session(state)
     np_dev = M.in_session(device, state)
-    for g_cpp, g_np in zip(cpp_dev.to_dict()["frequencies"], np_dev["frequencies"]):
+    for g_cpp, g_np in zip(cpp_dev.to_dict()["frequencies"], np_dev["frequencies"], strict=True):
         assert "session_drift" not in g_cpp and "session_drift" not in g_np
         np.testing.assert_allclose(M.harmonic_vector(g_cpp, 13), M.harmonic_vector(g_np, 13), atol=1e-15)
     ms = [sim.Material.from_dict(m) for m in MATERIALS]

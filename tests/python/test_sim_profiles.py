@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Device profiles and material libraries from Python dicts (tofmat.sim.*.from_dict / to_dict).
 
 Every malformed profile is a tofmat.FormatError (a ValueError) whose message names the key.
@@ -18,24 +19,36 @@ from tofmat import sim
 
 
 def minimal_device() -> dict[str, Any]:
-    return {"name": "dev", "version": 1,
-            "frequencies": [{"freq_mhz": 80.0}, {"freq_mhz": 16.0}, {"freq_mhz": 120.0}]}
+    return {"name": "dev", "version": 1, "frequencies": [{"freq_mhz": 80.0}, {"freq_mhz": 16.0}, {"freq_mhz": 120.0}]}
 
 
 def minimal_library() -> dict[str, Any]:
-    return {"name": "lib", "version": 1,
-            "materials": [{"name": "cork", "kind": "exponential", "albedo": 0.5, "subsurface": 0.3, "tau_ps": 200.0}]}
+    return {
+        "name": "lib",
+        "version": 1,
+        "materials": [{"name": "cork", "kind": "exponential", "albedo": 0.5, "subsurface": 0.3, "tau_ps": 200.0}],
+    }
 
 
 def rich_device() -> dict[str, Any]:
     d = minimal_device()
     d["name"] = "rich"
     for g, f in enumerate(d["frequencies"]):
-        f.update({"scale_error": 1e-4 * (g + 1), "phase_offset_rad": 0.1 + 0.37 * g,
-                  "step_gain": [1.01, 0.99, 1.0 + 1e-7], "step_offset": [0.001, -0.002, 1 / 3],
-                  "harmonics": [{"h": 3, "amplitude": 0.125, "phase_rad": 0.0}]})
-    d["pixel_phase"] = {"mean_rad": [0.1, -0.2, 0.3], "radial_rad": [0.01, 0.02, 1 / 7], "scatter_rad": 0.003,
-                        "seed": 12345}
+        f.update(
+            {
+                "scale_error": 1e-4 * (g + 1),
+                "phase_offset_rad": 0.1 + 0.37 * g,
+                "step_gain": [1.01, 0.99, 1.0 + 1e-7],
+                "step_offset": [0.001, -0.002, 1 / 3],
+                "harmonics": [{"h": 3, "amplitude": 0.125, "phase_rad": 0.0}],
+            }
+        )
+    d["pixel_phase"] = {
+        "mean_rad": [0.1, -0.2, 0.3],
+        "radial_rad": [0.01, 0.02, 1 / 7],
+        "scatter_rad": 0.003,
+        "seed": 12345,
+    }
     d["noise"] = {"read_noise": 2.5, "shot_gain": 0.8, "ambient": 11.0}
     d["signal"] = {"counts_at_1m": 2718.28, "saturation": 16000.0}
     d["camera"] = {"width": 320, "height": 240, "fx": 250.5, "fy": 251.25, "cx": 160.125, "cy": 119.875}
@@ -55,15 +68,18 @@ def test_format_error_is_a_value_error() -> None:
 # ------------------------------------------------------------------------------------------------
 # Devices
 # ------------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("where, key", [
-    ((), "colour"),
-    (("frequencies", 0), "freq"),
-    (("frequencies", 2), "gain"),
-    (("pixel_phase",), "mean"),
-    (("noise",), "read"),
-    (("signal",), "counts"),
-    (("camera",), "w"),
-])
+@pytest.mark.parametrize(
+    "where, key",
+    [
+        ((), "colour"),
+        (("frequencies", 0), "freq"),
+        (("frequencies", 2), "gain"),
+        (("pixel_phase",), "mean"),
+        (("noise",), "read"),
+        (("signal",), "counts"),
+        (("camera",), "w"),
+    ],
+)
 def test_device_rejects_unknown_keys(where: tuple[Any, ...], key: str) -> None:
     d = minimal_device()
     for k in ("pixel_phase", "noise", "signal", "camera"):
@@ -102,21 +118,24 @@ def test_device_rejects_missing_or_non_string_name(name: Any) -> None:
     assert "name" in format_error(sim.DeviceProfile.from_dict, d)
 
 
-@pytest.mark.parametrize("path, value, key", [
-    (("frequencies", 0, "freq_mhz"), "80", "freq_mhz"),
-    (("frequencies", 1, "scale_error"), None, "scale_error"),
-    (("frequencies", 2, "step_gain"), [1, 1], "step_gain"),
-    (("frequencies", 2, "step_offset"), [0, "0", 0], "step_offset"),
-    (("frequencies", 0, "harmonics"), {"h": 2}, "harmonics"),
-    (("frequencies",), {"freq_mhz": 80}, "frequencies"),
-    (("frequencies",), [{"freq_mhz": 80}], "frequencies"),
-    (("noise",), [1.0], "noise"),
-    (("noise", "read_noise"), "2", "read_noise"),
-    (("signal", "counts_at_1m"), [3000], "counts_at_1m"),
-    (("camera", "width"), "512", "width"),
-    (("pixel_phase", "mean_rad"), 0.1, "mean_rad"),
-    (("pixel_phase", "seed"), "1", "seed"),
-])
+@pytest.mark.parametrize(
+    "path, value, key",
+    [
+        (("frequencies", 0, "freq_mhz"), "80", "freq_mhz"),
+        (("frequencies", 1, "scale_error"), None, "scale_error"),
+        (("frequencies", 2, "step_gain"), [1, 1], "step_gain"),
+        (("frequencies", 2, "step_offset"), [0, "0", 0], "step_offset"),
+        (("frequencies", 0, "harmonics"), {"h": 2}, "harmonics"),
+        (("frequencies",), {"freq_mhz": 80}, "frequencies"),
+        (("frequencies",), [{"freq_mhz": 80}], "frequencies"),
+        (("noise",), [1.0], "noise"),
+        (("noise", "read_noise"), "2", "read_noise"),
+        (("signal", "counts_at_1m"), [3000], "counts_at_1m"),
+        (("camera", "width"), "512", "width"),
+        (("pixel_phase", "mean_rad"), 0.1, "mean_rad"),
+        (("pixel_phase", "seed"), "1", "seed"),
+    ],
+)
 def test_device_rejects_wrong_types(path: tuple[Any, ...], value: Any, key: str) -> None:
     d = minimal_device()
     for k in ("pixel_phase", "noise", "signal", "camera"):
@@ -176,7 +195,7 @@ def test_device_dict_round_trip_is_exact() -> None:
     assert once["noise"] == d["noise"]
     assert once["signal"] == d["signal"]
     assert once["camera"] == d["camera"]
-    for a, b in zip(once["frequencies"], d["frequencies"]):
+    for a, b in zip(once["frequencies"], d["frequencies"], strict=True):
         for k in ("freq_mhz", "scale_error", "phase_offset_rad", "step_gain", "step_offset"):
             assert a[k] == b[k], k
 
@@ -186,13 +205,14 @@ def test_device_dict_round_trip_of_general_harmonics_is_exact() -> None:
     # must come back unchanged through from_dict (a fixed point), for general phases too.
     d = minimal_device()
     for g, f in enumerate(d["frequencies"]):
-        f["harmonics"] = [{"h": h, "amplitude": 0.01 + 0.013 * (h + g), "phase_rad": -3.0 + 0.37 * (h + 6 * g)}
-                          for h in range(2, 8)]
+        f["harmonics"] = [
+            {"h": h, "amplitude": 0.01 + 0.013 * (h + g), "phase_rad": -3.0 + 0.37 * (h + 6 * g)} for h in range(2, 8)
+        ]
     once = sim.DeviceProfile.from_dict(d).to_dict()
     twice = sim.DeviceProfile.from_dict(copy.deepcopy(once)).to_dict()
     assert twice == once
-    for a, b in zip(once["frequencies"], d["frequencies"]):
-        for ea, eb in zip(a["harmonics"], b["harmonics"]):
+    for a, b in zip(once["frequencies"], d["frequencies"], strict=True):
+        for ea, eb in zip(a["harmonics"], b["harmonics"], strict=True):
             assert ea["amplitude"] == pytest.approx(eb["amplitude"], rel=1e-15)
             assert ea["phase_rad"] == pytest.approx(eb["phase_rad"], rel=1e-15, abs=1e-15)
 
@@ -218,22 +238,25 @@ def test_library_rejects_unknown_keys() -> None:
     assert "colour" in format_error(sim.Material.from_dict, {"name": "a", "kind": "opaque", "colour": 1})
 
 
-@pytest.mark.parametrize("change, key", [
-    (lambda d: d.pop("version"), "version"),
-    (lambda d: d.update(version=3), "version"),
-    (lambda d: d.pop("name"), "name"),
-    (lambda d: d.update(name=3), "name"),
-    (lambda d: d.update(materials={}), "materials"),
-    (lambda d: d.update(materials=[]), "materials"),
-    (lambda d: d["materials"][0].pop("name"), "name"),
-    (lambda d: d["materials"][0].pop("kind"), "kind"),
-    (lambda d: d["materials"][0].update(kind="glossy"), "kind"),
-    (lambda d: d["materials"][0].update(albedo="0.5"), "albedo"),
-    (lambda d: d["materials"][0].update(tau_ps=None), "tau_ps"),
-    (lambda d: d["materials"][0].update(albedo=10.5), "albedo"),
-    (lambda d: d["materials"][0].update(tau_ps=0.0), "tau_ps"),
-    (lambda d: d["materials"].append(dict(d["materials"][0])), "duplicate"),
-])
+@pytest.mark.parametrize(
+    "change, key",
+    [
+        (lambda d: d.pop("version"), "version"),
+        (lambda d: d.update(version=3), "version"),
+        (lambda d: d.pop("name"), "name"),
+        (lambda d: d.update(name=3), "name"),
+        (lambda d: d.update(materials={}), "materials"),
+        (lambda d: d.update(materials=[]), "materials"),
+        (lambda d: d["materials"][0].pop("name"), "name"),
+        (lambda d: d["materials"][0].pop("kind"), "kind"),
+        (lambda d: d["materials"][0].update(kind="glossy"), "kind"),
+        (lambda d: d["materials"][0].update(albedo="0.5"), "albedo"),
+        (lambda d: d["materials"][0].update(tau_ps=None), "tau_ps"),
+        (lambda d: d["materials"][0].update(albedo=10.5), "albedo"),
+        (lambda d: d["materials"][0].update(tau_ps=0.0), "tau_ps"),
+        (lambda d: d["materials"].append(dict(d["materials"][0])), "duplicate"),
+    ],
+)
 def test_library_rejects(change: Any, key: str) -> None:
     lib = minimal_library()
     change(lib)
@@ -246,14 +269,23 @@ def test_material_and_library_round_trip() -> None:
         {"name": "o", "kind": "opaque", "albedo": 0.1},
         {"name": "e", "kind": "exponential", "albedo": 0.3, "subsurface": 1 / 3, "tau_ps": 123.456},
         {"name": "g", "kind": "gamma", "albedo": 0.5, "subsurface": 0.9, "tau_ps": 77.0, "gamma_k": 2 / 3},
-        {"name": "s", "kind": "slab", "albedo": 0.7, "subsurface": 1.0, "tau_ps": 10.0, "refractive_index": 1 + 1 / 7,
-         "thickness_mm": 0.1, "path_factor": 1.5, "backing": 0.7},
+        {
+            "name": "s",
+            "kind": "slab",
+            "albedo": 0.7,
+            "subsurface": 1.0,
+            "tau_ps": 10.0,
+            "refractive_index": 1 + 1 / 7,
+            "thickness_mm": 0.1,
+            "path_factor": 1.5,
+            "backing": 0.7,
+        },
     ]
     lib = sim.MaterialLibrary.from_dict({"name": "lib", "version": 1, "materials": mats})
     assert lib.names == ["o", "e", "g", "s"]
     assert len(lib) == 4
     d = lib.to_dict()
-    for given, out in zip(mats, d["materials"]):
+    for given, out in zip(mats, d["materials"], strict=True):
         for k, v in given.items():
             assert out[k] == v, (given["name"], k)
     assert sim.MaterialLibrary.from_dict(d).to_dict() == d

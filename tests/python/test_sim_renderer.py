@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The raw frame renderer through Python (tofmat.sim.Renderer) and the float decode
 (tofmat._tofmat.decode_frame with p0 = Renderer.p0_tables()).
 
@@ -21,11 +22,17 @@ WRAP = np.array([1875.0, 9375.0, 1250.0])  # c_dev / (2 f), group order 80, 16, 
 
 
 def library() -> sim.MaterialLibrary:
-    return sim.MaterialLibrary.from_dict({"name": "t", "version": 1, "materials": [
-        {"name": "white", "kind": "opaque", "albedo": 0.9},
-        {"name": "grey", "kind": "opaque", "albedo": 0.3},
-        {"name": "wax", "kind": "exponential", "albedo": 0.8, "subsurface": 0.7, "tau_ps": 400.0},
-    ]})
+    return sim.MaterialLibrary.from_dict(
+        {
+            "name": "t",
+            "version": 1,
+            "materials": [
+                {"name": "white", "kind": "opaque", "albedo": 0.9},
+                {"name": "grey", "kind": "opaque", "albedo": 0.3},
+                {"name": "wax", "kind": "exponential", "albedo": 0.8, "subsurface": 0.7, "tau_ps": 400.0},
+            ],
+        }
+    )
 
 
 def device(**changes: Any) -> sim.DeviceProfile:
@@ -43,7 +50,7 @@ def decode(r: sim.Renderer, f: sim.Frame) -> Any:
 def rays(dev: sim.DeviceProfile) -> np.ndarray:
     """Unit ray through each pixel's centre, (3, H, W)."""
     c = dev.to_dict()["camera"]
-    ys, xs = np.mgrid[0:c["height"], 0:c["width"]]
+    ys, xs = np.mgrid[0 : c["height"], 0 : c["width"]]
     v = np.stack([(xs + 0.5 - c["cx"]) / c["fx"], (ys + 0.5 - c["cy"]) / c["fy"], np.ones(xs.shape)])
     return v / np.linalg.norm(v, axis=0)
 
@@ -94,8 +101,10 @@ def test_noise_free_opaque_target_decodes_to_the_true_range(depth_mm: float) -> 
 
 
 def test_p0_undoes_the_pixel_phase_pattern() -> None:
-    dev = device(pixel_phase={"mean_rad": [0.4, -1.0, 2.5], "radial_rad": [0.3, 0.2, -0.5], "scatter_rad": 0.05},
-                 camera={"width": 80, "height": 60, "cx": 40.0, "cy": 30.0})
+    dev = device(
+        pixel_phase={"mean_rad": [0.4, -1.0, 2.5], "radial_rad": [0.3, 0.2, -0.5], "scatter_rad": 0.05},
+        camera={"width": 80, "height": 60, "cx": 40.0, "cy": 30.0},
+    )
     r = sim.Renderer(dev, library())
     f = r.render(sim.Scene([sim.Target("white", 1000.0, rect=(0, 0, 80, 60))]), seed=1, noise=False)
     truth = f.range_mm.ravel().astype(float) * SCALE
@@ -112,8 +121,11 @@ def test_p0_undoes_the_pixel_phase_pattern() -> None:
 def test_mean_over_frames_converges_as_one_over_sqrt_n() -> None:
     # ~200-count signal, read noise 3: the noise dithers the quantisation; the decoded combined
     # depth per frame scatters by ~2.3 mm; its running mean's rms error falls as 1/sqrt(N).
-    dev = device(noise={"read_noise": 3.0}, signal={"counts_at_1m": 250.0},
-                 camera={"width": 64, "height": 48, "cx": 32.0, "cy": 24.0})
+    dev = device(
+        noise={"read_noise": 3.0},
+        signal={"counts_at_1m": 250.0},
+        camera={"width": 64, "height": 48, "cx": 32.0, "cy": 24.0},
+    )
     r = sim.Renderer(dev, library())
     s = sim.Scene([sim.Target("white", 1100.0, rect=(0, 0, 64, 48))])
     total = np.zeros(64 * 48)
@@ -217,16 +229,19 @@ def test_fronto_parallel_range_is_depth_over_cosine() -> None:
     np.testing.assert_allclose(f.depth_mm, 1234.5, rtol=2e-7)
 
 
-@pytest.mark.parametrize("target", [
-    dict(rect=(-1, 0, 10, 10)),
-    dict(rect=(500, 0, 513, 10)),
-    dict(rect=(0, 400, 10, 425)),
-    dict(rect=(10, 10, 10, 20)),
-    dict(yaw_deg=89.5),
-    dict(yaw_deg=-90.0),
-    dict(pitch_deg=95.0),
-    dict(fold_deg=180.0),
-])
+@pytest.mark.parametrize(
+    "target",
+    [
+        dict(rect=(-1, 0, 10, 10)),
+        dict(rect=(500, 0, 513, 10)),
+        dict(rect=(0, 400, 10, 425)),
+        dict(rect=(10, 10, 10, 20)),
+        dict(yaw_deg=89.5),
+        dict(yaw_deg=-90.0),
+        dict(pitch_deg=95.0),
+        dict(fold_deg=180.0),
+    ],
+)
 def test_bad_targets_raise_value_error(target: dict[str, Any]) -> None:
     r = sim.Renderer(sim.DeviceProfile.ideal_kinect2(), library())
     with pytest.raises(ValueError):

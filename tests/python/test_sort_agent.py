@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The diverter agent (`tofmat sort`, issue 17): gates planned from tofmatd's sort decisions so that
 each is open when its item arrives, and driven on simulated PCA9685 servos against a live line."""
 
@@ -7,14 +8,13 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import Daemon
 
 from tofmat.client import SortDecision
 from tofmat.hw import FakePCA9685Bus
 from tofmat.line import Gate, GateSchedule, parse_gate
 from tofmat.tools.line_demo import LineSetup
 from tofmat.tools.sort_agent import gate_servos, run_sort_agent
-
-from conftest import Daemon
 
 MS = 1_000_000
 

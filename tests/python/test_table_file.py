@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The compact table file (.tmx): round trip, byte layout (docs/table-format.md), damaged files,
 atomic saving."""
 
@@ -34,8 +35,19 @@ def parse_tmx(data: bytes) -> dict:
     off += 2 * values.size
     (crc,) = struct.unpack_from("<I", data, off)
     return dict(
-        magic=magic, major=major, minor=minor, start=start, width=width, step=step, rows=rows,
-        names=names, values=values, crc=crc, crc_offset=off, names_end=names_end, size=off + 4,
+        magic=magic,
+        major=major,
+        minor=minor,
+        start=start,
+        width=width,
+        step=step,
+        rows=rows,
+        names=names,
+        values=values,
+        crc=crc,
+        crc_offset=off,
+        names_end=names_end,
+        size=off + 4,
     )
 
 
@@ -71,7 +83,10 @@ def test_round_trip_real_database(real_table, real_tmx) -> None:
     assert t2.rows == real_table.rows
     assert t2.bins == real_table.bins
     assert (t2.bins.start_mm, t2.bins.width_mm, t2.bins.count) == (
-        real_table.bins.start_mm, real_table.bins.width_mm, real_table.bins.count)
+        real_table.bins.start_mm,
+        real_table.bins.width_mm,
+        real_table.bins.count,
+    )
     step = t2.quant_step_mm
     assert step > 0 and is_power_of_two(step)
     a, b = real_table.features, t2.features
@@ -154,7 +169,24 @@ def test_round_trip_all_missing_table(tmp_path) -> None:
 def test_truncated_files(real_tmx, tmp_path) -> None:
     data = real_tmx.read_bytes()
     names_end = parse_tmx(data)["names_end"]
-    for cut in [0, 1, 7, 8, 9, 11, 20, 47, 48, 55, names_end - 3, names_end, names_end + 1, len(data) // 2, len(data) - 5, len(data) - 1]:
+    for cut in [
+        0,
+        1,
+        7,
+        8,
+        9,
+        11,
+        20,
+        47,
+        48,
+        55,
+        names_end - 3,
+        names_end,
+        names_end + 1,
+        len(data) // 2,
+        len(data) - 5,
+        len(data) - 1,
+    ]:
         with pytest.raises(tofmat.FormatError, match="truncated") as e:
             load_bytes(tmp_path, data[:cut])
         assert "bad.tmx" in str(e.value), cut
@@ -206,7 +238,10 @@ def test_trailing_bytes(real_tmx, tmp_path) -> None:
 
 def small_tmx(tmp_path: Path) -> bytes:
     t = tofmat.ExemplarTable(
-        ["ab", "cd"], np.arange(2 * 1 * 3, dtype=np.float32).reshape(2, 1, 3), tofmat.BinSpec(600.0, 3.0, 3), [(16, 120)]
+        ["ab", "cd"],
+        np.arange(2 * 1 * 3, dtype=np.float32).reshape(2, 1, 3),
+        tofmat.BinSpec(600.0, 3.0, 3),
+        [(16, 120)],
     )
     t.save(tmp_path / "small.tmx")
     return (tmp_path / "small.tmx").read_bytes()
@@ -328,6 +363,8 @@ def test_longest_names_and_many_materials_round_trip(tmp_path) -> None:
     assert t2.materials == names
     np.testing.assert_array_equal(t2.features, feats)  # integers up to 254: exact with any step <= 1
     with pytest.raises(ValueError, match="255"):
-        tofmat.ExemplarTable(names + ["one_more"], np.zeros((256, 1, 1), np.float32), tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)])
+        tofmat.ExemplarTable(
+            [*names, "one_more"], np.zeros((256, 1, 1), np.float32), tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)]
+        )
     with pytest.raises(ValueError, match="ASCII"):
         tofmat.ExemplarTable(["café"], np.zeros((1, 1, 1), np.float32), tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)])

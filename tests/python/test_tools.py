@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """tofmat.tools: simulated sweeps (windows), the benchmark and the demo on the real database."""
 
 from __future__ import annotations
@@ -41,7 +42,9 @@ def test_random_windows_cover_every_material(real_table) -> None:
         assert np.isnan(w.query[:, outside]).all()
     # Fixed seed -> same windows.
     ws2 = list(random_windows(real_table, 7, 0.3, 5, np.random.default_rng(3)))
-    assert all(a.start == b.start and np.array_equal(a.query, b.query, equal_nan=True) for a, b in zip(ws, ws2))
+    assert all(
+        a.start == b.start and np.array_equal(a.query, b.query, equal_nan=True) for a, b in zip(ws, ws2, strict=True)
+    )
     with pytest.raises(ValueError):
         list(random_windows(real_table, 0, 0.3, 5, np.random.default_rng(3)))
 

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Attacks on tofmatd while a well-behaved subscriber is measured (issue 16: no client can stall,
 crash, blind or take over the box).
 
@@ -45,6 +46,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
+
 import tofmat
 from tofmat.client import daemon_binary, sim_data_dir
 
@@ -151,7 +153,7 @@ class RawConnection:
             self._fill(deadline)
         magic, version, kind, flags, length = HEADER.unpack_from(self._buf)
         if magic != MAGIC or version != VERSION or flags != 0 or not 4 <= length <= MAX_PAYLOAD:
-            raise WireError(f"bad header {bytes(self._buf[:HEADER.size])!r}")
+            raise WireError(f"bad header {bytes(self._buf[: HEADER.size])!r}")
         while len(self._buf) < HEADER.size + length:
             self._fill(deadline)
         (meta_len,) = struct.unpack_from("<I", self._buf, HEADER.size)
@@ -276,7 +278,7 @@ class Attack:
     def _guarded(self, index: int) -> None:
         try:
             self.worker(index)
-        except Exception as e:  # noqa: BLE001 (an attack's own bug: reported in its result, never silent)
+        except Exception as e:
             self.notes[f"worker{index}_crashed"] = f"{type(e).__name__}: {e}"
 
     def run(self) -> None:
@@ -1076,7 +1078,9 @@ class LabelStats:
     raw_gap_ms: float = float("nan")  # longest wait for any label, the scene's empty frames included
     missed_frames: int = 0  # frames with a target in view that gave no label
     source_gap_ms: float = float("nan")  # longest frame interval while tracking, by the daemon's frame clock
-    gap_end: float = float("nan")  # when the longest gap ended (time.monotonic of the label after it, or the window's end)
+    gap_end: float = float(
+        "nan"
+    )  # when the longest gap ended (time.monotonic of the label after it, or the window's end)
 
 
 def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: LabelRecord | None = None) -> LabelStats:
@@ -1231,8 +1235,10 @@ def settle(daemon: DaemonUnderTest, clients: int, timeout: float = 10.0) -> None
         if s is not None and int(s["clients"]["clients"]) <= clients + 1:  # (+1: this status client)
             return
         time.sleep(0.25)
-    say(f"  (the daemon still holds {s['clients']['clients'] if s else '?'} connections after {timeout:.0f} s; "
-        f"we hold {clients})")
+    say(
+        f"  (the daemon still holds {s['clients']['clients'] if s else '?'} connections after {timeout:.0f} s; "
+        f"we hold {clients})"
+    )
 
 
 def restore(daemon: DaemonUnderTest, baseline: dict[str, Any]) -> list[str]:
@@ -1256,11 +1262,13 @@ def restore(daemon: DaemonUnderTest, baseline: dict[str, Any]) -> list[str]:
 
 # --- bench ---------------------------------------------------------------------------------------
 
-GAP_NOTE = (f"worst gap: the longest wait for a label beyond the scene's own empty frames (the sweep labels every "
-            f"frame with a target and sends one no_target when it leaves, then nothing for its {SCENE_GAP} empty "
-            f"frames, {SCENE_GAP * FRAME_MS:.0f} ms; raw gap: any label, those included); source gap: the longest "
-            f"interval between consecutive tracked frames by the daemon's own frame clock (near the worst gap: the "
-            f"lateness came before serving, e.g. the simulated camera, which renders inside tofmatd, short of CPU)")
+GAP_NOTE = (
+    f"worst gap: the longest wait for a label beyond the scene's own empty frames (the sweep labels every "
+    f"frame with a target and sends one no_target when it leaves, then nothing for its {SCENE_GAP} empty "
+    f"frames, {SCENE_GAP * FRAME_MS:.0f} ms; raw gap: any label, those included); source gap: the longest "
+    f"interval between consecutive tracked frames by the daemon's own frame clock (near the worst gap: the "
+    f"lateness came before serving, e.g. the simulated camera, which renders inside tofmatd, short of CPU)"
+)
 
 
 @dataclass
@@ -1309,8 +1317,11 @@ def run_phase(daemon: DaemonUnderTest, sub: Subscriber, sampler: Sampler, name: 
     sample1 = sampler.sample()
     log1 = daemon.log_size()
     status1 = daemon.status()
-    dropped = (int(status1["frames_dropped"]) - int(status0["frames_dropped"])
-               if status0 is not None and status1 is not None and status1["uptime_s"] > status0["uptime_s"] else None)
+    dropped = (
+        int(status1["frames_dropped"]) - int(status0["frames_dropped"])
+        if status0 is not None and status1 is not None and status1["uptime_s"] > status0["uptime_s"]
+        else None
+    )
     server = ({k: int(v) - int(status0["clients"].get(k, 0)) for k, v in status1["clients"].items()
                if isinstance(v, int) and k not in ("clients", "unix_clients", "tcp_clients")}
               if dropped is not None and status0 is not None and status1 is not None else {})  # fmt: skip
@@ -1534,8 +1545,14 @@ def soak(args: argparse.Namespace) -> int:
         gap = max(s.gap_ms for s in stats.values())
         # Where the longest gap ended: in which phase (its attacks), or after the last.
         worst = max(stats.values(), key=lambda s: s.gap_ms)
-        gap_phase = next((f"phase {k + 1} ({', '.join(schedule[k])})" for k, b in enumerate(bounds)
-                          if b[0] <= worst.gap_end <= b[1]), "outside the phases (after the last attack)")
+        gap_phase = next(
+            (
+                f"phase {k + 1} ({', '.join(schedule[k])})"
+                for k, b in enumerate(bounds)
+                if b[0] <= worst.gap_end <= b[1]
+            ),
+            "outside the phases (after the last attack)",
+        )
         gap_where = f"{worst.gap_end - t_attacks:.1f} s after the first attack, {gap_phase}"
         failures = []
         if daemon.deaths or rc not in (0, None):
@@ -1556,8 +1573,12 @@ def soak(args: argparse.Namespace) -> int:
             "subscribers": {k: asdict(v) for k, v in stats.items()},
             "worst_gap_at": gap_where,
             "subscriber_errors": {s.name: dict(s.errors) for s in subs},
-            "rss_kb": {"first": first.rss_kb, "at_60s": at60.rss_kb, "last": last.rss_kb,
-                       "max": max(rss, default=None)},
+            "rss_kb": {
+                "first": first.rss_kb,
+                "at_60s": at60.rss_kb,
+                "last": last.rss_kb,
+                "max": max(rss, default=None),
+            },
             "fds": {"first": first.fds, "last": last.fds, "max": max(fds, default=None)},
             "log": {"bytes": last.log_bytes, "lines": last.log_lines},
             "daemon_cpu_pct": cpu_percent(first, last),
@@ -1583,9 +1604,15 @@ def format_soak(summary: dict[str, Any], stats: dict[str, LabelStats]) -> str:
     def mb(kb: int | None) -> str:
         return f"{kb / 1024:.1f}" if kb is not None else "-"
 
-    lines = [f"## soak: {summary['seconds']} s of attacks, {len(summary['phases'])} phases", "",
-             ("| subscriber | labels | labels/s | p50 ms | p99 ms | max ms | worst gap ms | source gap ms | "
-              "raw gap ms | frames missed while tracking |"), "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"## soak: {summary['seconds']} s of attacks, {len(summary['phases'])} phases",
+        "",
+        (
+            "| subscriber | labels | labels/s | p50 ms | p99 ms | max ms | worst gap ms | source gap ms | "
+            "raw gap ms | frames missed while tracking |"
+        ),
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for name, s in stats.items():
         lines.append(f"| {name} | {s.labels} | {s.rate:.1f} | {num(s.p50_ms, 2)} | {num(s.p99_ms, 2)} | "
                      f"{num(s.max_ms, 1)} | {s.gap_ms:.0f} | {num(s.source_gap_ms, 0)} | {s.raw_gap_ms:.0f} | "
@@ -1627,20 +1654,41 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     sub = p.add_subparsers(dest="command", required=True)
 
     def common(q: argparse.ArgumentParser, seconds: float) -> None:
-        q.add_argument("--seconds", type=float, default=seconds,
-                       help="bench: of each phase (quiet, then each attack); soak: of all the attacks")
+        q.add_argument(
+            "--seconds",
+            type=float,
+            default=seconds,
+            help="bench: of each phase (quiet, then each attack); soak: of all the attacks",
+        )
         q.add_argument("--attacks", default="", help=f"comma-separated, of: {', '.join(ATTACKS)} (default all)")
-        q.add_argument("--daemon-arg", dest="daemon_arg", action="append", default=[], metavar="ARGS",
-                       help="extra tofmatd arguments, split like a shell would: --daemon-arg='--idle-timeout 30'")
+        q.add_argument(
+            "--daemon-arg",
+            dest="daemon_arg",
+            action="append",
+            default=[],
+            metavar="ARGS",
+            help="extra tofmatd arguments, split like a shell would: --daemon-arg='--idle-timeout 30'",
+        )
         q.add_argument("--slots", type=int, default=DEFAULT_SLOTS, help="connections of idle_slots and tcp_unauth")
-        q.add_argument("--daemon-nice", type=int, default=0,
-                       help="run tofmatd at this niceness (the box's systemd unit: -5; needs root below 0)")
-        q.add_argument("--client-nice", type=int, default=0,
-                       help="run the measured subscribers at this niceness, as a box's own services are "
-                            "(the attacks stay at 0; needs root below 0)")
+        q.add_argument(
+            "--daemon-nice",
+            type=int,
+            default=0,
+            help="run tofmatd at this niceness (the box's systemd unit: -5; needs root below 0)",
+        )
+        q.add_argument(
+            "--client-nice",
+            type=int,
+            default=0,
+            help="run the measured subscribers at this niceness, as a box's own services are "
+            "(the attacks stay at 0; needs root below 0)",
+        )
         q.add_argument("--json", default="", help="write the figures to this file")
-        q.add_argument("--same-user", action="store_true",
-                       help=f"run as root, the Unix attacks still run as root (default: as uid {OTHER_UID}+)")
+        q.add_argument(
+            "--same-user",
+            action="store_true",
+            help=f"run as root, the Unix attacks still run as root (default: as uid {OTHER_UID}+)",
+        )
 
     common(sub.add_parser("bench", help="each attack alone against a measured subscriber"), 10.0)
     s = sub.add_parser("soak", help="attacks in rotation; exit 1 if the criteria fail")

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The box's I2C peripherals: the sorting gates' PWM chip and the front panel, and simulated twins.
 
 - :class:`PCA9685` (16-channel 12-bit PWM) and :class:`Servo` (a calibrated servo on one channel)
@@ -30,15 +31,15 @@ from .ssd1306 import SSD1306, render_text, text_line_height
 
 __all__ = [
     "I2C_BLOCK_MAX",
+    "PCA9685",
+    "SSD1306",
     "FakeChipError",
     "FakePCA9685Bus",
     "FakeSSD1306Bus",
     "I2CBus",
     "IgnoredWrite",
     "ManualClock",
-    "PCA9685",
     "PCA9685Transaction",
-    "SSD1306",
     "Servo",
     "Transaction",
     "open_bus",

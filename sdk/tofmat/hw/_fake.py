@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """What the simulated I2C chips share: a bus that answers at one address, its transaction log,
 rule violations, and a clock tests can step by hand."""
 
@@ -6,9 +7,9 @@ from __future__ import annotations
 import errno
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Literal, NoReturn
+from typing import Literal, NoReturn
 
 from .bus import I2C_BLOCK_MAX
 

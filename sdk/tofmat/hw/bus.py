@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The I2C bus the drivers talk to: the few smbus2 methods they use, and opening a real bus.
 
 Every driver in :mod:`tofmat.hw` takes an :class:`I2CBus`. A real one is ``smbus2.SMBus``

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """A simulated PCA9685 on its own I2C bus, modelled at register level, for tests and the simulated box.
 
 It follows the chip's documented rules, independently of the driver (its register constants are
@@ -10,9 +11,8 @@ off bits with full off winning. Where the chip's behaviour is not documented the
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable
 
 from ._fake import FakeI2CDevice, Op, Transaction
 
@@ -127,7 +127,7 @@ class FakePCA9685Bus(FakeI2CDevice):
         """Channel ``channel``'s (ON count, OFF count, full on, full off) as the registers hold them."""
         if not 0 <= channel < 16:
             raise ValueError(f"channel must be 0..15, not {channel}")
-        on_l, on_h, off_l, off_h = self.registers[_LED_FIRST + 4 * channel:_LED_FIRST + 4 * channel + 4]
+        on_l, on_h, off_l, off_h = self.registers[_LED_FIRST + 4 * channel : _LED_FIRST + 4 * channel + 4]
         return on_l | (on_h & 0x0F) << 8, off_l | (off_h & 0x0F) << 8, bool(on_h & _FULL), bool(off_h & _FULL)
 
     def pulse_us(self, channel: int) -> float | None:
@@ -205,7 +205,7 @@ class FakePCA9685Bus(FakeI2CDevice):
         return values
 
     def _write(self, op: Op, address: int, register: int, data: list[int]) -> None:
-        for reg, value in zip(self._registers_of(register, len(data)), data):
+        for reg, value in zip(self._registers_of(register, len(data)), data, strict=True):
             self._write_register(reg, value)
 
     def _write_register(self, reg: int, value: int) -> None:

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """A simulated SSD1306 128x64 OLED on its own I2C bus: parses the command stream and holds the memory.
 
 Independent of the driver (its command table is its own): each write's control byte says whether
@@ -10,9 +11,9 @@ everything else loudly (:class:`~tofmat.hw.FakeChipError` in strict mode, and :a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -174,7 +175,7 @@ class FakeSSD1306Bus(FakeI2CDevice):
                 i += 1
                 continue
             name, nargs = _COMMANDS[op]
-            args = data[i + 1:i + 1 + nargs]
+            args = data[i + 1 : i + 1 + nargs]
             i += 1 + nargs
             if len(args) < nargs:
                 # Whether the chip keeps a half-received command across writes is not in the facts.

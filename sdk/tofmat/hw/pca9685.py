@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """PCA9685 16-channel 12-bit PWM driver over I2C, and a calibrated servo on one of its channels.
 
 The sorting line's gates are hobby servos on a PCA9685 (hardware PWM: no software-timing jitter)::
@@ -20,7 +21,8 @@ import logging
 import math
 import operator
 import time
-from typing import Callable, SupportsIndex
+from collections.abc import Callable
+from typing import SupportsIndex
 
 from .bus import I2CBus, validate_address
 

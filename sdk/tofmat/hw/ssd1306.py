@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """SSD1306 128x64 monochrome OLED over I2C: the box's front panel, and text rendered for it.
 
 ::
@@ -119,7 +120,7 @@ class SSD1306:
         self._commands((COLUMN_RANGE, 0, self.width - 1), (PAGE_RANGE, 0, self.height // 8 - 1))
         data = pack_pages(frame != 0).reshape(-1).tolist()
         for i in range(0, len(data), I2C_BLOCK_MAX):
-            self._bus.write_i2c_block_data(self._address, CONTROL_DATA, data[i:i + I2C_BLOCK_MAX])
+            self._bus.write_i2c_block_data(self._address, CONTROL_DATA, data[i : i + I2C_BLOCK_MAX])
 
     def clear(self) -> None:
         """Switch every pixel off."""
@@ -199,5 +200,5 @@ def text_line_height() -> int:
 
 def _line_metrics(font: ImageFont.ImageFont | ImageFont.FreeTypeFont) -> tuple[int, int]:
     """(rows per line including one blank row, empty rows above the tallest glyphs) of ``font``."""
-    left, top, right, bottom = font.getbbox(_TALL_TEXT)
+    _left, top, _right, bottom = font.getbbox(_TALL_TEXT)
     return int(bottom - top) + 1, int(top)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The sorting line's agents beside tofmatd: the diverter gates (:mod:`tofmat.line.gates`)."""
 
 from __future__ import annotations

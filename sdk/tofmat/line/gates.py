@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Diverter gates for tofmatd's sort decisions: when each outlet's flap opens and closes.
 
 A flap on a servo is slow (``travel_ms`` from closed to open), so it must start moving before its

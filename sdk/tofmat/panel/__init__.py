@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The standalone box's front panel: what its 128x64 OLED shows (:class:`PanelView`).
 
 ``tofmat panel`` (tofmat.tools.panel_agent) keeps a view up to date from tofmatd's events and draws

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """What the front panel shows: five lines of text, from tofmatd's events and status.
 
 The lines, top to bottom::

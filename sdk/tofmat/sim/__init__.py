@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The physically based Kinect v2 simulator (C++ core in firmware/sim).
 
 Device profiles and material libraries are versioned JSON files shipped with

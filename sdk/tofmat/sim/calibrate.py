@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Fit the forward model (docs/simulator-model.md, model_np.py) to the real Kinect v2 database.
 
 Shared device parameters (per-frequency harmonics up to GROUP_HMAX, tap saturation, step gains
@@ -42,8 +43,9 @@ import math
 import os
 import sys
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence, TypeAlias, TypedDict, cast
+from typing import Any, TypeAlias, TypedDict, cast
 
 import numpy as np
 
@@ -352,9 +354,7 @@ class Problem:
             )  # fmt: skip
             d = M.decode(m, 0.0, dev["eps"])
         else:
-            z = M.phasor_direct(
-                dev["f"], dev["s"], dev["delta"], G, dev["gain"], dev["offset"], Rh, self.D
-            )
+            z = M.phasor_direct(dev["f"], dev["s"], dev["delta"], G, dev["gain"], dev["offset"], Rh, self.D)
             d = M.depths_from_phasor(z, dev["eps"])
         _, dcomb = M.unwrap_combined(d)
         noise = np.array([st[("noise", i)] for i in idx])
@@ -416,7 +416,7 @@ class Problem:
                     sp[n_data + 2 * a + j, pos[(p, i)]] = 1
         base = n_data + 2 * len(self.idx)
         for q, k in enumerate(self.harm_pairs):
-            ky = ("hy",) + k[1:]
+            ky = ("hy", *k[1:])
             for r in range(3):
                 sp[base + 3 * q + r, pos[k]] = 1
                 if ky in pos:
@@ -438,7 +438,7 @@ class Problem:
 
     def apply(self, x: FloatArray) -> State:
         st = dict(self.st)
-        st.update(zip(self.keys, map(float, x)))
+        st.update(zip(self.keys, map(float, x), strict=True))
         return st
 
     def residuals(self, x: FloatArray) -> FloatArray:
@@ -454,12 +454,12 @@ class Problem:
         for i in self.idx:
             pen += [st[("o0", i)] / OFFSET_PRIOR_MM, st[("o1", i)] / OFFSET_PRIOR_MM]
         for k in self.harm_pairs:
-            hx, hy = st[k], st[("hy",) + k[1:]]
+            hx, hy = st[k], st[("hy", *k[1:])]
             pen += [self.ridge_w * hx, self.ridge_w * hy,
                     100.0 * max(0.0, math.hypot(hx, hy) - 0.5)]  # fmt: skip
         drift_w = DRIFT_RIDGE * math.sqrt(len(self.idx))
         pen += [st[k] / SESSION_PRIOR if k[0] in SESSION_KEYS else drift_w * st[k] for k in self.pen_keys]
-        return np.concatenate(res + [np.array(pen)])
+        return np.concatenate([*res, np.array(pen)])
 
     def solve(self, max_nfev: int = 200) -> Any:
         require("scipy.optimize", extra="sim", feature=FEATURE)
@@ -519,7 +519,7 @@ def _init_offsets(prob: Problem, st: State, kinds: Sequence[str], idx: Sequence[
         for row in range(2):
             d = prob.Y[i, row] - sim[a, row]
             d = d[np.isfinite(d)]
-            st[("o%d" % row, i)] = float(np.clip(np.median(d), -390, 390)) if d.size else 0.0
+            st[(f"o{row}", i)] = float(np.clip(np.median(d), -390, 390)) if d.size else 0.0
 
 
 def typical_median(Y: FloatArray, frac: float = 0.5) -> tuple[FloatArray, list[int]]:
@@ -530,7 +530,7 @@ def typical_median(Y: FloatArray, frac: float = 0.5) -> tuple[FloatArray, list[i
         d = y - med
         d = d - np.nanmedian(d, axis=1, keepdims=True)
         dev.append(float(np.sqrt(np.nanmean(d * d))))
-    keep = sorted(np.argsort(dev)[: max(3, int(round(frac * len(Y))))].tolist())
+    keep = sorted(np.argsort(dev)[: max(3, round(frac * len(Y)))].tolist())
     return np.nanmedian(Y[keep], axis=0), keep
 
 
@@ -582,8 +582,11 @@ def stage_device(
         prob.setup(st, kinds, idx, _dev_keys(HARMONICS_LOW, sat=False), free)
         res = prob.solve(max_nfev=80)
         rms = prob.rms(prob.st, kinds, idx)
-        log(f"  restart {r:2d} (h <= 7): rms "
-            + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms)) + f" mm (cost {res.cost:.1f})")
+        log(
+            f"  restart {r:2d} (h <= 7): rms "
+            + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms, strict=True))
+            + f" mm (cost {res.cost:.1f})"
+        )
         low.append((float(res.cost), prob.st))
     # the multimodal part is the low harmonics' phases: only the best restarts go on to all
     # harmonics with the tap saturation (the expensive fit)
@@ -594,8 +597,11 @@ def stage_device(
         prob.setup(st, kinds, idx, _dev_keys(HARMONICS_FIT), free)
         res = prob.solve(max_nfev=150)
         rms = prob.rms(prob.st, kinds, idx)
-        log(f"  best {r + 1}, all harmonics: rms "
-            + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms)) + f" mm (cost {res.cost:.1f})")
+        log(
+            f"  best {r + 1}, all harmonics: rms "
+            + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms, strict=True))
+            + f" mm (cost {res.cost:.1f})"
+        )
         out.append((float(res.cost), prob.st))
     out.sort(key=lambda t: t[0])
     return [s for _, s in out]
@@ -637,7 +643,7 @@ def fit_material(
     fits: dict[str, State] = {}
     for kind in candidates:
         kb: tuple[float, State] | None = None
-        trial = [(st[("lt", i)], st[("b", i)], st[("lr", i)])] + list(starts)
+        trial = [(st["lt", i], st["b", i], st["lr", i]), *list(starts)]
         for lt, b0, lr in trial:
             s = dict(st)
             s[("lt", i)], s[("b", i)], s[("lr", i)] = lt, b0, lr
@@ -704,7 +710,7 @@ def simulated_curves(
 
 def rms_per_material(sim: FloatArray, Y: FloatArray) -> FloatArray:
     out = []
-    for s, y in zip(sim, Y):
+    for s, y in zip(sim, Y, strict=True):
         v = np.isfinite(y)
         r = (s - y)[v]
         r = np.where(np.isfinite(r), r, 50.0)
@@ -780,16 +786,14 @@ def calibrate(
         log(f"round {rnd + 1}: stage 2, per-material kind selection (device fixed)")
         for i in allidx:
             name = names[i]
-            cand = ["exponential", "gamma", "double"] + (
-                ["slab"] if SLAB_ALL or name in THIN_ACRYLICS else [])
+            cand = ["exponential", "gamma", "double"] + (["slab"] if SLAB_ALL or name in THIN_ACRYLICS else [])
             if rnd == 0:
                 kind, st_i, rms_i, scores = fit_material(prob, st, kinds, i, cand, i in noisy)
             elif KIND_RESELECT:  # every kind again against the refined device, warm starts
                 kind, st_i, rms_i, scores = fit_material(prob, st, kinds, i, cand, i in noisy,
                                                          starts=())  # fmt: skip
             else:  # warm start of the chosen kind only
-                kind, st_i, rms_i, scores = fit_material(
-                    prob, st, kinds, i, [kinds[i]], i in noisy, starts=())
+                kind, st_i, rms_i, scores = fit_material(prob, st, kinds, i, [kinds[i]], i in noisy, starts=())
                 scores = {**kind_scores.get(name, {}), kind: rms_i}
             kind_scores[name] = scores
             kinds[i] = kind
@@ -838,11 +842,23 @@ def calibrate(
         runtime_s=runtime,
         kind_scores=kind_scores,
         log=logs,
-        config={"restarts": restarts, "seed": seed, "rounds": rounds, "bins": list(bins),
-                "h_max": HMAX, "group_h_max": list(GROUP_HMAX), "ridge": RIDGE, "offset_prior_mm": OFFSET_PRIOR_MM,
-                "weight": {"exp": WEIGHT_EXP, "floor_mm": WEIGHT_FLOOR_MM, "cap_mm": WEIGHT_CAP_MM},
-                "joint_passes": list(JOINT_PASSES), "joint_nfev": JOINT_NFEV, "kind_cycles": KIND_CYCLES,
-                "session_drift": SESSION_DRIFT, "session_prior": SESSION_PRIOR, "drift_ridge": DRIFT_RIDGE},  # fmt: skip
+        config={
+            "restarts": restarts,
+            "seed": seed,
+            "rounds": rounds,
+            "bins": list(bins),
+            "h_max": HMAX,
+            "group_h_max": list(GROUP_HMAX),
+            "ridge": RIDGE,
+            "offset_prior_mm": OFFSET_PRIOR_MM,
+            "weight": {"exp": WEIGHT_EXP, "floor_mm": WEIGHT_FLOOR_MM, "cap_mm": WEIGHT_CAP_MM},
+            "joint_passes": list(JOINT_PASSES),
+            "joint_nfev": JOINT_NFEV,
+            "kind_cycles": KIND_CYCLES,
+            "session_drift": SESSION_DRIFT,
+            "session_prior": SESSION_PRIOR,
+            "drift_ridge": DRIFT_RIDGE,
+        },
     )
 
 
@@ -874,7 +890,8 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
     device["notes"] = (
         "Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the 29 "
         "real curves (docs/simulator-model.md with its extensions: harmonics to h = "
-        + "/".join(str(h) for h in GROUP_HMAX) + ", tap "
+        + "/".join(str(h) for h in GROUP_HMAX)
+        + ", tap "
         "full-well saturation with full_well in units of the 16 MHz tap signal of an albedo-1 "
         "target at range_ref_mm, signal_scale per group, decode offsets carrying the common row "
         "levels). camera/noise/pixel_phase/signal are not fitted (copied from the ideal profile)."

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat sim ...`: calibrate the simulator, reproduce the paper's evaluation, measure speed."""
 
 from __future__ import annotations
@@ -5,8 +6,9 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence, cast
+from typing import Any, cast
 
 import click
 import numpy as np
@@ -51,8 +53,14 @@ def _spread_option(option: str, hint: str, form: str, from_library: Callable[[],
 @sim_cli.command("evaluate")
 @click.option("--device", default=DEFAULT_DEVICE, show_default=True, help="Device profile name or path.")
 @click.option("--library", default=DEFAULT_LIBRARY, show_default=True, help="Material library name or path.")
-@click.option("--out", "out_dir", default=Path("build/sim-eval"), type=click.Path(file_okay=False, path_type=Path),
-              show_default=True, help="Folder for figures and results.json.")
+@click.option(
+    "--out",
+    "out_dir",
+    default=Path("build/sim-eval"),
+    type=click.Path(file_okay=False, path_type=Path),
+    show_default=True,
+    help="Folder for figures and results.json.",
+)
 @click.option("--materials", help="Comma-separated subset (default: the whole library).")
 @click.option("--step", default=1.0, show_default=True, help="Stage step, mm (600..1250 mm).")
 @click.option("--seed", default=0, show_default=True)
@@ -62,8 +70,11 @@ def _spread_option(option: str, hint: str, form: str, from_library: Callable[[],
 @click.option("--session-drift", default="none", show_default=True,
               help="Per-capture session states of the waveform (docs/simulator-model.md 2.2): 'none', 'library' "
               "(the spread of the states the calibrated library's fits carry) or 'S80,S16,S120' (standard deviations).")  # fmt: skip
-@click.option("--compare-fixed", is_flag=True,
-              help="Also classify every query with the fixed-point backend and report where it differs.")
+@click.option(
+    "--compare-fixed",
+    is_flag=True,
+    help="Also classify every query with the fixed-point backend and report where it differs.",
+)
 def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None, step: float, seed: int,
                  session_offsets: str, session_drift: str, compare_fixed: bool) -> None:  # fmt: skip
     """Leave-one-orientation-out nearest neighbour in the paper's protocol (Sec. 5)."""
@@ -89,24 +100,34 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     result, _ = ev.evaluate(r, names, stage_mm=stage, seed=seed, progress=lambda s: click.echo(s, err=True),
                             session_offsets_mm=spread, compare_fixed=compare_fixed, session_drift_sd=drift_sd,
                             session_renderer=lambda t: Renderer(r.device.in_session(t), r.library, 0))  # fmt: skip
-    click.echo(f"{len(names)} materials x {len(ev.ORIENTATIONS_DEG)} orientations, stage {stage[0]:g}..{stage[-1]:g} mm "
-               f"step {step:g} mm, ROI 20x20 px, session offsets sd {spread[0]:.2f}, {spread[1]:.2f} mm, "
-               f"session drift sd {drift_sd[0]:.2f}, {drift_sd[1]:.2f}, {drift_sd[2]:.2f}, "
-               f"capture {result.capture_seconds:.0f} s")
+    click.echo(
+        f"{len(names)} materials x {len(ev.ORIENTATIONS_DEG)} orientations, stage {stage[0]:g}..{stage[-1]:g} mm "
+        f"step {step:g} mm, ROI 20x20 px, session offsets sd {spread[0]:.2f}, {spread[1]:.2f} mm, "
+        f"session drift sd {drift_sd[0]:.2f}, {drift_sd[1]:.2f}, {drift_sd[2]:.2f}, "
+        f"capture {result.capture_seconds:.0f} s"
+    )
     click.echo("| feature | accuracy (sim) | paper | classify time |")
     click.echo("|---|---:|---:|---:|")
     for name, acc in result.accuracy.items():
         paper = ev.PAPER_ACCURACY.get(name)
-        click.echo(f"| {name} | {acc:.1f} % | {f'{paper:.1f} %' if paper else '-'} | {result.classify_seconds[name]:.2f} s |")
+        click.echo(
+            f"| {name} | {acc:.1f} % | {f'{paper:.1f} %' if paper else '-'} | {result.classify_seconds[name]:.2f} s |"
+        )
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in ("both", "depth", "frequency"):
-        plots.confusion_matrix(result.confusion[name], names, f"simulated database, {name} (accuracy {result.accuracy[name]:.1f} %)",
-                               out_dir / f"confusion_{name}.png")
+        plots.confusion_matrix(
+            result.confusion[name],
+            names,
+            f"simulated database, {name} (accuracy {result.accuracy[name]:.1f} %)",
+            out_dir / f"confusion_{name}.png",
+        )
     for name, differ in result.fixed_disagreements.items():
         n = len(result.materials) * len(ev.ORIENTATIONS_DEG)
         worst = max((abs(d[4]) for d in differ), default=0.0)
-        click.echo(f"fixed vs float, {name}: {len(differ)} of {n} queries labelled differently"
-                   + (f" (largest float margin between the two labels {worst:.4f} mm^2)" if differ else ""))
+        click.echo(
+            f"fixed vs float, {name}: {len(differ)} of {n} queries labelled differently"
+            + (f" (largest float margin between the two labels {worst:.4f} mm^2)" if differ else "")
+        )
     conf = {k: ev.top_confusions(result, k) for k in result.confusion}
     click.echo("most frequent confusions (both): " + ", ".join(f"{t}->{p} {n}" for t, p, n in conf["both"]))
 
@@ -116,8 +137,15 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     coarse = np.arange(600.0, 1250.0 + 1e-9, max(step, 2.0))
     orient = [ev.stability(r, names, p, angles, False, coarse, seed + 17) for p in probes]
     fold = [ev.stability(r, names, p, folds, True, coarse, seed + 29) for p in probes]
-    plots.stability(orient, "orientation [deg]", "Feature stability vs orientation (cf. Fig. 6)", out_dir / "stability_orientation.png")
-    plots.stability(fold, "fold angle [deg]", "Feature stability vs fold angle (cf. Fig. 7)", out_dir / "stability_fold.png")
+    plots.stability(
+        orient,
+        "orientation [deg]",
+        "Feature stability vs orientation (cf. Fig. 6)",
+        out_dir / "stability_orientation.png",
+    )
+    plots.stability(
+        fold, "fold angle [deg]", "Feature stability vs fold angle (cf. Fig. 7)", out_dir / "stability_fold.png"
+    )
     summary = {
         "materials": names,
         "orientations_deg": list(ev.ORIENTATIONS_DEG),
@@ -130,15 +158,24 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
         "stability_orientation": orient,
         "stability_fold": fold,
         "fixed_disagreements": result.fixed_disagreements,
-        "seconds": {"capture": result.capture_seconds, "classify": result.classify_seconds, "total": time.perf_counter() - t0},
+        "seconds": {
+            "capture": result.capture_seconds,
+            "classify": result.classify_seconds,
+            "total": time.perf_counter() - t0,
+        },
     }
     (out_dir / "results.json").write_text(json.dumps(summary, indent=2))
     click.echo(f"wrote {out_dir}/results.json and figures")
 
 
 @sim_cli.command("calibrate")
-@click.option("--db", "db_dir", required=True, type=click.Path(exists=True, file_okay=False, path_type=Path),
-              help="Folder of the real database (.npy per material).")
+@click.option(
+    "--db",
+    "db_dir",
+    required=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="Folder of the real database (.npy per material).",
+)
 @click.option("--out", "out_dir", default=Path("build/calib"), type=click.Path(file_okay=False, path_type=Path),
               show_default=True, help="Writes data/devices/kinect2_tanaka2017.json, data/materials/tanaka2017.json, "
               "the fit log and the real-vs-simulated plot under this folder.")  # fmt: skip
@@ -163,11 +200,15 @@ def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed:
         table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))
     except (ValueError, OSError) as e:
         raise click.ClickException(f"cannot read the database: {e}") from e
-    result = cal.calibrate(table, restarts=restarts, seed=seed, rounds=rounds, progress=lambda m: click.echo(m, err=True))
+    result = cal.calibrate(
+        table, restarts=restarts, seed=seed, rounds=rounds, progress=lambda m: click.echo(m, err=True)
+    )
     for kind, path in cal.write_outputs(result, out_dir, table).items():
         click.echo(f"wrote {kind}: {path}")
-    click.echo(f"median rms {result.median_rms_mm:.3f} mm over {len(result.rms_mm)} materials "
-               f"(max {max(result.rms_mm.values()):.3f} mm), {result.runtime_s:.0f} s")
+    click.echo(
+        f"median rms {result.median_rms_mm:.3f} mm over {len(result.rms_mm)} materials "
+        f"(max {max(result.rms_mm.values()):.3f} mm), {result.runtime_s:.0f} s"
+    )
 
 
 @sim_cli.command("bench")
@@ -208,12 +249,16 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
         err.append(np.median(np.abs(d.combined_mm[ok] - clean.combined_mm[ok])))
     t = np.array(times)
     n_threads = threads or os.cpu_count() or 1
-    click.echo(f"render, {n_threads} thread(s), full frame with noise: median {1e3 * np.median(t):.1f} ms = "
-               f"{1 / np.median(t):.0f} frames/s (best {1e3 * t.min():.1f} ms); noise: median |combined depth - "
-               f"noise-free| on the target {np.median(err):.2f} mm")
-    click.echo(f"float decode, one core (9 samples -> phase, amplitude, per-frequency depth, combined depth, Eq. (10) "
-               f"features, flags): full frame median {1e3 * np.median(decode_t):.1f} ms (best {1e3 * min(decode_t):.1f}); "
-               f"20x20 ROI median {1e6 * np.median(roi_t):.0f} us (best {1e6 * min(roi_t):.0f}), Python call included")
+    click.echo(
+        f"render, {n_threads} thread(s), full frame with noise: median {1e3 * np.median(t):.1f} ms = "
+        f"{1 / np.median(t):.0f} frames/s (best {1e3 * t.min():.1f} ms); noise: median |combined depth - "
+        f"noise-free| on the target {np.median(err):.2f} mm"
+    )
+    click.echo(
+        f"float decode, one core (9 samples -> phase, amplitude, per-frequency depth, combined depth, Eq. (10) "
+        f"features, flags): full frame median {1e3 * np.median(decode_t):.1f} ms (best {1e3 * min(decode_t):.1f}); "
+        f"20x20 ROI median {1e6 * np.median(roi_t):.0f} us (best {1e6 * min(roi_t):.0f}), Python call included"
+    )
 
 
 @sim_cli.command("table")
@@ -222,7 +267,9 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
 @click.option("--materials", help="Comma-separated subset (default: the whole library).")
 @click.option("--bins", "n_bins", default=200, show_default=True, help="Depth bins from 600 mm (the real database's).")
 @click.option("--yaw", default=10.0, show_default=True, help="Target orientation, degrees.")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx).")
+@click.option(
+    "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx)."
+)
 def table_cmd(device: str, library: str, materials: str | None, n_bins: int, yaw: float, output: Path) -> None:
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against)."""
     from .table import database_bins, simulated_table
@@ -238,4 +285,6 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, yaw
         raise click.ClickException(str(e)) from e
     output.parent.mkdir(parents=True, exist_ok=True)
     table.save(str(output))
-    click.echo(f"{output}: {len(names)} materials x 2 rows x {n_bins} bins, recorded in {time.perf_counter() - t0:.1f} s")
+    click.echo(
+        f"{output}: {len(names)} materials x 2 rows x {n_bins} bins, recorded in {time.perf_counter() - t0:.1f} s"
+    )

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The paper's evaluation (Sec. 5), reproduced on the calibrated simulator.
 
 A database in the paper's protocol: every material on a translation stage,
@@ -30,8 +31,9 @@ to the distance from that class to its nearest other class.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -150,7 +152,9 @@ def leave_one_orientation_out(
             continue
         # (Exemplars are "material@orientation": a different orientation of the same material is
         # the same label.)
-        for truth, (a, b) in enumerate(zip(results, Classifier(table, backend="fixed").classify_batch(queries))):
+        for truth, (a, b) in enumerate(
+            zip(results, Classifier(table, backend="fixed").classify_batch(queries), strict=True)
+        ):
             la, lb = a.material.split("@")[0], b.material.split("@")[0]
             if la != lb:
                 d = {m.material: m.distance for m in a.ranking}

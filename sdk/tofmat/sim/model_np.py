@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Vectorised NumPy reference implementation of docs/simulator-model.md.
 
 This module is the executable form of the forward-model specification: material kernels
@@ -31,7 +32,8 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import Any, Mapping, Sequence, TypeAlias, cast
+from collections.abc import Mapping, Sequence
+from typing import Any, TypeAlias, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -140,11 +142,7 @@ def response(material: Mapping[str, Any], omega: Any, alpha: Any = 0.0) -> Compl
         # section 1.1: two exponential components, b and b2 share the Fresnel factor
         b2_eff = fresnel_b_eff(float(m["subsurface2"]), n, alpha)
         tau2 = float(m["tau2_ps"]) * 1e-3
-        return rho * (
-            (1.0 - b_eff - b2_eff)
-            + b_eff * k_exponential(omega, tau)
-            + b2_eff * k_exponential(omega, tau2)
-        )
+        return rho * ((1.0 - b_eff - b2_eff) + b_eff * k_exponential(omega, tau) + b2_eff * k_exponential(omega, tau2))
     else:
         raise ValueError(f"unknown material kind {kind!r}")
     return rho * ((1.0 - b_eff) + b_eff * k)
@@ -164,7 +162,7 @@ def n_harmonics(device: Mapping[str, Any]) -> int:
     """Highest harmonic listed by any group, drift included (at least 7)."""
     hs = [int(hh["h"]) for g in device["frequencies"]
           for key in ("harmonics", "session_drift") for hh in g.get(key, [])]  # fmt: skip
-    return max([N_HARM] + hs)
+    return max([N_HARM, *hs])
 
 
 def harmonic_vector(group: Mapping[str, Any], n_harm: int = N_HARM, key: str = "harmonics") -> ComplexArray:
@@ -209,7 +207,7 @@ def device_arrays(device: Mapping[str, Any]) -> dict[str, npt.NDArray[Any]]:
     sat = device.get("saturation") or {}
     fw = [g.get("full_well") for g in groups]
     return {
-        "scale": np.array([float(g.get("signal_scale", d)) for g, d in zip(groups, SIGNAL_SCALE_DEFAULT)]),
+        "scale": np.array([float(g.get("signal_scale", d)) for g, d in zip(groups, SIGNAL_SCALE_DEFAULT, strict=True)]),
         "full_well": np.array([np.inf if w is None else float(w) for w in fw]),
         "sat_p": np.array(float(sat.get("sharpness", 8.0))),
         "f": np.array(GROUP_FREQS_MHZ),
@@ -236,20 +234,16 @@ def ideal_device(name: str = "ideal", version: str = "0") -> dict[str, Any]:
                 "scale_error": 0.0,
                 "phase_offset_rad": 0.0,
                 "decode_offset_rad": 0.0,
-                "harmonics": [
-                    {"h": h, "amplitude": 0.0, "phase_rad": 0.0} for h in range(2, N_HARM + 1)
-                ],
+                "harmonics": [{"h": h, "amplitude": 0.0, "phase_rad": 0.0} for h in range(2, N_HARM + 1)],
                 "step_gain": [1.0, 1.0, 1.0],
                 "step_offset": [0.0, 0.0, 0.0],
             }
-            for f, r in zip((80, 16, 120), SIGNAL_SCALE_DEFAULT)
+            for f, r in zip((80, 16, 120), SIGNAL_SCALE_DEFAULT, strict=True)
         ],
     }
 
 
-def material_harmonic_responses(
-    material: Mapping[str, Any], dev: Mapping[str, Any], alpha: Any = 0.0
-) -> ComplexArray:
+def material_harmonic_responses(material: Mapping[str, Any], dev: Mapping[str, Any], alpha: Any = 0.0) -> ComplexArray:
     """R(h f (1 + s), alpha) for the groups and h = 0..H: shape (3, H + 1) (+ alpha's shape)."""
     h = np.arange(dev["G"].shape[-1])
     omega = 2.0 * math.pi * (dev["f"] * 1e-3 * (1.0 + dev["s"]))[:, None] * h[None, :]
@@ -370,8 +364,8 @@ def phasor_direct(
             z = z + xa[..., None] * Pk
         if np.any(xb != 0):
             z = z + xb[..., None] * np.conj(Pk)
-    O = offset @ np.exp(-1j * ph)  # (3,)
-    return cast(ComplexArray, z + (np.real(Rh[..., 0]) * O)[..., None])
+    rot = offset @ np.exp(-1j * ph)  # (3,)
+    return cast(ComplexArray, z + (np.real(Rh[..., 0]) * rot)[..., None])
 
 
 def depths_from_phasor(z: ComplexArray, eps: Any = None) -> FloatArray:
@@ -463,7 +457,7 @@ def bin_edges(start_mm: float, width_mm: float, count: int) -> FloatArray:
 
 
 def sweep_grid(start_mm: float = 450.0, stop_mm: float = 1400.0, step_mm: float = 0.25) -> FloatArray:
-    n = int(round((stop_mm - start_mm) / step_mm))
+    n = round((stop_mm - start_mm) / step_mm)
     return cast(FloatArray, start_mm + step_mm * np.arange(n + 1))
 
 

@@ -1,9 +1,11 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Figures of the simulator's calibration and evaluation (docs/simulator.md); need the ``sim`` extra (matplotlib)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -28,8 +30,15 @@ def confusion_matrix(conf: npt.NDArray[np.int64], materials: Sequence[str], titl
     for t in range(n):
         for p in range(n):
             if conf[t, p]:
-                ax.text(p, t, str(conf[t, p]), ha="center", va="center", fontsize=5,
-                        color="white" if frac[t, p] > 0.5 else "black")
+                ax.text(
+                    p,
+                    t,
+                    str(conf[t, p]),
+                    ha="center",
+                    va="center",
+                    fontsize=5,
+                    color="white" if frac[t, p] > 0.5 else "black",
+                )
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="fraction of the true material's queries")
     ax.set_title(title)
     fig.tight_layout()

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """An exemplar table recorded with the simulated camera.
 
 What a sensor box does with its own camera before it labels anything: every material is moved
@@ -56,7 +57,9 @@ def simulated_table(
     depths = np.arange(centres[0] - 60.0, centres[-1] + 60.0 + 1e-9, step_mm)
     features = []
     for k, name in enumerate(materials):
-        obs = [roi_observation(renderer, p0, name, float(z), yaw_deg, seed + 1000 * k + i) for i, z in enumerate(depths)]
+        obs = [
+            roi_observation(renderer, p0, name, float(z), yaw_deg, seed + 1000 * k + i) for i, z in enumerate(depths)
+        ]
         got = [o for o in obs if o is not None]
         out = np.full((2, bins.count), np.nan, np.float32)
         if len(got) >= 2:

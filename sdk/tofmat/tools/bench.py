@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Accuracy and run time of the classifier on noisy windows of the real curves.
 
 Error and latency are always reported together (DESIGN.md section 6). This is a
@@ -62,10 +63,10 @@ def bench_windows(
             t0 = time.perf_counter_ns()
             batch = clf.classify_batch(queries)
             batch_ns = min(batch_ns, time.perf_counter_ns() - t0)
-        if any(b.index != lab for b, lab in zip(batch, labels)):
+        if any(b.index != lab for b, lab in zip(batch, labels, strict=True)):
             raise RuntimeError("classify_batch disagrees with classify")
         pairs: Counter[tuple[str, str]] = Counter()
-        for t, lab in zip(truth, labels):
+        for t, lab in zip(truth, labels, strict=True):
             if t != lab:
                 a, b = sorted((table.materials[t], table.materials[lab]))
                 pairs[(a, b)] += 1

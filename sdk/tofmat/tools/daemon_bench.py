@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat bench-daemon`: what each of tofmatd's profiles costs and reaches, on the simulated camera.
 
 Per profile and number of clients: tofmatd on a 30 frames/s simulated camera, every client
@@ -13,9 +14,9 @@ from __future__ import annotations
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -84,7 +85,10 @@ def run_profile(table: Path, profile: str, n_clients: int, seconds: float) -> Pr
             results: list[list[tuple[float, bool | float | None]]] = [[] for _ in clients]
             start = time.monotonic()
             until = start + seconds
-            threads = [threading.Thread(target=_collect, args=(c, profile, until, r)) for c, r in zip(clients, results)]
+            threads = [
+                threading.Thread(target=_collect, args=(c, profile, until, r))
+                for c, r in zip(clients, results, strict=True)
+            ]
             for t in threads:
                 t.start()
             control = connect(sock, daemon)

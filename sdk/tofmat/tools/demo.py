@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The live demo on the real database: simulated hand-held sweeps, classified as they grow.
 
 Each sweep moves one material through part of the depth range. Every frame
@@ -10,8 +11,8 @@ with tofmatd on the simulated camera.)
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat bench-line`: how many items a minute the simulated sorting line sorts right.
 
 Runs `tofmat line-demo`'s line (tools/line_demo.py) over a grid of belt speeds, offered rates and
@@ -12,9 +13,9 @@ A benchmark: it prints figures and never fails on them.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Iterable
 
 import numpy as np
 

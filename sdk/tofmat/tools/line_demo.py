@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat line-demo`: tofmatd running a simulated sorting line, end to end.
 
 The simulated belt (``--source sim:belt``) carries items of a few materials past a light barrier
@@ -15,9 +16,9 @@ import tempfile
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -60,7 +61,7 @@ class LineSetup:
     def outlets(self) -> list[tuple[str, float]]:
         """(name, position) of each material's outlet, then the reject outlet's."""
         out = [(m, self.first_outlet_mm + k * self.outlet_spacing_mm) for k, m in enumerate(self.materials)]
-        return out + [("reject", self.first_outlet_mm + len(self.materials) * self.outlet_spacing_mm)]
+        return [*out, ("reject", self.first_outlet_mm + len(self.materials) * self.outlet_spacing_mm)]
 
     def burst_start_mm(self) -> float:
         """Where the item's leading edge is when its burst starts: the item's middle is under the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat demo`: tofmatd on the simulated camera, watched through the Python client.
 
 Starts the daemon with ``--source sim:sweep`` (targets of a few materials moved by hand from 600 to
@@ -12,9 +13,9 @@ import signal
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -97,7 +98,9 @@ def run_live_demo(
         daemon = start_daemon(table, socket, source, log)
         try:
             with connect(socket, daemon) as client:
-                echo(f"connected to {client.hello['server']} at {socket}; {len(materials)} hand-held sweeps, 600..1200 mm")
+                echo(
+                    f"connected to {client.hello['server']} at {socket}; {len(materials)} hand-held sweeps, 600..1200 mm"
+                )
                 last: Label | None = None
                 shown = ""
                 for label in client.labels(timeout=30.0):

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat panel`: the standalone box's front panel, an SSD1306 OLED showing tofmatd's label.
 
 It follows tofmatd's ``labels``, ``device`` and ``reset`` streams and its status (the profile and
@@ -11,8 +12,8 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from ..client import Client, ClientError
 from ..hw import SSD1306, render_text

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Plots of exemplar tables: every material's distortion curves vs depth (cf. the paper's Fig. 4)."""
 
 from __future__ import annotations

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """`tofmat sort`: the diverter agent. It follows tofmatd's sort decisions and moves each outlet's
 gate (a flap on a servo, on a PCA9685) so that it is open when its item arrives and closed after.
 
@@ -8,13 +9,12 @@ on (CLOCK_MONOTONIC) and reports decisions that came too late for a gate to open
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from ..client import Client, LineEvent, SortDecision
 from ..hw import PCA9685, I2CBus, Servo
 from ..line import Gate, GateMove, GateSchedule
-
 
 SERVO_HZ = 50  # hobby servos: a pulse every 20 ms
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Hand-held sweeps simulated from real curves.
 
 Until the physical simulator lands, a "sweep" is a window of consecutive depth
@@ -7,8 +8,8 @@ feature vector a user builds by moving a target through part of the range.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 import numpy.typing as npt

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Opening a table from whatever the user points at."""
 
 from __future__ import annotations
