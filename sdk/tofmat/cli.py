@@ -14,48 +14,27 @@ import click
 import numpy as np
 
 from . import ClassificationResult, Classifier, ExemplarTable, __version__
-from ._extras import MissingExtraError, require_pyplot
+from ._clikit import CliState, Failure, FiniteFloat, NumberList, TofmatGroup, progress_bar, setup_logging
+from ._extras import require_pyplot
 from .tools.tables import open_table
 
 F = TypeVar("F", bound=Callable[..., Any])
 log = logging.getLogger("tofmat")
 
 
-def user_errors(fn: F) -> F:
-    """Bad input (ValueError, including FormatError) and refused files (OSError) end in one clear line."""
-
-    def wrapper(*args: Any, **kwargs: Any) -> Any:
-        try:
-            return fn(*args, **kwargs)
-        except (ValueError, OSError) as e:
-            raise click.ClickException(str(e)) from e
-
-    wrapper.__name__ = fn.__name__
-    wrapper.__doc__ = fn.__doc__
-    return wrapper  # type: ignore[return-value]
-
-
 def csv_list(value: str | None) -> list[str] | None:
     return [v.strip() for v in value.split(",") if v.strip()] if value else None
 
 
-class ExtrasGroup(click.Group):
-    """A command that needs an optional dependency which is not installed ends in one line naming the
-    extra to install (pip install 'tofmat[...]'), exit status 1, not a traceback."""
-
-    def invoke(self, ctx: click.Context) -> Any:
-        try:
-            return super().invoke(ctx)
-        except MissingExtraError as e:
-            raise click.ClickException(str(e)) from e
-
-
-@click.group(cls=ExtrasGroup)
+@click.group(cls=TofmatGroup)
 @click.version_option(__version__, prog_name="tofmat")
-@click.option("-v", "--verbose", is_flag=True, help="Log progress to stderr.")
-def main(verbose: bool) -> None:
+@click.option("-v", "--verbose", is_flag=True, help="Show debug logs, and the traceback of an error.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bars or progress notes.")
+@click.pass_context
+def main(ctx: click.Context, verbose: bool, quiet: bool) -> None:
     """Material classification from Time-of-Flight depth distortion."""
-    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(message)s")
+    ctx.obj = CliState(verbose=verbose, quiet=quiet)
+    setup_logging(verbose)
 
 
 @main.group()
@@ -68,11 +47,16 @@ def table() -> None:
 @click.option(
     "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file to write (.tmx)."
 )
-@click.option("--bin-start", default=600.0, show_default=True, help="Left edge of the first bin, mm.")
 @click.option(
-    "--bin-stop", default=1200.0, show_default=True, help="Left edge of the last bin, mm (numpy.linspace convention)."
+    "--bin-start", default=600.0, show_default=True, type=FiniteFloat(0, 20000), help="Left edge of the first bin, mm."
 )
-@user_errors
+@click.option(
+    "--bin-stop",
+    default=1200.0,
+    show_default=True,
+    type=FiniteFloat(0, 20000),
+    help="Left edge of the last bin, mm (numpy.linspace convention).",
+)
 def table_import(directory: Path, output: Path, bin_start: float, bin_stop: float) -> None:
     """Import a folder of <material>.npy curves into a compact table file."""
     t = ExemplarTable.from_npy_dir(directory, bin_start_mm=bin_start, bin_stop_mm=bin_stop)
@@ -99,7 +83,6 @@ def table_summary(path: Path, t: ExemplarTable) -> dict[str, Any]:
 @table.command("info")
 @click.argument("path", type=click.Path(exists=True, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-@user_errors
 def table_info(path: Path, as_json: bool) -> None:
     """Describe a table file (or a folder of .npy curves)."""
     t = open_table(path)
@@ -145,9 +128,8 @@ def result_dict(r: ClassificationResult, top: int) -> dict[str, Any]:
 )
 @click.argument("query", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--materials", help="Comma-separated candidate materials (default: all).")
-@click.option("--top", default=5, show_default=True, help="Ranking entries to print.")
+@click.option("--top", default=5, show_default=True, type=click.IntRange(1, 255), help="Ranking entries to print.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-@user_errors
 def classify(table_path: Path, query: Path, materials: str | None, top: int, as_json: bool) -> None:
     """Classify QUERY.npy: (rows, bins) or a batch (n, rows, bins), NaN = missing."""
     t = open_table(table_path)
@@ -177,7 +159,6 @@ def plot() -> None:
 @plot.command("table")
 @click.argument("path", type=click.Path(exists=True, path_type=Path))
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path))
-@user_errors
 def plot_table_cmd(path: Path, output: Path) -> None:
     """Plot every material's distortion curves (like the paper's Fig. 4)."""
     require_pyplot(extra="plot", feature="tofmat plot table")
@@ -195,21 +176,37 @@ def plot_table_cmd(path: Path, output: Path) -> None:
     type=click.Path(exists=True, path_type=Path),
     help="Table file or .npy folder.",
 )
-@click.option("--windows", default="1,3,10,30,100", show_default=True, help="Window lengths in bins.")
-@click.option("--noise", default=0.3, show_default=True, help="Gaussian noise sigma, mm.")
-@click.option("--per-material", default=40, show_default=True, help="Windows per material and length.")
-@click.option("--seed", default=0, show_default=True)
+@click.option(
+    "--windows",
+    default="1,3,10,30,100",
+    show_default=True,
+    type=NumberList(int, 1, 10000),
+    help="Window lengths in bins.",
+)
+@click.option("--noise", default=0.3, show_default=True, type=FiniteFloat(0, 1000), help="Gaussian noise sigma, mm.")
+@click.option(
+    "--per-material",
+    default=40,
+    show_default=True,
+    type=click.IntRange(1, 100000),
+    help="Windows per material and length.",
+)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**63 - 1))
 @click.option("--backends", default="float,fixed", show_default=True, help="Classifier backends to compare.")
 @click.option("--json", "as_json", is_flag=True)
-@user_errors
-def bench(table_path: Path, windows: str, noise: float, per_material: int, seed: int, backends: str,
+def bench(table_path: Path, windows: list[int], noise: float, per_material: int, seed: int, backends: str,
           as_json: bool) -> None:  # fmt: skip
     """Accuracy and time per query on noisy windows of the table's own curves, per backend."""
     from .tools.bench import bench_windows, format_markdown
 
-    lengths = [int(w) for w in csv_list(windows) or []]
     table = open_table(table_path)
-    rows = [r for b in csv_list(backends) or [] for r in bench_windows(table, lengths, noise, per_material, seed, b)]
+    names = csv_list(backends) or []
+    rows = []
+    with progress_bar("backends") as progress:
+        for k, b in enumerate(names):
+            progress(k, len(names), b)
+            rows += bench_windows(table, windows, noise, per_material, seed, b)
+        progress(len(names), len(names), "done")
     click.echo(json.dumps([r.as_dict() for r in rows], indent=2) if as_json else format_markdown(rows, noise))
 
 
@@ -221,12 +218,17 @@ def bench(table_path: Path, windows: str, noise: float, per_material: int, seed:
     type=click.Path(exists=True, path_type=Path),
     help="Table file or .npy folder.",
 )
-@click.option("--sweeps", default=8, show_default=True)
-@click.option("--sweep-bins", default=60, show_default=True, help="Depth bins one sweep passes through.")
-@click.option("--frames-per-bin", default=2, show_default=True)
-@click.option("--noise", default=0.3, show_default=True, help="Per-frame noise sigma, mm.")
-@click.option("--seed", default=1, show_default=True)
-@user_errors
+@click.option("--sweeps", default=8, show_default=True, type=click.IntRange(1, 10000))
+@click.option(
+    "--sweep-bins",
+    default=60,
+    show_default=True,
+    type=click.IntRange(1, 10000),
+    help="Depth bins one sweep passes through.",
+)
+@click.option("--frames-per-bin", default=2, show_default=True, type=click.IntRange(1, 1000))
+@click.option("--noise", default=0.3, show_default=True, type=FiniteFloat(0, 1000), help="Per-frame noise sigma, mm.")
+@click.option("--seed", default=1, show_default=True, type=click.IntRange(0, 2**63 - 1))
 def sweeps_cmd(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: int, noise: float, seed: int) -> None:
     """Partial matching on noisy windows of the table's own curves (no camera, no daemon)."""
     from .tools.demo import run_demo
@@ -238,18 +240,18 @@ def sweeps_cmd(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: i
 @click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
 @click.option("--materials", default="cork,pvc,wood,paper,acryl", show_default=True, help="Targets swept, in order.")
-@click.option("--frames", default=60, show_default=True, help="Frames per sweep (600 to 1200 mm).")
-@click.option("--gap", default=10, show_default=True, help="Frames with no target between sweeps.")
-@user_errors
+@click.option(
+    "--frames", default=60, show_default=True, type=click.IntRange(2, 10000), help="Frames per sweep (600 to 1200 mm)."
+)
+@click.option(
+    "--gap", default=10, show_default=True, type=click.IntRange(0, 10000), help="Frames with no target between sweeps."
+)
 def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None:
     """tofmatd on the simulated camera, live labels through the Python client, accuracy and latency."""
-    from .tools.live_demo import ensure_sim_table, run_live_demo
+    from .tools.live_demo import run_live_demo
 
-    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
-    try:
-        run_live_demo(table, csv_list(materials) or [], frames, gap, echo=click.echo)
-    except RuntimeError as e:
-        raise click.ClickException(str(e)) from e
+    table = table_path or _sim_table()
+    run_live_demo(table, csv_list(materials) or [], frames, gap, echo=click.echo)
 
 
 @main.command("line-demo")
@@ -257,71 +259,51 @@ def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None
               help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
 @click.option("--materials", default="acryl,copper,fabric,silicone,cork", show_default=True,
               help="The items' materials; each gets an outlet, in this order along the belt.")  # fmt: skip
-@click.option("--seconds", default=60.0, show_default=True, type=click.FloatRange(5, 3600),
+@click.option("--seconds", default=60.0, show_default=True, type=FiniteFloat(5, 3600),
               help="How long to run after the first item.")  # fmt: skip
-@click.option("--speed", default=500.0, show_default=True, type=click.FloatRange(50, 2000), help="Belt speed, mm/s.")
-@click.option("--rate", default=60.0, show_default=True, type=click.FloatRange(1, 600), help="Items offered a minute.")
+@click.option("--speed", default=500.0, show_default=True, type=FiniteFloat(50, 2000), help="Belt speed, mm/s.")
+@click.option("--rate", default=60.0, show_default=True, type=FiniteFloat(1, 600), help="Items offered a minute.")
 @click.option("--burst", default=4, show_default=True, type=click.IntRange(1, 30), help="Frames per item.")
 @click.option("--seed", default=1, show_default=True, type=click.IntRange(0, 2**30))
 @click.option("--gates/--no-gates", default=True, show_default=True,
               help="Run tofmat sort beside it: a flap per outlet on a simulated PCA9685.")  # fmt: skip
 @click.option("-q", "--quiet", is_flag=True, help="Only the summary, not every item.")
-@user_errors
 def line_demo(table_path: Path | None, materials: str, seconds: float, speed: float, rate: float, burst: int,
               seed: int, gates: bool, quiet: bool) -> None:  # fmt: skip
     """tofmatd sorting a simulated belt: barrier, camera, outlets; items/min, right outlet, margins."""
     from .tools.line_demo import LineSetup, run_line, summary
-    from .tools.live_demo import ensure_sim_table
 
-    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
+    table = table_path or _sim_table()
     setup = LineSetup(tuple(csv_list(materials) or []), speed_mm_s=speed, rate_per_min=rate, burst=burst, seed=seed)
     click.echo(f"starting tofmatd --source {setup.source()} --gpio sim (a simulated line, {seconds:g} s)")
-    try:
-        result = run_line(table, setup, seconds, echo=None if quiet else click.echo, gates=gates)
-    except RuntimeError as e:
-        raise click.ClickException(str(e)) from e
+    result = run_line(table, setup, seconds, echo=None if quiet else click.echo, gates=gates)
     click.echo("")
     for line in summary(setup, result):
         click.echo(line)
 
 
-def _numbers(kind: type, text: str, what: str) -> list[Any]:
-    try:
-        values = [kind(v) for v in csv_list(text) or []]
-    except ValueError as e:
-        raise click.BadParameter(f"{what}: {e}") from e
-    if not values or any(v <= 0 for v in values):
-        raise click.BadParameter(f"{what}: expected a comma-separated list of positive numbers, got {text!r}")
-    return values
-
-
 @main.command("bench-line")
 @click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
-@click.option("--speeds", default="200,500,1000", show_default=True, help="Belt speeds, mm/s.")
-@click.option("--loads", default="0.6,0.8,0.9,1.0,1.2", show_default=True,
+@click.option(
+    "--speeds", default="200,500,1000", show_default=True, type=NumberList(float, 50, 2000), help="Belt speeds, mm/s."
+)
+@click.option("--loads", default="0.6,0.8,0.9,1.0,1.2", show_default=True, type=NumberList(float, 0.01, 10),
               help="Offered rates as fractions of what the belt carries packed tight.")  # fmt: skip
-@click.option("--bursts", default="4", show_default=True, help="Frames per item.")
+@click.option("--bursts", default="4", show_default=True, type=NumberList(int, 1, 30), help="Frames per item.")
 @click.option("--seeds", default=3, show_default=True, type=click.IntRange(1, 50))
-@click.option("--seconds", default=20.0, show_default=True, type=click.FloatRange(5, 3600), help="Per run.")
-@click.option("--item", default=160.0, show_default=True, type=click.FloatRange(10, 1000), help="Item length, mm.")
-@user_errors
-def bench_line_cmd(table_path: Path | None, speeds: str, loads: str, bursts: str, seeds: int, seconds: float,
+@click.option("--seconds", default=20.0, show_default=True, type=FiniteFloat(5, 3600), help="Per run.")
+@click.option("--item", default=160.0, show_default=True, type=FiniteFloat(10, 1000), help="Item length, mm.")
+def bench_line_cmd(table_path: Path | None, speeds: list[float], loads: list[float], bursts: list[int], seeds: int, seconds: float,
                    item: float) -> None:  # fmt: skip
     """The simulated sorting line over speeds and rates: the highest rate with 99 % to the right outlet."""
     from .tools.line_bench import format_markdown, run_grid
     from .tools.line_demo import LineSetup
-    from .tools.live_demo import ensure_sim_table
 
-    speed_list = _numbers(float, speeds, "--speeds")
-    load_list = _numbers(float, loads, "--loads")
-    burst_list = _numbers(int, bursts, "--bursts")
-    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
+    table = table_path or _sim_table()
     base = LineSetup(("acryl", "copper", "fabric", "silicone", "cork"), item_mm=item)
-    try:
-        cells = run_grid(table, base, speed_list, load_list, seeds, seconds, burst_list, click.echo)
-    except RuntimeError as e:
-        raise click.ClickException(str(e)) from e
+    with progress_bar("simulated line runs") as progress:
+        cells = run_grid(table, base, speeds, loads, seeds, seconds, bursts, progress)
     click.echo("")
     for line in format_markdown(cells, seeds, seconds):
         click.echo(line)
@@ -331,18 +313,33 @@ def bench_line_cmd(table_path: Path | None, speeds: str, loads: str, bursts: str
 @click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Table (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
 @click.option("--profiles", default="handheld,segmentation,sorting", show_default=True)
-@click.option("--clients", default="1,8", show_default=True, help="Numbers of subscribed clients to try.")
-@click.option("--seconds", default=20.0, show_default=True, help="Per profile and client count.")
-@user_errors
-def bench_daemon_cmd(table_path: Path | None, profiles: str, clients: str, seconds: float) -> None:
+@click.option(
+    "--clients",
+    default="1,8",
+    show_default=True,
+    type=NumberList(int, 1, 64),
+    help="Numbers of subscribed clients to try.",
+)
+@click.option(
+    "--seconds", default=20.0, show_default=True, type=FiniteFloat(1, 3600), help="Per profile and client count."
+)
+def bench_daemon_cmd(table_path: Path | None, profiles: str, clients: list[int], seconds: float) -> None:
     """Latency, frame rate and accuracy of each tofmatd profile on the simulated camera (30 frames/s)."""
     from .tools.daemon_bench import bench_daemon, format_markdown
+
+    table = table_path or _sim_table()
+    with progress_bar("profiles") as progress:
+        runs = bench_daemon(table, csv_list(profiles) or [], clients, seconds, progress)
+    click.echo(format_markdown(runs))
+
+
+def _sim_table() -> Path:
+    """The simulated camera's own table, recorded once into build/ (a minute or so the first time)."""
     from .tools.live_demo import ensure_sim_table
 
-    table = table_path or ensure_sim_table(Path("build/sim_table.tmx"), click.echo)
-    counts = [int(c) for c in csv_list(clients) or []]
-    runs = bench_daemon(table, csv_list(profiles) or [], counts, seconds, lambda line: click.echo(line, err=True))
-    click.echo(format_markdown(runs))
+    path = Path("build/sim_table.tmx")
+    with progress_bar(f"recording the simulated camera's table into {path} (once)") as progress:
+        return ensure_sim_table(path, progress)
 
 
 def _client_options(fn: F) -> F:
@@ -362,7 +359,10 @@ def _i2c_bus(bus: str) -> Any:
     """A real I2C bus by number ("1": /dev/i2c-1) or device path (smbus2, `tofmat[hw]`)."""
     from .hw import open_bus
 
-    return open_bus(int(bus) if bus.isdigit() else bus)
+    try:
+        return open_bus(int(bus) if bus.isdigit() else bus)
+    except FileNotFoundError as e:  # the bus is not there: the box's hardware, not the user's input
+        raise Failure(str(e)) from e
 
 
 def _connect(address: str, token_file: Path | None) -> Any:
@@ -382,8 +382,7 @@ def _connect(address: str, token_file: Path | None) -> Any:
 @click.option("--bus", help="I2C bus of the PCA9685 (number or /dev path).")
 @click.option("--pca-address", default="0x40", show_default=True, help="The PCA9685's I2C address.")
 @click.option("--simulated", is_flag=True, help="Drive a simulated PCA9685 instead of a real bus.")
-@click.option("--seconds", type=click.FloatRange(0.1, None), help="Stop after this long (default: run until stopped).")
-@user_errors
+@click.option("--seconds", type=FiniteFloat(0.1, None), help="Stop after this long (default: run until stopped).")
 def sort_cmd(address: str, token_file: Path | None, gates: tuple[str, ...], bus: str | None, pca_address: str,
              simulated: bool, seconds: float | None) -> None:  # fmt: skip
     """The diverter agent: moves each outlet's gate (a servo on a PCA9685) for tofmatd's sort decisions."""
@@ -411,8 +410,7 @@ def sort_cmd(address: str, token_file: Path | None, gates: tuple[str, ...], bus:
 @click.option("--simulated", is_flag=True, help="Draw on a simulated SSD1306 instead of a real bus.")
 @click.option("--png", type=click.Path(dir_okay=False, path_type=Path),
               help="With --simulated: write what the panel shows at the end to this PNG.")  # fmt: skip
-@click.option("--seconds", type=click.FloatRange(0.1, None), help="Stop after this long (default: run until stopped).")
-@user_errors
+@click.option("--seconds", type=FiniteFloat(0.1, None), help="Stop after this long (default: run until stopped).")
 def panel_cmd(address: str, token_file: Path | None, bus: str | None, oled_address: str, simulated: bool,
               png: Path | None, seconds: float | None) -> None:  # fmt: skip
     """The box's front panel: tofmatd's label, confidence and state on an SSD1306 OLED."""
@@ -443,8 +441,10 @@ def panel_cmd(address: str, token_file: Path | None, bus: str | None, oled_addre
 
 @main.command()
 @_client_options
-@click.option("--top", default=3, show_default=True, help="Ranking entries shown.")
-@click.option("--count", default=0, help="Stop after this many labels (0: until interrupted).")
+@click.option("--top", default=3, show_default=True, type=click.IntRange(1, 255), help="Ranking entries shown.")
+@click.option(
+    "--count", default=0, type=click.IntRange(0, None), help="Stop after this many labels (0: until interrupted)."
+)
 def watch(address: str, token_file: Path | None, top: int, count: int) -> None:
     """Live labels from tofmatd with their ranking, in the terminal."""
     from .client import ClientError, DeviceEvent, Label
@@ -495,9 +495,12 @@ def status(address: str, token_file: Path | None) -> None:
     "--source", required=True, help="kinect[:SERIAL] | sim[:SCENE,...] | replay:FILE (named: never a default)"
 )
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Recording file.")
-@click.option("--frames", default=30, show_default=True, help="Frames to record (2.6 MB each).")
-@click.option("--timeout", default=60.0, show_default=True, help="Seconds to wait for them.")
-@user_errors
+@click.option(
+    "--frames", default=30, show_default=True, type=click.IntRange(1, 100000), help="Frames to record (2.6 MB each)."
+)
+@click.option(
+    "--timeout", default=60.0, show_default=True, type=FiniteFloat(0.1, 86400), help="Seconds to wait for them."
+)
 def record(source: str, output: Path, frames: int, timeout: float) -> None:
     """Record a source's raw frames for `tofmatd --source replay:FILE`."""
     from . import _tofmat

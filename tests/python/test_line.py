@@ -178,7 +178,9 @@ def test_bench_line_refuses_lists_that_are_not_numbers() -> None:
 
     from tofmat.cli import main
 
-    for args, says in ((["--speeds", "fast"], "--speeds: could not convert"), (["--loads", "0.5,-1"], "positive"),
-                       (["--bursts", "2.5"], "--bursts: invalid literal"), (["--speeds", ""], "positive")):  # fmt: skip
+    for args, says in ((["--speeds", "fast"], "'--speeds': 'fast': expected comma-separated numbers from 50"),
+                       (["--loads", "0.5,-1"], "'--loads': '0.5,-1': expected comma-separated numbers from 0.01"),
+                       (["--bursts", "2.5"], "'--bursts': '2.5': expected comma-separated whole numbers from 1"),
+                       (["--speeds", ""], "'--speeds': '': expected"), (["--loads", "nan"], "'--loads': 'nan'")):  # fmt: skip
         r = CliRunner().invoke(main, ["bench-line", *args])
-        assert r.exit_code == 2 and says in r.output, (args, r.output)
+        assert r.exit_code == 2 and says in r.output and len(r.output.strip().splitlines()) == 1, (args, r.output)

@@ -13,20 +13,19 @@ from typing import Any, cast
 import click
 import numpy as np
 
+from .._clikit import FiniteFloat, TofmatGroup, progress_bar
 from .._extras import require, require_pyplot
 from . import DEFAULT_DEVICE, DEFAULT_LIBRARY, Renderer, Scene, Target, data_dir, load_device, load_library
 
 
-@click.group("sim")
+@click.group("sim", cls=TofmatGroup)
 def sim_cli() -> None:
     """The physically based Kinect v2 simulator."""
 
 
 def _renderer(device: str, library: str, threads: int = 0) -> Renderer:
-    try:
-        return Renderer(load_device(device), load_library(library), threads)
-    except (ValueError, OSError) as e:
-        raise click.ClickException(str(e)) from e
+    """The simulator for a device profile and a material library, each a name or a path."""
+    return Renderer(load_device(device), load_library(library), threads)
 
 
 def _spread_option(option: str, hint: str, form: str, from_library: Callable[[], Sequence[float]]) -> tuple[float, ...]:
@@ -62,8 +61,10 @@ def _spread_option(option: str, hint: str, form: str, from_library: Callable[[],
     help="Folder for figures and results.json.",
 )
 @click.option("--materials", help="Comma-separated subset (default: the whole library).")
-@click.option("--step", default=1.0, show_default=True, help="Stage step, mm (600..1250 mm).")
-@click.option("--seed", default=0, show_default=True)
+@click.option(
+    "--step", default=1.0, show_default=True, type=FiniteFloat(0.05, 650), help="Stage step, mm (600..1250 mm)."
+)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31))
 @click.option("--session-offsets", default="none", show_default=True,
               help="Per-capture row offsets: 'none', 'library' (the spread the calibrated library's fits carry) "
               "or 'S0,S1' (standard deviations in mm of rows 0 and 1).")  # fmt: skip
@@ -97,9 +98,10 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
                                     lambda: ev.session_state_spread(fits()))  # fmt: skip
     drift_sd = (t80, t16, t120)
     t0 = time.perf_counter()
-    result, _ = ev.evaluate(r, names, stage_mm=stage, seed=seed, progress=lambda s: click.echo(s, err=True),
-                            session_offsets_mm=spread, compare_fixed=compare_fixed, session_drift_sd=drift_sd,
-                            session_renderer=lambda t: Renderer(r.device.in_session(t), r.library, 0))  # fmt: skip
+    with progress_bar("capturing materials") as progress:
+        result, _ = ev.evaluate(r, names, stage_mm=stage, seed=seed, progress=progress,
+                                session_offsets_mm=spread, compare_fixed=compare_fixed, session_drift_sd=drift_sd,
+                                session_renderer=lambda t: Renderer(r.device.in_session(t), r.library, 0))  # fmt: skip
     click.echo(
         f"{len(names)} materials x {len(ev.ORIENTATIONS_DEG)} orientations, stage {stage[0]:g}..{stage[-1]:g} mm "
         f"step {step:g} mm, ROI 20x20 px, session offsets sd {spread[0]:.2f}, {spread[1]:.2f} mm, "
@@ -179,9 +181,21 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
 @click.option("--out", "out_dir", default=Path("build/calib"), type=click.Path(file_okay=False, path_type=Path),
               show_default=True, help="Writes data/devices/kinect2_tanaka2017.json, data/materials/tanaka2017.json, "
               "the fit log and the real-vs-simulated plot under this folder.")  # fmt: skip
-@click.option("--restarts", default=3, show_default=True, help="Restarts of the harmonic phases (multimodal fit).")
-@click.option("--rounds", default=2, show_default=True, help="Rounds of per-material and joint refinement.")
-@click.option("--seed", default=0, show_default=True)
+@click.option(
+    "--restarts",
+    default=3,
+    show_default=True,
+    type=click.IntRange(1, 100),
+    help="Restarts of the harmonic phases (multimodal fit).",
+)
+@click.option(
+    "--rounds",
+    default=2,
+    show_default=True,
+    type=click.IntRange(1, 20),
+    help="Rounds of per-material and joint refinement.",
+)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31))
 @click.option("--session-drift/--no-session-drift", default=True, show_default=True,
               help="Fit a drift direction of the waveform and every capture's session state "
               "(docs/simulator-model.md 2.2); without it only the per-capture offsets.")  # fmt: skip
@@ -191,15 +205,10 @@ def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed:
 
     from . import calibrate as cal
 
-    if restarts < 1 or rounds < 1:
-        raise click.BadParameter("--restarts and --rounds must be >= 1")
     require("scipy.optimize", extra="sim", feature="tofmat sim calibrate")
     require_pyplot(extra="sim", feature="tofmat sim calibrate")  # the fit's figure, written after ~43 min
     cal.SESSION_DRIFT = session_drift
-    try:
-        table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))
-    except (ValueError, OSError) as e:
-        raise click.ClickException(f"cannot read the database: {e}") from e
+    table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))
     result = cal.calibrate(
         table, restarts=restarts, seed=seed, rounds=rounds, progress=lambda m: click.echo(m, err=True)
     )
@@ -214,14 +223,18 @@ def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed:
 @sim_cli.command("bench")
 @click.option("--device", default=DEFAULT_DEVICE, show_default=True)
 @click.option("--library", default=DEFAULT_LIBRARY, show_default=True)
-@click.option("--frames", default=30, show_default=True)
-@click.option("--threads", default=0, show_default=True, help="Render threads (0: one per hardware thread).")
+@click.option("--frames", default=30, show_default=True, type=click.IntRange(1, 100000))
+@click.option(
+    "--threads",
+    default=0,
+    show_default=True,
+    type=click.IntRange(0, 1024),
+    help="Render threads (0: one per hardware thread).",
+)
 def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
     """Render speed (full 512x424 frames with noise) and float decode speed (full frame and 20x20 ROI)."""
     from .. import _tofmat
 
-    if threads < 0:
-        raise click.BadParameter("must be >= 0", param_hint="--threads")
     r = _renderer(device, library, threads)
     names = r.library.names
     scene = Scene([Target(names[0], 900.0, 20.0, 0.0, 0.0, (96, 72, 416, 352))], names[-1], 2500.0)
@@ -265,8 +278,15 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
 @click.option("--device", default=DEFAULT_DEVICE, show_default=True, help="Device profile name or path.")
 @click.option("--library", default=DEFAULT_LIBRARY, show_default=True, help="Material library name or path.")
 @click.option("--materials", help="Comma-separated subset (default: the whole library).")
-@click.option("--bins", "n_bins", default=200, show_default=True, help="Depth bins from 600 mm (the real database's).")
-@click.option("--yaw", default=10.0, show_default=True, help="Target orientation, degrees.")
+@click.option(
+    "--bins",
+    "n_bins",
+    default=200,
+    show_default=True,
+    type=click.IntRange(2, 10000),
+    help="Depth bins from 600 mm (the real database's).",
+)
+@click.option("--yaw", default=10.0, show_default=True, type=FiniteFloat(-80, 80), help="Target orientation, degrees.")
 @click.option(
     "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx)."
 )
@@ -276,13 +296,9 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, yaw
 
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
-    if n_bins < 2:
-        raise click.BadParameter("at least 2 bins", param_hint="--bins")
     t0 = time.perf_counter()
-    try:
-        table = simulated_table(r, names, database_bins(n_bins), yaw_deg=yaw)
-    except ValueError as e:
-        raise click.ClickException(str(e)) from e
+    with progress_bar("recording materials") as progress:
+        table = simulated_table(r, names, database_bins(n_bins), yaw_deg=yaw, progress=progress)
     output.parent.mkdir(parents=True, exist_ok=True)
     table.save(str(output))
     click.echo(

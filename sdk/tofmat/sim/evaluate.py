@@ -39,6 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import BinSpec, Classifier, ExemplarTable
+from .._progress import Progress
 from . import Renderer, Target, stage_sweep
 
 PAPER_ACCURACY = {"frequency": 57.4, "depth": 81.6, "both": 90.5}
@@ -198,7 +199,7 @@ def evaluate(
     orientations: tuple[float, ...] = ORIENTATIONS_DEG,
     stage_mm: Array | None = None,
     seed: int = 0,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
     session_offsets_mm: tuple[float, float] = (0.0, 0.0),
     compare_fixed: bool = False,
     session_drift_sd: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -227,7 +228,7 @@ def evaluate(
                                              float(rng.normal(0.0, session_offsets_mm[1]))))  # fmt: skip
             captures[(m, o)] = c
         if progress:
-            progress(f"captured {m} ({i + 1}/{len(materials)})")
+            progress(i + 1, len(materials), f"captured {m}")
     ev = Evaluation(materials, capture_seconds=time.perf_counter() - t0)
     for name, fn in feature_functions(len(stage)).items():
         t1 = time.perf_counter()

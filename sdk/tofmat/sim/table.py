@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import BinSpec, ExemplarTable
+from .._progress import Progress
 from .._tofmat import decode_frame
 from . import Renderer, Scene
 
@@ -47,6 +48,7 @@ def simulated_table(
     yaw_deg: float = 10.0,
     step_mm: float = 4.0,
     seed: int = 7,
+    progress: Progress | None = None,
 ) -> ExemplarTable:
     """Sweeps of `materials` over the bins' range (plus a margin) every `step_mm`, resampled at
     the bin centres of the measured combined depth; bins a sweep does not reach are missing."""
@@ -57,6 +59,8 @@ def simulated_table(
     depths = np.arange(centres[0] - 60.0, centres[-1] + 60.0 + 1e-9, step_mm)
     features = []
     for k, name in enumerate(materials):
+        if progress:
+            progress(k, len(materials), name)
         obs = [
             roi_observation(renderer, p0, name, float(z), yaw_deg, seed + 1000 * k + i) for i, z in enumerate(depths)
         ]
@@ -70,4 +74,6 @@ def simulated_table(
             for r in range(2):
                 out[r, inside] = np.interp(centres[inside], combined[order], rows[r, order])
         features.append(out)
+    if progress:
+        progress(len(materials), len(materials), "recorded")
     return ExemplarTable(list(materials), np.stack(features), bins, ROWS)

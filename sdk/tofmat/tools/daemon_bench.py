@@ -14,12 +14,12 @@ from __future__ import annotations
 import tempfile
 import threading
 import time
-from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .._progress import Progress
 from ..client import Client, Label, LabelMap
 from .live_demo import connect, start_daemon, stop_daemon
 
@@ -143,13 +143,16 @@ def format_markdown(runs: list[ProfileRun]) -> str:
 
 
 def bench_daemon(table: Path, profiles: list[str], clients: list[int], seconds: float,
-                 echo: Callable[[str], None]) -> list[ProfileRun]:  # fmt: skip
-    runs = []
+                 progress: Progress | None = None) -> list[ProfileRun]:  # fmt: skip
+    """Each profile with each number of clients; `progress` hears of every run."""
     for p in profiles:
         if p not in SCENES:
             raise ValueError(f"unknown profile {p!r}; one of {', '.join(SCENES)}")
+    runs = []
+    for p in profiles:
         for n in clients:
             r = run_profile(table, p, n, seconds)
-            echo(f"{p} x{n}: {asdict(r)}")
             runs.append(r)
+            if progress:
+                progress(len(runs), len(profiles) * len(clients), f"{p} x{n}: {r.fps:.1f} frames/s")
     return runs

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._progress import Progress
 from .line_demo import LineResult, LineSetup, run_line
 
 LOADER_GAP_MM = 20.0  # the simulated loader's least gap between items (firmware/daemon/src/belt_sim.cpp)
@@ -68,8 +69,11 @@ class Cell:
 
 
 def run_grid(table: Path, base: LineSetup, speeds: Iterable[float], loads: Iterable[float], seeds: int,
-             seconds: float, bursts: Iterable[int], echo: Callable[[str], None]) -> list[Cell]:  # fmt: skip
-    cells = []
+             seconds: float, bursts: Iterable[int], progress: Progress | None = None) -> list[Cell]:  # fmt: skip
+    """Every (speed, burst, load) cell, `seeds` runs each; `progress` hears of every run."""
+    speeds, bursts, loads = list(speeds), list(bursts), list(loads)
+    total = len(speeds) * len(bursts) * len(loads) * seeds
+    cells: list[Cell] = []
     for speed in speeds:
         for burst in bursts:
             for load in loads:
@@ -78,9 +82,11 @@ def run_grid(table: Path, base: LineSetup, speeds: Iterable[float], loads: Itera
                 runs = []
                 for seed in range(1, seeds + 1):
                     r = run_line(table, replace(setup, seed=seed), seconds)
-                    echo(f"  {speed:g} mm/s, burst {burst}, {setup.rate_per_min:g}/min offered, seed {seed}: "
-                         f"{r.items} items, {100.0 * r.right_fraction():.1f} % right, {dict(r.reasons())}")  # fmt: skip
                     runs.append(r)
+                    if progress:
+                        done = sum(len(c.runs) for c in cells) + len(runs)
+                        progress(done, total, f"{speed:g} mm/s, burst {burst}, {setup.rate_per_min:g}/min: "
+                                 f"{100.0 * r.right_fraction():.1f} % right")  # fmt: skip
                 cells.append(Cell(setup, load, runs))
     return cells
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._progress import Progress
 from ..client import Client, DaemonUnavailableError, Label, daemon_binary, sim_data_dir
 
 
@@ -141,16 +142,15 @@ def run_live_demo(
     return result
 
 
-def ensure_sim_table(path: Path, echo: Callable[[str], None]) -> Path:
-    """The simulated camera's own table (tofmat sim table), recorded once."""
+def ensure_sim_table(path: Path, progress: Progress | None = None) -> Path:
+    """The simulated camera's own table (tofmat sim table), recorded once into ``path``."""
     if path.is_file():
         return path
     from ..sim import Renderer, load_device, load_library
     from ..sim.table import database_bins, simulated_table
 
-    echo(f"recording the simulated camera's table into {path} (once)")
     r = Renderer(load_device(), load_library())
-    table = simulated_table(r, list(r.library.names), database_bins())
+    table = simulated_table(r, list(r.library.names), database_bins(), progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     table.save(str(path))
     return path
