@@ -62,7 +62,7 @@ build-python:
 check-db:
 	@test -d "$(DB)" || { echo "error: real database not found at $(DB) (set DB=...)" >&2; exit 1; }
 
-test: setup check-db lint build-cpp build-python typecheck test-cpp test-sanitize test-python
+test: setup check-db lint build-cpp build-python typecheck docs test-cpp test-sanitize test-python
 
 # Formatting and linting with the ecosystem's tools, configured in the repo: ruff for
 # Python (ruff.toml). `make format` applies the formatters.
@@ -77,7 +77,7 @@ format:
 
 # The SDK is fully typed (the extension through sdk/tofmat/_tofmat.pyi).
 typecheck:
-	cd sdk && $(PYTHON) -m mypy --strict tofmat
+	cd sdk && $(PYTHON) -m mypy --strict tofmat ../examples
 
 test-cpp:
 	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
@@ -223,3 +223,6 @@ bench-cross: cross check-db
 # measured (figures only), and the 30-minute soak of them mixed: outside
 # `make test` and CI (tests/soak/README.md).
 include tests/soak/attacks.mk
+
+# The documentation site: `make docs` (Sphinx, warnings as errors; part of `make test`).
+include mk/docs.mk
