@@ -22,6 +22,7 @@ void register_sim(pyb::module_& m);
 void register_kinect(pyb::module_& m);
 void register_client(pyb::module_& m);
 void register_record(pyb::module_& m);
+void register_logging(pyb::module_& m);
 
 // A C-contiguous float32 copy/view of `a` after checking that it is a
 // floating-point array of exactly `shape` (-1 = any size on that axis).

@@ -2,6 +2,7 @@
 
 PYBIND11_MODULE(_tofmat, m) {
   m.doc() = "tofmat core (C++) bindings; use the tofmat package, not this module directly.";
+  tofmat::py::register_logging(m);
   tofmat::py::register_errors(m);
   tofmat::py::register_table(m);
   tofmat::py::register_classifier(m);

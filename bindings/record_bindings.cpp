@@ -2,12 +2,14 @@
 // its first frames written to a recording that `--source replay:FILE` plays.
 #include <pybind11/stl.h>
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
 #include <thread>
 
 #include "bindings.hpp"
+#include "core_log.hpp"
 #include "tofmat/daemon/recording.hpp"
 
 namespace tofmat::py {
@@ -21,6 +23,7 @@ struct RecordResult {
 RecordResult record(const std::string& source_spec, const std::string& path, std::uint64_t frames,
                     const std::string& sim_data_dir, double timeout_s) {
   if (frames == 0) throw pyb::value_error("frames must be at least 1");
+  if (!(timeout_s > 0.0 && timeout_s <= 1e7)) throw pyb::value_error("timeout must be a number of seconds in (0, 1e7]");
   daemon::SourceOptions options;
   options.sim_data_dir = sim_data_dir;
   auto source = daemon::make_source(source_spec, options);
@@ -52,18 +55,33 @@ RecordResult record(const std::string& source_spec, const std::string& path, std
   {
     pyb::gil_scoped_release release;
     std::thread t([&] { source->run(cb, stop); });
-    {
-      std::unique_lock<std::mutex> lock(mutex);
-      done.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return stop.load(); });
-      stop = true;
+    const auto deadline = std::chrono::steady_clock::now() +
+                          std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                              std::chrono::duration<double>(timeout_s));
+    std::unique_lock<std::mutex> lock(mutex);
+    while (!stop.load() && std::chrono::steady_clock::now() < deadline) {
+      // Wakes every 200 ms to hand the source's logs to Python while it runs.
+      done.wait_until(lock, std::min(deadline, std::chrono::steady_clock::now() + std::chrono::milliseconds(200)),
+                      [&] { return stop.load(); });
+      lock.unlock();
+      {
+        pyb::gil_scoped_acquire gil;
+        forward_core_logs();
+      }
+      lock.lock();
     }
+    stop = true;
+    lock.unlock();
     t.join();
   }
+  forward_core_logs();
+  const std::string problem = take_last_core_problem();
   if (!error.empty()) throw std::runtime_error("recording failed: " + error);
   if (writer) writer->close();
   if (result.frames < frames)
     throw std::runtime_error("recorded " + std::to_string(result.frames) + " of " + std::to_string(frames) +
-                             " frames before the timeout (" + result.last_state + ")");
+                             " frames before the timeout" +
+                             (problem.empty() ? " (" + result.last_state + ")" : ": " + problem));
   return result;
 }
 

@@ -227,6 +227,12 @@ def setup_logging(verbose: bool) -> None:
     logging.basicConfig(
         level=logging.DEBUG if verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
+    # A command's failure already says what the core last warned of (for example why the camera
+    # could not be opened), in its one line: the core's own warnings are for -v.
+    logging.getLogger("tofmat.core").setLevel(logging.DEBUG if verbose else logging.ERROR)
+    from . import _tofmat
+
+    _tofmat.forward_core_logs()  # the core takes the level now
 
 
 EchoFn = Callable[[str], None]

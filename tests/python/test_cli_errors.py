@@ -4,6 +4,7 @@ the system one line and status 1, -v adds the traceback, progress bars show on a
 
 from __future__ import annotations
 
+import logging
 import os
 import pty
 import subprocess
@@ -157,3 +158,26 @@ def test_long_jobs_show_a_progress_bar_on_a_terminal_and_none_with_q(tmp_path: P
     # Not on a terminal (a log, a pipe): results only.
     p = subprocess.run([sys.executable, "-m", "tofmat", *args], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0 and p.stderr == "", p.stderr
+
+
+def test_the_cores_logs_reach_python_logging_never_stdout(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """With no camera (as here), the driver's retry warnings go to logging.getLogger("tofmat.core"),
+    and the failure names their reason instead of 'stopped: stopped'."""
+    from tofmat import _tofmat
+    from tofmat.client import sim_data_dir
+
+    caplog.set_level(logging.WARNING, logger="tofmat.core")
+    with pytest.raises(RuntimeError, match=r"recorded 0 of 1 frames before the timeout: .*no Kinect v2 found"):
+        _tofmat.record("kinect", str(tmp_path / "r.rec"), 1, str(sim_data_dir()), 1.0)
+    core = [r for r in caplog.records if r.name == "tofmat.core"]
+    assert core and all(r.levelno == logging.WARNING for r in core)
+    assert "no Kinect v2 found" in core[0].getMessage()
+    out, _ = capfd.readouterr()
+    assert out == ""  # the C++ logger wrote to stdout
+    # The command: one line, status 1, nothing on stdout.
+    p = subprocess.run([sys.executable, "-m", "tofmat", "record", "--source", "kinect", "-o", str(tmp_path / "r.rec"),
+                        "--frames", "1", "--timeout", "1"], capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert p.returncode == 1 and p.stdout == ""
+    assert "no Kinect v2 found" in one_line(p.stderr)
