@@ -10,6 +10,8 @@
 
 namespace tofmat::py {
 
+using namespace pybind11::literals;
+
 void register_errors(pyb::module_& m) {
   // A file or stream that does not follow its format is bad input: a ValueError.
   pyb::register_exception<FormatError>(m, "FormatError", PyExc_ValueError);
@@ -17,7 +19,17 @@ void register_errors(pyb::module_& m) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const IoError& e) {
-      PyErr_SetString(PyExc_OSError, e.what());
+      // OSError(errno, message) becomes FileNotFoundError, PermissionError, IsADirectoryError...
+      // as Python's own file functions raise them; its strerror is the whole message.
+      if (e.error_number() != 0) {
+        PyObject* args = Py_BuildValue("(is)", e.error_number(), e.what());
+        if (args != nullptr) {
+          PyErr_SetObject(PyExc_OSError, args);
+          Py_DECREF(args);
+        }
+      } else {
+        PyErr_SetString(PyExc_OSError, e.what());
+      }
     }
   });
 }
@@ -42,14 +54,25 @@ std::string shape_text(const std::vector<pyb::ssize_t>& shape) {
 
 FloatArray as_float32(const pyb::handle& obj, const std::vector<pyb::ssize_t>& shape,
                                                      const char* what) {
-  if (!pyb::isinstance<pyb::array>(obj)) {
-    throw pyb::value_error(std::string(what) + " must be a numpy float array of shape " + shape_text(shape) +
-                           ", got " + std::string(pyb::str(pyb::type::of(obj).attr("__name__"))));
+  pyb::array a;
+  if (pyb::isinstance<pyb::array>(obj)) {
+    a = pyb::reinterpret_borrow<pyb::array>(obj);
+  } else {
+    // An array-like (nested lists, tuples, numbers): numpy's own conversion to float64, so a
+    // list of Python numbers is accepted and a list of strings or None is a TypeError.
+    const std::string type_name = pyb::str(pyb::type::of(obj).attr("__name__"));
+    try {
+      a = pyb::module_::import("numpy").attr("asarray")(obj, "dtype"_a = "float64");
+    } catch (const pyb::error_already_set& e) {
+      if (!e.matches(PyExc_ValueError) && !e.matches(PyExc_TypeError)) throw;
+      throw pyb::type_error(std::string(what) + " must be an array of numbers of shape " + shape_text(shape) +
+                            " (a numpy float array, or nested lists of numbers), got a " + type_name +
+                            " numpy cannot read as numbers");
+    }
   }
-  auto a = pyb::reinterpret_borrow<pyb::array>(obj);
   if (a.dtype().kind() != 'f') {
-    throw pyb::value_error(std::string(what) + " must have a floating-point dtype (float32 preferred; NaN = missing), got " +
-                           std::string(pyb::str(a.dtype())));
+    throw pyb::type_error(std::string(what) + " must have a floating-point dtype (float32 preferred; NaN = missing), got " +
+                          std::string(pyb::str(a.dtype())));
   }
   std::vector<pyb::ssize_t> actual(a.shape(), a.shape() + a.ndim());
   bool ok = actual.size() == shape.size();

@@ -119,7 +119,18 @@ void register_table(pyb::module_& m) {
                                for (std::size_t i = 0; i < t.n_materials(); ++i) out.push_back(t.valid_count(i));
                                return out;
                              })
-      .def("index_of", &ExemplarTable::index_of, pyb::arg("material"))
+      .def(
+          "index_of",
+          [](const ExemplarTable& t, const std::string& material) {
+            const auto i = t.index_of(material);
+            if (i < 0) {
+              std::string names;
+              for (const auto& name : t.materials()) names += (names.empty() ? "" : ", ") + name;
+              throw pyb::key_error("unknown material '" + material + "'; the table has: " + names);
+            }
+            return i;
+          },
+          pyb::arg("material"), "Index of a material in `materials`. Raises KeyError for a name the table lacks.")
       .def("__len__", &ExemplarTable::n_materials)
       .def("__repr__", [](const ExemplarTable& t) {
         return "<ExemplarTable " + std::to_string(t.n_materials()) + " materials x " + std::to_string(t.n_rows()) +

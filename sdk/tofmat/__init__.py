@@ -46,6 +46,7 @@ from .client import (
     ProtocolError,
     ProtocolVersionError,
 )
+from .devices import Device, devices
 
 try:
     __version__ = version("tofmat")
@@ -65,6 +66,7 @@ __all__ = [
     "DaemonTimeoutError",
     "DaemonUnavailableError",
     "DepthBinAccumulator",
+    "Device",
     "ExemplarTable",
     "FormatError",
     "MissingExtraError",
@@ -75,6 +77,7 @@ __all__ = [
     "UsbError",
     "__version__",
     "depth_from_phase_mm",
+    "devices",
     "read_npy",
     "unambiguous_range_mm",
 ]

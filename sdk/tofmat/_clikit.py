@@ -79,12 +79,13 @@ def classify_exception(e: BaseException) -> click.ClickException:
     if isinstance(e, KeyError):  # an unknown name (material, stream): str() of a KeyError quotes it
         return UserError(_one_line(str(e.args[0]) if e.args else "unknown key"))
     if isinstance(e, OSError):
-        what = _one_line(str(e))
+        # OSError(errno, message) prints as "[Errno 2] message": the message alone says it, with a path.
+        what = _one_line(e.strerror if e.strerror and e.filename is None and "/" in e.strerror else str(e))
         if isinstance(e, (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError, FileExistsError)):
             return UserError(what)
         # Our own OSErrors (no errno) are about what a named path holds; the system's carry an errno.
         return UserError(what) if e.errno is None or e.errno in _USER_ERRNOS else Failure(what)
-    if isinstance(e, ValueError):  # includes the table format's FormatError
+    if isinstance(e, (ValueError, TypeError)):  # FormatError is a ValueError; TypeError: an array of no numbers
         return UserError(_one_line(str(e)))
     if isinstance(e, (RuntimeError, ConnectionError, TimeoutError)):
         return Failure(_one_line(str(e)))

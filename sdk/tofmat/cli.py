@@ -517,23 +517,23 @@ def record(source: str, output: Path, frames: int, timeout: float) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 def devices(as_json: bool) -> None:
     """List Kinect v2 cameras on the USB bus; exit 1 with the reason when there is none usable."""
-    from . import UsbError, _tofmat
+    from . import UsbError, devices
 
     try:
-        found = _tofmat.kinect.list_devices()
+        found = devices()
     except UsbError as e:
         raise click.ClickException(str(e)) from e
     if as_json:
-        click.echo(json.dumps(found, indent=2))
+        click.echo(json.dumps([d.as_dict() for d in found], indent=2))
     for d in found if not as_json else []:
-        state = "ok" if d["accessible"] else f"not usable: {d['problem']}"
-        click.echo(f"Kinect v2 045e:{d['product_id']:04x} at USB {d['port']} serial {d['serial'] or '?'} ({state})")
+        state = "ok" if d.accessible else f"not usable: {d.problem}"
+        click.echo(f"Kinect v2 045e:{d.product_id:04x} at USB {d.port} serial {d.serial or '?'} ({state})")
     if not found:
         raise click.ClickException(
             "no Kinect v2 found (USB 045e:02d8 or 045e:02c4); is it plugged into a USB 3 port and powered?"
         )
-    if not any(d["accessible"] for d in found):
-        raise click.ClickException(f"no usable Kinect v2: {found[0]['problem']}")
+    if not any(d.accessible for d in found):
+        raise click.ClickException(f"no usable Kinect v2: {found[0].problem}")
 
 
 def _register_sim() -> None:

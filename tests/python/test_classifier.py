@@ -169,16 +169,27 @@ def test_scalar_query_is_value_error(real_clf) -> None:
 
 
 @pytest.mark.parametrize("dtype", [np.int32, np.int64, np.uint8, np.bool_, np.complex64])
-def test_non_float_dtype_is_value_error(real_clf, dtype) -> None:
-    with pytest.raises(ValueError, match="dtype"):
+def test_non_float_dtype_is_type_error(real_clf, dtype) -> None:
+    with pytest.raises(TypeError, match="dtype"):
         real_clf.classify(np.zeros((2, 200), dtype=dtype))
 
 
-def test_python_list_is_value_error(real_table, real_clf) -> None:
-    with pytest.raises(ValueError, match=r"\(2, 200\)"):
-        real_clf.classify(real_table.features[0].tolist())
-    with pytest.raises(ValueError):
-        real_clf.classify_batch(real_table.features[:2].tolist())
+def test_python_lists_are_array_likes(real_table, real_clf) -> None:
+    """Nested lists of numbers (NaN included) classify as the same array would; other things are TypeError."""
+    q = np.full((2, 200), np.nan, np.float32)
+    q[:, 40:50] = real_table.features[real_table.index_of("cork"), :, 40:50]
+    as_list = q.tolist()
+    assert real_clf.classify(as_list).material == real_clf.classify(q).material == "cork"
+    assert real_clf.classify(as_list).distance == real_clf.classify(q).distance
+    batch = real_clf.classify_batch([as_list, as_list])
+    assert [r.material for r in batch] == ["cork", "cork"]
+    with pytest.raises(ValueError, match=r"\(2, 200\)"):  # a list of the wrong shape: still the shape's error
+        real_clf.classify(as_list[0])
+    none_is_missing = [[None if np.isnan(v) else v for v in row] for row in as_list]  # numpy reads None as NaN
+    assert real_clf.classify(none_is_missing).distance == real_clf.classify(q).distance
+    for bad in ([["cork"] * 200] * 2, {"a": 1}, "cork"):
+        with pytest.raises(TypeError, match="array of numbers"):
+            real_clf.classify(bad)
 
 
 def test_float64_and_other_layouts_give_the_float32_result(real_table, real_clf, rng) -> None:
@@ -438,7 +449,7 @@ def test_constructor_rejects_infinite_values_and_non_float() -> None:
     f[0, 0, 2] = np.inf
     with pytest.raises(ValueError, match="Inf"):
         tofmat.ExemplarTable(["a"], f, tofmat.BinSpec(0.0, 1.0, 4), [(16, 120)])
-    with pytest.raises(ValueError):
+    with pytest.raises(TypeError, match="floating-point dtype"):
         tofmat.ExemplarTable(["a"], np.zeros((1, 1, 4), np.int32), tofmat.BinSpec(0.0, 1.0, 4), [(16, 120)])
 
 

@@ -194,10 +194,10 @@ def test_accumulator_bad_input() -> None:
     acc = tofmat.DepthBinAccumulator(tofmat.BinSpec(0.0, 1.0, 20), 2)
     with pytest.raises(ValueError):
         acc.add(1.0, np.array([1.0, 2.0, 3.0], np.float32))
-    with pytest.raises(ValueError):
+    with pytest.raises(TypeError, match="floating-point dtype"):
         acc.add(1.0, np.array([1, 2], np.int32))
-    with pytest.raises(ValueError):
-        acc.add(1.0, [1.0, 2.0])
+    with pytest.raises(TypeError, match="array of numbers"):
+        acc.add(1.0, ["a", "b"])
     with pytest.raises(ValueError, match="infinite"):
         acc.add(1.0, np.array([1.0, np.inf], np.float32))
     with pytest.raises(ValueError):
@@ -207,6 +207,8 @@ def test_accumulator_bad_input() -> None:
     with pytest.raises(ValueError):
         acc.add_many(np.zeros(3), np.zeros((3, 3), np.float32))
     assert acc.bins_covered() == 0  # nothing half-added
+    acc.add(1.0, [1.0, 2.0])  # an array-like of numbers
+    assert acc.bins_covered() == 1
     with pytest.raises(ValueError):
         tofmat.DepthBinAccumulator(tofmat.BinSpec(0.0, 1.0, 20), 0)
     with pytest.raises(ValueError):

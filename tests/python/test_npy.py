@@ -148,9 +148,9 @@ def test_rejects_malformed_files(tmp_path, content, match) -> None:
 
 
 def test_missing_file_and_directory_are_oserror(tmp_path) -> None:
-    with pytest.raises(OSError):
+    with pytest.raises(FileNotFoundError):
         tofmat.read_npy(tmp_path / "nope.npy")
-    with pytest.raises(OSError):
+    with pytest.raises(IsADirectoryError):
         tofmat.read_npy(tmp_path)
 
 
@@ -186,11 +186,14 @@ def test_from_npy_dir_other_row_counts_have_unknown_rows(tmp_path) -> None:
 
 
 def test_from_npy_dir_errors(tmp_path) -> None:
-    with pytest.raises(OSError):
+    with pytest.raises(FileNotFoundError, match="no such directory"):
         tofmat.ExemplarTable.from_npy_dir(tmp_path / "nope")
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(NotADirectoryError):
+        tofmat.ExemplarTable.from_npy_dir(tmp_path / "file")
     empty = tmp_path / "empty"
     empty.mkdir()
-    with pytest.raises(OSError):
+    with pytest.raises(FileNotFoundError, match=r"no \.npy files"):
         tofmat.ExemplarTable.from_npy_dir(empty)
 
     mixed = tmp_path / "mixed"

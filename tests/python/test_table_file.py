@@ -289,12 +289,36 @@ def test_huge_dimensions_are_refused_quickly(tmp_path) -> None:
         load_bytes(tmp_path, b)
 
 
-def test_missing_file_is_oserror(tmp_path) -> None:
-    with pytest.raises(OSError) as e:
+def test_missing_file_is_file_not_found_error(tmp_path) -> None:
+    with pytest.raises(FileNotFoundError, match=r"nope\.tmx") as e:
         tofmat.ExemplarTable.load(tmp_path / "nope.tmx")
     assert not isinstance(e.value, ValueError)
-    with pytest.raises(OSError):
+    with pytest.raises(IsADirectoryError):
         tofmat.ExemplarTable.load(tmp_path)  # a folder
+
+
+def test_unreadable_file_is_permission_error(real_table, tmp_path) -> None:
+    path = tmp_path / "t.tmx"
+    real_table.save(path)
+    path.chmod(0)
+    try:
+        if os.access(path, os.R_OK):  # root reads it anyway: check as another user
+            pid = os.fork()
+            if pid == 0:
+                os.setuid(12345)
+                try:
+                    tofmat.ExemplarTable.load(path)
+                    os._exit(1)
+                except PermissionError:
+                    os._exit(0)
+                except BaseException:
+                    os._exit(2)
+            assert os.waitpid(pid, 0)[1] == 0
+        else:
+            with pytest.raises(PermissionError):
+                tofmat.ExemplarTable.load(path)
+    finally:
+        path.chmod(0o644)
 
 
 def test_empty_file_is_format_error(tmp_path) -> None:
@@ -368,3 +392,17 @@ def test_longest_names_and_many_materials_round_trip(tmp_path) -> None:
         )
     with pytest.raises(ValueError, match="ASCII"):
         tofmat.ExemplarTable(["café"], np.zeros((1, 1, 1), np.float32), tofmat.BinSpec(0.0, 1.0, 1), [(16, 120)])
+
+
+def test_index_of_an_unknown_material_is_key_error_naming_the_table(real_table) -> None:
+    assert real_table.index_of("cork") == real_table.materials.index("cork")
+    with pytest.raises(KeyError, match="unknown material 'unobtainium'; the table has: acryl"):
+        real_table.index_of("unobtainium")
+
+
+def test_devices_are_typed_records() -> None:
+    """tofmat.devices() is public: a list of Device (none on a machine without a Kinect, as here)."""
+    found = tofmat.devices()
+    assert isinstance(found, list) and all(isinstance(d, tofmat.Device) for d in found)
+    d = tofmat.Device(bus=2, port="2-1", product_id=0x02D8, serial="x", accessible=False, problem="busy")
+    assert d.as_dict()["product_id"] == 0x02D8

@@ -1,6 +1,9 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// ExemplarTable: construction with its checks, lookups, and loading the real database's folder of .npy files.
 #include "tofmat/core/exemplar_table.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cfloat>
 #include <cmath>
 #include <set>
@@ -73,21 +76,24 @@ std::int64_t ExemplarTable::index_of(const std::string& name) const {
 ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, double bin_start_mm, double bin_stop_mm,
                                           std::vector<RowSpec> rows) {
   std::error_code ec;
-  if (!std::filesystem::is_directory(dir, ec)) throw IoError("not a directory: " + dir.string());
+  if (!std::filesystem::is_directory(dir, ec)) {
+    const bool exists = std::filesystem::exists(dir, ec);
+    throw IoError((exists ? "not a directory: " : "no such directory: ") + dir.string(), exists ? ENOTDIR : ENOENT);
+  }
   std::vector<std::filesystem::path> files;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     if (entry.is_regular_file() && entry.path().extension() == ".npy") files.push_back(entry.path());
   }
   std::sort(files.begin(), files.end());
-  if (files.empty()) throw IoError("no .npy files in " + dir.string());
+  if (files.empty()) throw IoError("no .npy files in " + dir.string(), ENOENT);
   if (files.size() > kMaxMaterials)
-    throw std::invalid_argument(std::to_string(files.size()) + " .npy files in " + dir.string() + ": a table holds at most " +
-                                std::to_string(kMaxMaterials) + " materials");
+    throw std::invalid_argument(std::to_string(files.size()) + " .npy files in " + dir.string() +
+                                ": a table holds at most " + std::to_string(kMaxMaterials) + " materials");
   std::uintmax_t total = 0;
   for (const auto& f : files) total += std::filesystem::file_size(f);  // (throws if it cannot tell)
   if (total > kMaxTableFolderBytes)
-    throw std::invalid_argument(dir.string() + ": its .npy files hold " + std::to_string(total >> 20) + " MiB, more than " +
-                                std::to_string(kMaxTableFolderBytes >> 20) + " MiB");
+    throw std::invalid_argument(dir.string() + ": its .npy files hold " + std::to_string(total >> 20) +
+                                " MiB, more than " + std::to_string(kMaxTableFolderBytes >> 20) + " MiB");
 
   std::vector<std::string> names;
   std::vector<float> values;
@@ -115,7 +121,8 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
       for (std::size_t r = 0; r < n_rows; ++r) {
         const double v = a.data[r * n_bins + b];
         if (std::isinf(v)) throw FormatError(f.string() + ": holds an infinite value");
-        if (std::fabs(v) > static_cast<double>(FLT_MAX)) throw FormatError(f.string() + ": holds a value beyond the float32 range");
+        if (std::fabs(v) > static_cast<double>(FLT_MAX))
+          throw FormatError(f.string() + ": holds a value beyond the float32 range");
         values[base + r * n_bins + b] = all_zero ? NAN : static_cast<float>(v);
       }
     }
@@ -125,7 +132,8 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
     throw std::invalid_argument("row descriptions given for " + std::to_string(rows.size()) + " rows, files have " +
                                 std::to_string(n_rows));
   }
-  if (n_bins < 2 || n_bins > kMaxBins) throw FormatError(dir.string() + ": files hold " + std::to_string(n_bins) + " bins, need 2..65535");
+  if (n_bins < 2 || n_bins > kMaxBins)
+    throw FormatError(dir.string() + ": files hold " + std::to_string(n_bins) + " bins, need 2..65535");
   const BinSpec bins = BinSpec::linspace(bin_start_mm, bin_stop_mm, static_cast<std::uint32_t>(n_bins));
   return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values));
 }

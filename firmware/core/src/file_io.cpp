@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Reading a whole file under a size bound, and replacing a file atomically (write to a temporary, fsync, rename).
 #include "tofmat/core/file_io.hpp"
 
 #include <fcntl.h>
@@ -5,8 +7,8 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <cstring>
 #include <string>
+#include <system_error>
 
 #include "tofmat/core/error.hpp"
 
@@ -14,7 +16,7 @@ namespace tofmat {
 namespace {
 
 [[noreturn]] void io_fail(const std::string& what, const std::filesystem::path& path, int err) {
-  throw IoError(what + " " + path.string() + ": " + std::strerror(err));
+  throw IoError(what + " " + path.string() + ": " + std::generic_category().message(err), err);
 }
 
 // Closes the descriptor on every path out of a function.
@@ -34,7 +36,8 @@ std::vector<std::uint8_t> read_file_bounded(const std::filesystem::path& path, s
   if (f.fd < 0) io_fail("cannot open", path, errno);
   struct stat st {};
   if (::fstat(f.fd, &st) != 0) io_fail("cannot stat", path, errno);
-  if (!S_ISREG(st.st_mode)) throw IoError("not a regular file: " + path.string());
+  if (!S_ISREG(st.st_mode))
+    throw IoError("not a regular file: " + path.string(), S_ISDIR(st.st_mode) ? EISDIR : EINVAL);
   const auto size = static_cast<std::uint64_t>(st.st_size);
   if (size > max_bytes) {
     throw FormatError(path.string() + ": file is " + std::to_string(size) + " bytes, more than the " +
