@@ -75,9 +75,12 @@ format:
 	$(PYTHON) -m ruff format .
 	$(PYTHON) -m ruff check --fix .
 
-# The SDK is fully typed (the extension through sdk/tofmat/_tofmat.pyi).
+# The SDK is fully typed (the extension through sdk/tofmat/_tofmat.pyi), and the stub is
+# checked against the built extension by mypy's stubtest (from the top folder, so that the
+# installed package is the one imported; sdk/stubtest-allowlist.txt says what pybind11 makes differ).
 typecheck:
 	cd sdk && $(PYTHON) -m mypy --strict tofmat ../examples
+	$(PYTHON) -m mypy.stubtest tofmat._tofmat --allowlist sdk/stubtest-allowlist.txt
 
 test-cpp:
 	ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
