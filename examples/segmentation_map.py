@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         with tofmat.Client(args.address) as client:
-            before = str(client.status()["profile"])
+            before = client.status()["profile"]
             if before != "segmentation" and args.expect:
                 print(f"segmentation_map.py: tofmatd is in the {before} profile, not segmentation", file=sys.stderr)
                 return 1

@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         with tofmat.Client(args.address) as client:
-            before = str(client.status()["profile"])
+            before = client.status()["profile"]
             if before != "sorting" and args.expect:
                 print(f"sorting_trigger.py: tofmatd is in the {before} profile, not sorting", file=sys.stderr)
                 return 1

@@ -2,7 +2,7 @@
 # Type stubs for the C++ extension (bindings/). Keep in step with bindings/*.cpp.
 from collections.abc import Sequence
 from os import PathLike
-from typing import Any, overload
+from typing import Any, Literal, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -98,7 +98,7 @@ class ClassificationResult:
 
 class Classifier:
     def __init__(
-        self, table: ExemplarTable, backend: str = "float", materials: Sequence[str] | None = None
+        self, table: ExemplarTable, backend: Literal["float", "fixed"] = "float", materials: Sequence[str] | None = None
     ) -> None: ...
     def classify(self, query: npt.ArrayLike) -> ClassificationResult: ...
     def classify_batch(self, queries: npt.ArrayLike) -> list[ClassificationResult]: ...

@@ -8,7 +8,7 @@ import logging
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import click
 import numpy as np
@@ -16,6 +16,7 @@ import numpy as np
 from . import ClassificationResult, Classifier, ExemplarTable, __version__
 from ._clikit import CliState, Failure, FiniteFloat, NumberList, TofmatGroup, progress_bar, setup_logging
 from ._extras import require_pyplot
+from .client import Backend
 from .tools.tables import open_table
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -205,7 +206,7 @@ def bench(table_path: Path, windows: list[int], noise: float, per_material: int,
     with progress_bar("backends") as progress:
         for k, b in enumerate(names):
             progress(k, len(names), b)
-            rows += bench_windows(table, windows, noise, per_material, seed, b)
+            rows += bench_windows(table, windows, noise, per_material, seed, cast(Backend, b))  # the core checks it
         progress(len(names), len(names), "done")
     click.echo(json.dumps([r.as_dict() for r in rows], indent=2) if as_json else format_markdown(rows, noise))
 

@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal, NotRequired, TypedDict, cast, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -40,18 +40,67 @@ from ._tofmat import (
 )
 
 DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
-STREAMS = (
-    "labels",
-    "label_map",
-    "device",
-    "depth:80",
-    "depth:16",
-    "depth:120",
-    "depth:combined",
-    "sort",
-    "line",
-    "reset",
-)
+
+# The names the protocol uses (docs/protocol.md), as types: a checker catches a misspelt one.
+Stream = Literal[
+    "labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined", "sort", "line", "reset"
+]
+Profile = Literal["handheld", "segmentation", "sorting"]
+Backend = Literal["fixed", "float"]
+DepthKind = Literal["80", "16", "120", "combined"]
+LabelState = Literal["tracking", "no_target", "final", "mixed"]
+DeviceState = Literal["opening", "streaming", "disconnected", "stopped", "failed"]
+Role = Literal["read", "control"]
+
+STREAMS: tuple[Stream, ...] = get_args(Stream)
+
+
+class TableStatus(TypedDict):
+    path: str
+    materials: list[str]
+    bins: int
+    bin_start_mm: float
+    bin_width_mm: float
+
+
+class DeviceStatus(TypedDict):
+    state: DeviceState
+    message: str
+    changes: int
+
+
+class ReloadStatus(TypedDict):
+    ok: bool
+    path: str
+    error: NotRequired[str]
+
+
+class Status(TypedDict):
+    """tofmatd's ``status`` reply (docs/protocol.md, ``status``). A later minor version may add keys;
+    the ones here are always there, but for those marked NotRequired."""
+
+    server: str
+    profile: Profile
+    backend: Backend
+    roi: list[int]
+    candidates: list[str]
+    table: TableStatus
+    frames_processed: int
+    frames_dropped: int
+    frames_skipped: int
+    processing_errors: int
+    last_error: str
+    fps: float
+    process_ms: float
+    source: str
+    source_counters: dict[str, Any]
+    simulated: bool
+    device: DeviceStatus
+    clients: dict[str, int]
+    uptime_s: float
+    last_reload: ReloadStatus | None
+    button: NotRequired[dict[str, Any]]
+    line: NotRequired[dict[str, Any]]
 
 
 @dataclass(frozen=True)
@@ -73,8 +122,8 @@ class Label:
     frame: int
     timestamp_ns: int  # CLOCK_MONOTONIC when the daemon had the whole frame
     received_ns: int  # CLOCK_MONOTONIC when this client read it
-    profile: str
-    state: str  # "tracking", "no_target", "final", "mixed" (a sorting burst whose frames disagreed)
+    profile: Profile
+    state: LabelState  # "mixed": a sorting burst whose frames disagreed
     material: str | None  # None when state is "no_target"
     index: int
     distance: float
@@ -112,7 +161,7 @@ class LabelMap:
 class DepthImage:
     frame: int
     timestamp_ns: int
-    kind: str  # "80", "16", "120" (wrapped) or "combined"
+    kind: DepthKind  # "80", "16", "120" (wrapped) or "combined"
     x0: int
     y0: int
     depth_mm: npt.NDArray[np.float32]  # (height, width), NaN where invalid
@@ -120,7 +169,7 @@ class DepthImage:
 
 @dataclass(frozen=True)
 class DeviceEvent:
-    state: str  # opening, streaming, disconnected, stopped, failed
+    state: DeviceState
     message: str
     timestamp_ns: int
 
@@ -275,12 +324,11 @@ class Client:
         return dict(self._connection().hello)
 
     @property
-    def role(self) -> str:
+    def role(self) -> Role:
         """``"read"`` (subscribe, status) or ``"control"`` (also the commands that change what every
         client gets: profile, ROI, candidates, trigger, reset, load_table). A control command on a
         reading connection raises NotPermittedError."""
-        role: str = self._connection().hello["role"]
-        return role
+        return cast(Role, self._connection().hello["role"])
 
     def _connection(self) -> _tofmat.ClientConnection:
         if self._conn is None:
@@ -316,15 +364,15 @@ class Client:
             return result
 
     # --- commands ----------------------------------------------------------------------------
-    def status(self) -> dict[str, Any]:
+    def status(self) -> Status:
         """Source, device state, profile, table, frame rate, drops, errors, clients."""
-        return self._call("status")
+        return cast(Status, self._call("status"))
 
     def reset(self) -> None:
         """Forget the accumulated observations (handheld) or the armed burst (sorting)."""
         self._call("reset")
 
-    def set_profile(self, name: str) -> None:
+    def set_profile(self, name: Profile) -> None:
         self._call("set_profile", {"name": name})
 
     def set_roi(self, x0: int, y0: int, x1: int, y1: int) -> None:
@@ -346,7 +394,7 @@ class Client:
         return trigger
 
     # --- streams -----------------------------------------------------------------------------
-    def subscribe(self, *streams: str) -> None:
+    def subscribe(self, *streams: Stream | str) -> None:
         """Subscribe to streams: the ones this client knows (``STREAMS``) or any the daemon offers in
         its hello's capabilities (a later minor version's; their events are skipped unless known)."""
         offered = set(self.hello.get("capabilities", []))
@@ -356,7 +404,7 @@ class Client:
         self._call("subscribe", {"streams": list(streams)})
         self._streams.update(streams)
 
-    def unsubscribe(self, *streams: str) -> None:
+    def unsubscribe(self, *streams: Stream | str) -> None:
         """Stop the given streams (none given: all of them)."""
         self._call("unsubscribe", {"streams": list(streams)})
         if streams:
@@ -413,7 +461,7 @@ class Client:
             self.subscribe("label_map")
         return self._wait_for(lambda e: isinstance(e, LabelMap), timeout)  # type: ignore[return-value]
 
-    def depth(self, kind: str = "combined", timeout: float | None = 5.0) -> DepthImage:
+    def depth(self, kind: DepthKind = "combined", timeout: float | None = 5.0) -> DepthImage:
         """The next depth image of the profile's region: "80", "16", "120" or "combined". Other
         events that come meanwhile are kept for next_event() and events(), not dropped."""
         stream = f"depth:{kind}"
@@ -458,7 +506,9 @@ def sim_data_dir() -> Path:
 
 
 __all__ = [
+    "STREAMS",
     "AuthenticationError",
+    "Backend",
     "Client",
     "ClientError",
     "CommandError",
@@ -466,17 +516,27 @@ __all__ = [
     "DaemonTimeoutError",
     "DaemonUnavailableError",
     "DepthImage",
+    "DepthKind",
     "DeviceEvent",
+    "DeviceState",
+    "DeviceStatus",
     "Event",
     "Label",
     "LabelMap",
+    "LabelState",
     "LineEvent",
     "NotPermittedError",
+    "Profile",
     "ProtocolError",
     "ProtocolVersionError",
     "Rank",
+    "ReloadStatus",
     "ResetEvent",
+    "Role",
     "SortDecision",
+    "Status",
+    "Stream",
+    "TableStatus",
     "Truth",
     "daemon_binary",
 ]

@@ -17,6 +17,7 @@ panel does not dress it up as a percentage.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,7 +48,7 @@ class PanelView:
     seen: dict[str, int] = field(default_factory=dict)  # events taken, by kind
 
     # --- what happened -------------------------------------------------------------------
-    def daemon_status(self, status: dict[str, Any]) -> None:
+    def daemon_status(self, status: Mapping[str, Any]) -> None:
         self.connected = True
         self.profile = str(status.get("profile", ""))
         self.fps = float(status.get("fps", 0.0) or 0.0)

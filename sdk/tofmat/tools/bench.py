@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .. import Classifier, ExemplarTable
+from ..client import Backend
 from .sweeps import random_windows
 
 
@@ -39,7 +40,7 @@ def bench_windows(
     noise_mm: float = 0.3,
     per_material: int = 40,
     seed: int = 0,
-    backend: str = "float",
+    backend: Backend = "float",
     repeats: int = 3,
 ) -> list[BenchRow]:
     """Timings are the best of `repeats` passes: on a shared machine the

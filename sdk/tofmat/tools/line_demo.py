@@ -16,7 +16,7 @@ import tempfile
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -92,7 +92,7 @@ class LineResult:
     decided: list[SortDecision] = field(default_factory=list)
     fired: list[SortDecision] = field(default_factory=list)
     faults: list[LineEvent] = field(default_factory=list)
-    status: dict[str, object] = field(default_factory=dict)
+    status: Mapping[str, object] = field(default_factory=dict)
     gates: AgentResult | None = None  # `tofmat sort` on a simulated PCA9685, when asked for
     gate_chip_errors: int = 0
 

@@ -13,7 +13,7 @@ import signal
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,7 +30,7 @@ class DemoResult:
     labels: int = 0
     labels_correct: int = 0  # every label event while tracking
     latencies_ms: list[float] = field(default_factory=list)
-    status: dict[str, object] = field(default_factory=dict)
+    status: Mapping[str, object] = field(default_factory=dict)
 
     @property
     def accuracy(self) -> float:
