@@ -16,7 +16,7 @@ SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 # tofmatd: spdlog (logging), CLI11 (flags and config file); OpenCV imgproc for
 # the tests (the float reference of the segmentation's integer smoothing).
 APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev \
-                libspdlog-dev libcli11-dev libopencv-imgproc-dev libgpiod-dev
+                libspdlog-dev libcli11-dev libopencv-imgproc-dev libgpiod-dev clang-format clang-tidy
 
 CROSS    := build/aarch64
 # The aarch64 cross build of everything that runs on the box: Debian's cross
@@ -65,15 +65,17 @@ check-db:
 test: setup check-db lint build-cpp build-python typecheck docs test-cpp test-sanitize test-python
 
 # Formatting and linting with the ecosystem's tools, configured in the repo: ruff for
-# Python (ruff.toml). `make format` applies the formatters.
+# Python (ruff.toml); clang-format, clang-tidy and the SPDX check for C++ (mk/lint-cpp.mk,
+# docs/coding-style.md). `make format` applies the formatters.
 .PHONY: lint lint-python format
-lint: lint-python
+lint: lint-python lint-cpp
 lint-python:
 	$(PYTHON) -m ruff format --check --diff .
 	$(PYTHON) -m ruff check .
 format:
 	$(PYTHON) -m ruff format .
 	$(PYTHON) -m ruff check --fix .
+	git ls-files -z -- $(LINT_CPP_FORMAT_FILES) | xargs -0 $(CLANG_FORMAT) -i
 
 # The SDK is fully typed (the extension through sdk/tofmat/_tofmat.pyi), and the stub is
 # checked against the built extension by mypy's stubtest (from the top folder, so that the
@@ -229,3 +231,4 @@ include tests/soak/attacks.mk
 
 # The documentation site: `make docs` (Sphinx, warnings as errors; part of `make test`).
 include mk/docs.mk
+include mk/lint-cpp.mk

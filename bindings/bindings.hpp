@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Registration functions of the _tofmat module, one per binding file, and the
 // numpy-argument checks they share.
 #pragma once
@@ -27,7 +28,6 @@ void register_logging(pyb::module_& m);
 // A C-contiguous float32 copy/view of `a` after checking that it is a
 // floating-point array of exactly `shape` (-1 = any size on that axis).
 // Raises ValueError naming `what`, the expected and the actual shape/dtype.
-FloatArray as_float32(const pyb::handle& a, const std::vector<pyb::ssize_t>& shape,
-                                                     const char* what);
+FloatArray as_float32(const pyb::handle& a, const std::vector<pyb::ssize_t>& shape, const char* what);
 
 }  // namespace tofmat::py

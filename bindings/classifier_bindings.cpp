@@ -1,3 +1,6 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Classifier for Python: Eq. (12) nearest neighbour (float or fixed point) over an exemplar
+// table, single queries and batches, with the GIL released.
 #include <pybind11/stl.h>
 
 #include <algorithm>

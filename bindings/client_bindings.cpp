@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The C++ tofmatd client (firmware/protocol/client.hpp) for Python: the
 // connection, handshake, framing and bounds live in C++; tofmat/client.py
 // turns its messages into numpy arrays and dataclasses. Blocking calls
@@ -23,7 +24,7 @@ ClientExceptions& exceptions() {
   return *e;
 }
 
-pyb::object make_class(pyb::module_& m, const char* name, pyb::tuple bases, const char* doc) {
+pyb::object make_class(pyb::module_& m, const char* name, const pyb::tuple& bases, const char* doc) {
   pyb::dict ns;
   ns["__doc__"] = doc;
   ns["__module__"] = "tofmat";
@@ -42,7 +43,9 @@ pyb::object make_class(pyb::module_& m, const char* name, pyb::tuple bases, cons
     case ClientErrorKind::kAuth: cls = e.auth; break;
     case ClientErrorKind::kProtocol: cls = e.protocol; break;
     case ClientErrorKind::kClosed: cls = e.closed; break;
-    case ClientErrorKind::kCommand: cls = err.code() == protocol::codes::kPermission ? e.not_permitted : e.command; break;
+    case ClientErrorKind::kCommand:
+      cls = err.code() == protocol::codes::kPermission ? e.not_permitted : e.command;
+      break;
   }
   pyb::object exc = cls(err.what());
   exc.attr("code") = err.code();
@@ -61,9 +64,7 @@ auto guarded(F&& f) -> decltype(f()) {
   }
 }
 
-pyb::object loads(const protocol::Json& j) {
-  return pyb::module_::import("json").attr("loads")(j.dump());
-}
+pyb::object loads(const protocol::Json& j) { return pyb::module_::import("json").attr("loads")(j.dump()); }
 
 // An event as (meta dict, blob bytes) after the typed decoder checked it.
 pyb::object event_tuple(const protocol::Message& m) {
@@ -137,12 +138,13 @@ void register_client(pyb::module_& m) {
                          "tofmatd speaks another protocol version than this SDK.");
   e.auth = make_class(m, "AuthenticationError", pyb::make_tuple(e.base, builtins.attr("PermissionError")),
                       "tofmatd refused the token (TCP connections need the daemon's shared secret).");
-  e.protocol = make_class(m, "ProtocolError", pyb::make_tuple(e.base),
-                          "tofmatd sent something the protocol does not allow.");
+  e.protocol =
+      make_class(m, "ProtocolError", pyb::make_tuple(e.base), "tofmatd sent something the protocol does not allow.");
   e.closed = make_class(m, "ConnectionClosedError", pyb::make_tuple(e.base, builtins.attr("ConnectionError")),
                         "The connection to tofmatd went away (it stopped or restarted).");
-  e.command = make_class(m, "CommandError", pyb::make_tuple(e.base),
-                         "tofmatd refused a command (attribute code: invalid_argument, unknown_command, failed, permission).");
+  e.command =
+      make_class(m, "CommandError", pyb::make_tuple(e.base),
+                 "tofmatd refused a command (attribute code: invalid_argument, unknown_command, failed, permission).");
   e.not_permitted = make_class(m, "NotPermittedError", pyb::make_tuple(e.command, builtins.attr("PermissionError")),
                                "The command needs the control role and this connection may only read (code "
                                "permission): on the Unix socket control is the daemon's user or its control group, "

@@ -1,3 +1,6 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The decode of raw Kinect v2 samples to per-frequency depth and Eq. (10) features (float and
+// fixed point) for numpy arrays, with the GIL released.
 #include <pybind11/stl.h>
 
 #include <cstring>
@@ -10,7 +13,8 @@ namespace tofmat::py {
 namespace {
 pyb::array_t<float> stack3(const std::array<std::vector<float>, 3>& planes, std::size_t pixels) {
   pyb::array_t<float> out(std::vector<pyb::ssize_t>{3, static_cast<pyb::ssize_t>(pixels)});
-  for (std::size_t g = 0; g < 3; ++g) std::memcpy(out.mutable_data() + g * pixels, planes[g].data(), pixels * sizeof(float));
+  for (std::size_t g = 0; g < 3; ++g)
+    std::memcpy(out.mutable_data() + g * pixels, planes[g].data(), pixels * sizeof(float));
   return out;
 }
 
@@ -38,14 +42,15 @@ void register_decode(pyb::module_& m) {
                                std::memcpy(out.mutable_data(), d.combined_mm.data(), d.pixels * sizeof(float));
                                return out;
                              })
-      .def_property_readonly("features",
-                             [](const DecodedFrame& d) {
-                               pyb::array_t<float> out(std::vector<pyb::ssize_t>{2, static_cast<pyb::ssize_t>(d.pixels)});
-                               for (std::size_t r = 0; r < 2; ++r) {
-                                 std::memcpy(out.mutable_data() + r * d.pixels, d.features[r].data(), d.pixels * sizeof(float));
-                               }
-                               return out;
-                             })
+      .def_property_readonly(
+          "features",
+          [](const DecodedFrame& d) {
+            pyb::array_t<float> out(std::vector<pyb::ssize_t>{2, static_cast<pyb::ssize_t>(d.pixels)});
+            for (std::size_t r = 0; r < 2; ++r) {
+              std::memcpy(out.mutable_data() + r * d.pixels, d.features[r].data(), d.pixels * sizeof(float));
+            }
+            return out;
+          })
       .def_property_readonly("flags", [](const DecodedFrame& d) {
         pyb::array_t<std::uint8_t> out(static_cast<pyb::ssize_t>(d.pixels));
         std::memcpy(out.mutable_data(), d.flags.data(), d.pixels);
@@ -94,7 +99,8 @@ void register_decode(pyb::module_& m) {
       pyb::arg("raw"), pyb::arg("p0_rad") = pyb::none(), pyb::arg("min_amplitude") = defaults.min_amplitude,
       pyb::arg("min_mean_amplitude") = defaults.min_mean_amplitude,
       pyb::arg("min_unwrap_amplitude") = defaults.min_unwrap_amplitude,
-      pyb::arg("max_gap_16_80_mm") = defaults.max_gap_16_80_mm, pyb::arg("max_gap_80_120_mm") = defaults.max_gap_80_120_mm,
+      pyb::arg("max_gap_16_80_mm") = defaults.max_gap_16_80_mm,
+      pyb::arg("max_gap_80_120_mm") = defaults.max_gap_80_120_mm,
       "Decode raw (9, ...) int16 samples; p0_rad: (3, pixels) per-pixel corrections, or DecodeTables built from "
       "them once. Outputs are flat per pixel. Flags: DECODE_SATURATED, DECODE_DARK (a group below min_amplitude or "
       "the mean below min_mean_amplitude), DECODE_UNWRAP (16 MHz below min_unwrap_amplitude, or the unwrapped "
@@ -121,7 +127,8 @@ void register_decode(pyb::module_& m) {
         std::vector<float> p0;
         if (!p0_obj.is_none()) {
           auto a = as_float32(p0_obj, {3, -1}, "p0_rad");
-          if (static_cast<std::size_t>(a.shape(1)) != pixels) throw pyb::value_error("p0_rad must be (3, height * width)");
+          if (static_cast<std::size_t>(a.shape(1)) != pixels)
+            throw pyb::value_error("p0_rad must be (3, height * width)");
           p0.assign(a.data(), a.data() + a.size());
         }
         pyb::gil_scoped_release nogil;
@@ -130,7 +137,8 @@ void register_decode(pyb::module_& m) {
       pyb::arg("raw"), pyb::arg("p0_rad"), pyb::arg("rect"), pyb::arg("min_amplitude") = defaults.min_amplitude,
       pyb::arg("min_mean_amplitude") = defaults.min_mean_amplitude,
       pyb::arg("min_unwrap_amplitude") = defaults.min_unwrap_amplitude,
-      pyb::arg("max_gap_16_80_mm") = defaults.max_gap_16_80_mm, pyb::arg("max_gap_80_120_mm") = defaults.max_gap_80_120_mm,
+      pyb::arg("max_gap_16_80_mm") = defaults.max_gap_16_80_mm,
+      pyb::arg("max_gap_80_120_mm") = defaults.max_gap_80_120_mm,
       "Decode only the pixels of rect = (x0, y0, x1, y1) of a (9, height, width) frame; outputs flat, row by row.");
 }
 

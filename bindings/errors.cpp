@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 #include <pybind11/stl.h>
 
 #include <cfloat>
@@ -52,8 +53,7 @@ std::string shape_text(const std::vector<pyb::ssize_t>& shape) {
 }
 }  // namespace
 
-FloatArray as_float32(const pyb::handle& obj, const std::vector<pyb::ssize_t>& shape,
-                                                     const char* what) {
+FloatArray as_float32(const pyb::handle& obj, const std::vector<pyb::ssize_t>& shape, const char* what) {
   pyb::array a;
   if (pyb::isinstance<pyb::array>(obj)) {
     a = pyb::reinterpret_borrow<pyb::array>(obj);
@@ -71,7 +71,8 @@ FloatArray as_float32(const pyb::handle& obj, const std::vector<pyb::ssize_t>& s
     }
   }
   if (a.dtype().kind() != 'f') {
-    throw pyb::type_error(std::string(what) + " must have a floating-point dtype (float32 preferred; NaN = missing), got " +
+    throw pyb::type_error(std::string(what) +
+                          " must have a floating-point dtype (float32 preferred; NaN = missing), got " +
                           std::string(pyb::str(a.dtype())));
   }
   std::vector<pyb::ssize_t> actual(a.shape(), a.shape() + a.ndim());

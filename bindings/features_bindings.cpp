@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// DepthBinAccumulator for Python: per-frame observations into a partial Eq. (10) query.
 #include <pybind11/stl.h>
 
 #include <cstring>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmat._tofmat.kinect: the Kinect v2 driver's device listing, and
 // tofmat.UsbError (an OSError with a .kind naming what went wrong).
 #include <pybind11/stl.h>

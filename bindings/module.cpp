@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The _tofmat extension module: registers every binding file's part, the logging sink first.
 #include "bindings.hpp"
 
 PYBIND11_MODULE(_tofmat, m) {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmat record: a source of tofmatd (kinect, sim, replay) run in-process,
 // its first frames written to a recording that `--source replay:FILE` plays.
 #include <pybind11/stl.h>
@@ -55,9 +56,9 @@ RecordResult record(const std::string& source_spec, const std::string& path, std
   {
     pyb::gil_scoped_release release;
     std::thread t([&] { source->run(cb, stop); });
-    const auto deadline = std::chrono::steady_clock::now() +
-                          std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                              std::chrono::duration<double>(timeout_s));
+    const auto deadline =
+        std::chrono::steady_clock::now() +
+        std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(timeout_s));
     std::unique_lock<std::mutex> lock(mutex);
     while (!stop.load() && std::chrono::steady_clock::now() < deadline) {
       // Wakes every 200 ms to hand the source's logs to Python while it runs.

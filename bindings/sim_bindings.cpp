@@ -1,3 +1,6 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// tofmat._tofmat.sim: the physically based Kinect v2 simulator (device profiles, material
+// library, renderer) for the SDK's tofmat.sim.
 #include <pybind11/complex.h>
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
@@ -42,7 +45,8 @@ void register_sim(pyb::module_& parent) {
   auto m = parent.def_submodule("sim", "Physically based Kinect v2 simulator (firmware/sim).");
 
   pyb::class_<Material>(m, "Material", "A material's temporal response parameters (closed forms).")
-      .def_static("from_dict", [](const pyb::dict& d) { return material_from_json(dumps(d)); }, pyb::arg("params"))
+      .def_static(
+          "from_dict", [](const pyb::dict& d) { return material_from_json(dumps(d)); }, pyb::arg("params"))
       .def("to_dict", [](const Material& x) { return loads(material_to_json(x)); })
       .def_readonly("name", &Material::name)
       .def_property_readonly("kind", [](const Material& x) { return std::string(response_kind_name(x.kind)); })
@@ -52,10 +56,12 @@ void register_sim(pyb::module_& parent) {
             return material_response(x, freq_hz, incidence_deg * kPi / 180.0);
           },
           pyb::arg("freq_hz"), pyb::arg("incidence_deg") = 0.0, "R(nu, alpha), the response's Fourier coefficient.")
-      .def("__repr__", [](const Material& x) { return "<sim.Material " + x.name + " (" + response_kind_name(x.kind) + ")>"; });
+      .def("__repr__",
+           [](const Material& x) { return "<sim.Material " + x.name + " (" + response_kind_name(x.kind) + ")>"; });
 
   pyb::class_<DeviceProfile>(m, "DeviceProfile", "A ToF camera's parameters (harmonics, errors, noise, optics).")
-      .def_static("from_dict", [](const pyb::dict& d) { return device_from_json(dumps(d)); }, pyb::arg("params"))
+      .def_static(
+          "from_dict", [](const pyb::dict& d) { return device_from_json(dumps(d)); }, pyb::arg("params"))
       .def_static("ideal_kinect2", &DeviceProfile::ideal_kinect2)
       .def_static("load", &load_device, pyb::arg("name_or_path"), pyb::arg("data_dir"))
       .def("to_dict", [](const DeviceProfile& d) { return loads(device_to_json(d)); })
@@ -65,7 +71,8 @@ void register_sim(pyb::module_& parent) {
       .def("__repr__", [](const DeviceProfile& d) { return "<sim.DeviceProfile " + d.name + ">"; });
 
   pyb::class_<MaterialLibrary>(m, "MaterialLibrary", "Named materials, loaded from a versioned JSON file.")
-      .def_static("from_dict", [](const pyb::dict& d) { return library_from_json(dumps(d)); }, pyb::arg("params"))
+      .def_static(
+          "from_dict", [](const pyb::dict& d) { return library_from_json(dumps(d)); }, pyb::arg("params"))
       .def_static("load", &load_library, pyb::arg("name_or_path"), pyb::arg("data_dir"))
       .def("to_dict", [](const MaterialLibrary& l) { return loads(library_to_json(l)); })
       .def_readonly("name", &MaterialLibrary::name)
@@ -81,8 +88,8 @@ void register_sim(pyb::module_& parent) {
 
   m.def(
       "distortion_curves",
-      [](const DeviceProfile& device, const std::vector<Material>& materials, const BinSpec& bins,
-         double incidence_deg, const std::string& method) {
+      [](const DeviceProfile& device, const std::vector<Material>& materials, const BinSpec& bins, double incidence_deg,
+         const std::string& method) {
         const CurveMethod cm = method_from(method);
         const auto rows = kinect2_database_rows();
         std::vector<std::vector<float>> curves(materials.size());
@@ -143,15 +150,30 @@ void register_sim(pyb::module_& parent) {
   pyb::class_<Frame>(m, "Frame", "A rendered raw frame (or region) and its ground truth (numpy arrays).")
       .def_readonly("x0", &Frame::x0)
       .def_readonly("y0", &Frame::y0)
-      .def_property_readonly("raw", [](const Frame& f) { return image(f.raw, {9, f.height, f.width}); })
-      .def_property_readonly("range_mm", [](const Frame& f) { return image(f.range_mm, {f.height, f.width}); })
-      .def_property_readonly("depth_mm", [](const Frame& f) { return image(f.depth_mm, {f.height, f.width}); })
-      .def_property_readonly("target", [](const Frame& f) { return image(f.target, {f.height, f.width}); })
-      .def_property_readonly("incidence_deg", [](const Frame& f) { return image(f.incidence_deg, {f.height, f.width}); });
+      .def_property_readonly("raw",
+                             [](const Frame& f) {
+                               return image(f.raw, {9, f.height, f.width});
+                             })
+      .def_property_readonly("range_mm",
+                             [](const Frame& f) {
+                               return image(f.range_mm, {f.height, f.width});
+                             })
+      .def_property_readonly("depth_mm",
+                             [](const Frame& f) {
+                               return image(f.depth_mm, {f.height, f.width});
+                             })
+      .def_property_readonly("target",
+                             [](const Frame& f) {
+                               return image(f.target, {f.height, f.width});
+                             })
+      .def_property_readonly("incidence_deg", [](const Frame& f) {
+        return image(f.incidence_deg, {f.height, f.width});
+      });
 
   pyb::class_<Renderer>(m, "Renderer")
       .def(pyb::init<DeviceProfile, MaterialLibrary, int>(), pyb::arg("device"), pyb::arg("library"),
-           pyb::arg("threads") = 0, "threads: workers per frame (0: one per hardware thread); frames do not depend on it.")
+           pyb::arg("threads") = 0,
+           "threads: workers per frame (0: one per hardware thread); frames do not depend on it.")
       .def(
           "render",
           [](const Renderer& r, const Scene& s, std::uint64_t seed, bool noise) {
@@ -173,7 +195,8 @@ void register_sim(pyb::module_& parent) {
             pyb::array_t<float> out(std::vector<pyb::ssize_t>{3, c.height, c.width});
             for (int g = 0; g < 3; ++g) {
               const auto& p = r.pixel_phase(g);
-              std::memcpy(out.mutable_data() + static_cast<std::size_t>(g) * p.size(), p.data(), p.size() * sizeof(float));
+              std::memcpy(out.mutable_data() + static_cast<std::size_t>(g) * p.size(), p.data(),
+                          p.size() * sizeof(float));
             }
             return out;
           },
@@ -185,7 +208,8 @@ void register_sim(pyb::module_& parent) {
             pyb::array_t<float> out(std::vector<pyb::ssize_t>{3, c.height, c.width});
             for (int g = 0; g < 3; ++g) {
               const auto p = r.p0_table(g);
-              std::memcpy(out.mutable_data() + static_cast<std::size_t>(g) * p.size(), p.data(), p.size() * sizeof(float));
+              std::memcpy(out.mutable_data() + static_cast<std::size_t>(g) * p.size(), p.data(),
+                          p.size() * sizeof(float));
             }
             return out;
           },
@@ -208,7 +232,8 @@ void register_sim(pyb::module_& parent) {
         out["stage_mm"] = pyb::array_t<double>(n, c.stage_mm.data());
         pyb::array_t<double> depth(std::vector<pyb::ssize_t>{3, n});
         for (std::size_t g = 0; g < 3; ++g) {
-          std::memcpy(depth.mutable_data() + g * c.stage_mm.size(), c.depth_mm[g].data(), c.stage_mm.size() * sizeof(double));
+          std::memcpy(depth.mutable_data() + g * c.stage_mm.size(), c.depth_mm[g].data(),
+                      c.stage_mm.size() * sizeof(double));
         }
         out["depth_mm"] = depth;
         out["combined_mm"] = pyb::array_t<double>(n, c.combined_mm.data());

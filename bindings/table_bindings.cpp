@@ -1,3 +1,6 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// BinSpec and ExemplarTable for Python: the real database's .npy folders, the compact .tmx file,
+// and the features as numpy arrays.
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
@@ -71,8 +74,7 @@ void register_table(pyb::module_& m) {
              const auto n_r = static_cast<pyb::ssize_t>(rows.size());
              auto a = as_float32(features, {n_m, n_r, static_cast<pyb::ssize_t>(bins.count)}, "features");
              std::vector<float> values(a.data(), a.data() + a.size());
-             return std::make_shared<ExemplarTable>(std::move(materials), rows_from(rows), bins,
-                                                          std::move(values));
+             return std::make_shared<ExemplarTable>(std::move(materials), rows_from(rows), bins, std::move(values));
            }),
            pyb::arg("materials"), pyb::arg("features"), pyb::arg("bins"), pyb::arg("rows"),
            "features: float array (len(materials), len(rows), bins.count), NaN = missing. "
@@ -82,7 +84,8 @@ void register_table(pyb::module_& m) {
           [](const std::filesystem::path& dir, double start, double stop) {
             return std::make_shared<ExemplarTable>(ExemplarTable::from_npy_dir(dir, start, stop));
           },
-          pyb::arg("path"), pyb::arg("bin_start_mm") = kDatabaseBinStartMm, pyb::arg("bin_stop_mm") = kDatabaseBinStopMm,
+          pyb::arg("path"), pyb::arg("bin_start_mm") = kDatabaseBinStartMm,
+          pyb::arg("bin_stop_mm") = kDatabaseBinStopMm,
           "Import a folder of <material>.npy curves (the real database's layout). Bins are "
           "numpy.linspace(bin_start_mm, bin_stop_mm, n_bins), as the authors built them.")
       .def_static(
@@ -105,14 +108,14 @@ void register_table(pyb::module_& m) {
       .def_property_readonly("n_bins", &ExemplarTable::n_bins)
       .def_property_readonly("quant_step_mm", &ExemplarTable::quant_step_mm,
                              "Step of the int16 quantisation the values went through (0: never quantised).")
-      .def_property_readonly("features",
-                             [](const ExemplarTable& t) {
-                               pyb::array_t<float> out({static_cast<pyb::ssize_t>(t.n_materials()),
-                                                        static_cast<pyb::ssize_t>(t.n_rows()),
-                                                        static_cast<pyb::ssize_t>(t.n_bins())});
-                               std::memcpy(out.mutable_data(), t.values().data(), t.values().size() * sizeof(float));
-                               return out;
-                             })
+      .def_property_readonly(
+          "features",
+          [](const ExemplarTable& t) {
+            pyb::array_t<float> out({static_cast<pyb::ssize_t>(t.n_materials()), static_cast<pyb::ssize_t>(t.n_rows()),
+                                     static_cast<pyb::ssize_t>(t.n_bins())});
+            std::memcpy(out.mutable_data(), t.values().data(), t.values().size() * sizeof(float));
+            return out;
+          })
       .def_property_readonly("valid_counts",
                              [](const ExemplarTable& t) {
                                std::vector<std::size_t> out;

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # The box's Debian package (tofmatd), built by CPack from the install rules
 # below: `make package` runs it in the amd64 build and the aarch64 cross
 # build. Included by the top-level CMakeLists.txt when tofmatd is built and the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # Cross build for the board (aarch64 Linux, Debian 12: Raspberry Pi 4/5, Jetson
 # class) with Debian's g++-aarch64-linux-gnu; arm64 libraries come from
 # multiarch (/usr/lib/aarch64-linux-gnu, `dpkg --add-architecture arm64`), the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmat_bench_fixed: the fixed-point path's error against its run time
 // (issue 5). A benchmark, not a test: it prints figures and never fails on
 // timing (it exits non-zero only on bad options or a missing database).
@@ -49,6 +50,7 @@
 #include <string>
 #include <vector>
 
+#include "synthetic_raw.hpp"
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/decode.hpp"
@@ -61,7 +63,6 @@
 #include "tofmat/core/raw_lut.hpp"
 #include "tofmat/kinect/constants.hpp"
 #include "tofmat/kinect/raw_unpack.hpp"
-#include "synthetic_raw.hpp"
 
 #ifndef TOFMAT_DB_DIR
 #define TOFMAT_DB_DIR "/work/shared/data/tanaka2017_kinect2_db"
@@ -75,8 +76,8 @@ using Clock = std::chrono::steady_clock;
 constexpr int kWidth = 512, kHeight = 424;
 constexpr std::size_t kPixels = static_cast<std::size_t>(kWidth) * kHeight;
 constexpr const double* kRange = tofmat_test::kGroupRangeMm;  // group order 80, 16, 120 MHz
-constexpr PixelRegion kRoi{246, 202, 266, 222};          // 20x20 in the middle
-constexpr int kUnpackRow0 = 188, kUnpackRow1 = 236;      // unpack_roi: the rows of a 48x48 region at the centre
+constexpr PixelRegion kRoi{246, 202, 266, 222};               // 20x20 in the middle
+constexpr int kUnpackRow0 = 188, kUnpackRow1 = 236;           // unpack_roi: the rows of a 48x48 region at the centre
 constexpr PixelRegion kUnpackRegion{232, kUnpackRow0, 280, kUnpackRow1};  // unpack_region: that region
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
@@ -273,15 +274,16 @@ std::vector<Query> make_queries(const ExemplarTable& t) {
 
 struct Options {
   std::string op = "all", kernel = "best", db = TOFMAT_DB_DIR;
-  long reps = -1;  // -1: the op's default
+  long reps = -1;            // -1: the op's default
   std::uint32_t window = 0;  // nn/dist: only queries of this window length (0: all)
 };
 
 [[noreturn]] void usage(const char* why) {
-  std::fprintf(stderr,
-               "error: %s\nusage: tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]\n"
-               "                          [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]\n",
-               why);
+  std::fprintf(
+      stderr,
+      "error: %s\nusage: tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]\n"
+      "                          [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]\n",
+      why);
   std::exit(2);
 }
 
@@ -307,14 +309,15 @@ Options parse(int argc, char** argv) {
       usage(("unknown option " + a).c_str());
     }
   }
-  const std::vector<std::string> ops{"all",  "decode", "roi",        "nn",           "dist",
+  const std::vector<std::string> ops{"all",   "decode", "roi",        "nn",           "dist",
                                      "frame", "unpack", "unpack_roi", "unpack_region"};
   if (std::find(ops.begin(), ops.end(), o.op) == ops.end()) usage("unknown --op");
   if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float" && o.kernel != "reference") {
     usage("unknown --kernel");
   }
   const bool unpack = o.op == "unpack" || o.op == "unpack_roi" || o.op == "unpack_region";
-  if (o.kernel == "float" && (o.op == "dist" || o.op == "frame" || unpack)) usage("--kernel float is for decode, roi and nn");
+  if (o.kernel == "float" && (o.op == "dist" || o.op == "frame" || unpack))
+    usage("--kernel float is for decode, roi and nn");
   if (o.kernel == "reference" && o.op != "unpack" && o.op != "unpack_roi") {
     usage("--kernel reference is for unpack and unpack_roi");
   }
@@ -339,16 +342,17 @@ int run_single(const Options& o) {
     if (o.kernel == "float") {
       const DecodeTables t(f.p0, kPixels);
       for (long r = 0; r < reps; ++r) {
-        const DecodedFrame d = o.op == "decode" ? decode_frame(f.raw.data(), t)
-                                                : decode_region(f.raw.data(), kWidth, kHeight, t, kRoi);
+        const DecodedFrame d =
+            o.op == "decode" ? decode_frame(f.raw.data(), t) : decode_region(f.raw.data(), kWidth, kHeight, t, kRoi);
         g_sink = g_sink + d.flags[d.pixels / 2];
       }
     } else {
       const FixedDecodeTables t(f.p0, kPixels);
       const FixedKernel k = fixed_kernel(o.kernel);
       for (long r = 0; r < reps; ++r) {
-        const FixedDecodedFrame d = o.op == "decode" ? decode_frame_fixed(f.raw.data(), t, {}, k)
-                                                     : decode_region_fixed(f.raw.data(), kWidth, kHeight, t, kRoi, {}, k);
+        const FixedDecodedFrame d = o.op == "decode"
+                                        ? decode_frame_fixed(f.raw.data(), t, {}, k)
+                                        : decode_region_fixed(f.raw.data(), kWidth, kHeight, t, kRoi, {}, k);
         g_sink = g_sink + d.combined_q8[d.pixels / 2];
       }
     }
@@ -423,12 +427,14 @@ int run_all(const Options& o) {
   const DecodedFrame ref = decode_frame(f.raw.data(), ft);
   std::size_t ref_valid = 0;
   for (auto fl : ref.flags) ref_valid += fl == 0;
-  std::printf("### Decode: 512x424 synthetic frame (depths 500..4500 mm, amplitudes 20..3000 counts, random p0; "
-              "%zu of %zu pixels valid in the float decode)\n\n",
-              ref_valid, kPixels);
-  std::printf("| path | full frame, ms (median of %ld) | 20x20 ROI, us (median of %ld) | max depth error vs float, mm "
-              "(80 / 16 / 120 MHz) | max combined-depth error, mm | pixels valid in both | flags differ |\n",
-              frame_reps, roi_reps);
+  std::printf(
+      "### Decode: 512x424 synthetic frame (depths 500..4500 mm, amplitudes 20..3000 counts, random p0; "
+      "%zu of %zu pixels valid in the float decode)\n\n",
+      ref_valid, kPixels);
+  std::printf(
+      "| path | full frame, ms (median of %ld) | 20x20 ROI, us (median of %ld) | max depth error vs float, mm "
+      "(80 / 16 / 120 MHz) | max combined-depth error, mm | pixels valid in both | flags differ |\n",
+      frame_reps, roi_reps);
   std::printf("|---|---:|---:|---|---:|---:|---:|\n");
   {
     const double full = median_seconds(frame_reps, [&] { g_sink = g_sink + decode_frame(f.raw.data(), ft).flags[0]; });
@@ -455,13 +461,15 @@ int run_all(const Options& o) {
   const FloatClassifier fl(table);
   const FixedClassifier fx(table);
   const std::vector<Query> qs = make_queries(*table);
-  std::printf("\n### Nearest neighbour (Eq. (12)): real database, %zu materials x %u bins x %u rows, fixed step %g mm "
-              "(compact table %zu bytes); queries as `make bench` (windows of consecutive bins, N(0, 0.3 mm) noise, "
-              "seed 1); time per query = median of %ld passes / queries\n\n",
-              table->n_materials(), table->n_bins(), table->n_rows(), fx.compact().step_mm(),
-              fx.compact().memory_bytes(), nn_reps);
-  std::printf("| window (bins) | queries | float us/query | fixed us/query | float accuracy | fixed accuracy | labels "
-              "differ |\n|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf(
+      "\n### Nearest neighbour (Eq. (12)): real database, %zu materials x %u bins x %u rows, fixed step %g mm "
+      "(compact table %zu bytes); queries as `make bench` (windows of consecutive bins, N(0, 0.3 mm) noise, "
+      "seed 1); time per query = median of %ld passes / queries\n\n",
+      table->n_materials(), table->n_bins(), table->n_rows(), fx.compact().step_mm(), fx.compact().memory_bytes(),
+      nn_reps);
+  std::printf(
+      "| window (bins) | queries | float us/query | fixed us/query | float accuracy | fixed accuracy | labels "
+      "differ |\n|---:|---:|---:|---:|---:|---:|---:|\n");
   for (std::uint32_t w : {1u, 3u, 10u, 30u, 100u}) {
     std::vector<const Query*> sel;
     for (const auto& q : qs) {
@@ -515,15 +523,16 @@ int run_all(const Options& o) {
       if (m.index == labels[i]) check_gap = std::max(check_gap, m.distance - c.best().distance);
     }
   }
-  std::printf("\n### Fixed-point full-frame decode + features + per-pixel classification of %zu materials (one core)\n\n"
-              "Scene: depths 610..1190 mm, %zu vertical bands each carrying one material's curves, amplitudes "
-              "300..3000 counts; %zu of %zu pixels classified, %.1f %% of them as their band's material (one bin per pixel); "
-              "check: FloatClassifier on the same two features gives another label at %zu of %zu sampled pixels (there "
-              "the float distances of the two labels differ by at most %.3g mm^2: the features' quantisation to the "
-              "table's step).\n\n",
-              table->n_materials(), table->n_materials(), classified, kPixels,
-              100.0 * static_cast<double>(correct) / static_cast<double>(std::max<std::size_t>(1, classified)),
-              check_differs, checked, check_gap);
+  std::printf(
+      "\n### Fixed-point full-frame decode + features + per-pixel classification of %zu materials (one core)\n\n"
+      "Scene: depths 610..1190 mm, %zu vertical bands each carrying one material's curves, amplitudes "
+      "300..3000 counts; %zu of %zu pixels classified, %.1f %% of them as their band's material (one bin per pixel); "
+      "check: FloatClassifier on the same two features gives another label at %zu of %zu sampled pixels (there "
+      "the float distances of the two labels differ by at most %.3g mm^2: the features' quantisation to the "
+      "table's step).\n\n",
+      table->n_materials(), table->n_materials(), classified, kPixels,
+      100.0 * static_cast<double>(correct) / static_cast<double>(std::max<std::size_t>(1, classified)), check_differs,
+      checked, check_gap);
   std::printf("| stage | ms per frame (median of %ld) | best |\n|---|---:|---:|\n", frame_reps);
   // One row: the median and the best of frame_reps runs (the best is the
   // code's own cost; the median also carries what else the machine did).
@@ -534,7 +543,8 @@ int run_all(const Options& o) {
   std::vector<std::uint8_t> fused(kPixels);
   for (const char* kname : {"scalar", "best"}) {
     const FixedKernel k = fixed_kernel(kname);
-    const std::string kn = std::string(kname) + (std::strcmp(kname, "best") == 0 ? std::string(" = ") + best_name() : "");
+    const std::string kn =
+        std::string(kname) + (std::strcmp(kname, "best") == 0 ? std::string(" = ") + best_name() : "");
     row("fixed decode (" + kn + "), new frame each time",
         [&] { g_sink = g_sink + decode_frame_fixed(mf.raw.data(), mt, {}, k).flags[0]; });
     FixedDecodedFrame reused;  // a stream of frames decodes into the same buffers
@@ -549,7 +559,9 @@ int run_all(const Options& o) {
       g_sink = g_sink + static_cast<std::int64_t>(pc.classify(reused, labels.data(), k));
     });
     row("**decode + features + per-pixel classification fused in 512-pixel tiles** (`classify_frame`, " + kn + ")",
-        [&] { g_sink = g_sink + static_cast<std::int64_t>(pc.classify_frame(mf.raw.data(), mt, fused.data(), {}, k)); });
+        [&] {
+          g_sink = g_sink + static_cast<std::int64_t>(pc.classify_frame(mf.raw.data(), mt, fused.data(), {}, k));
+        });
     if (fused != labels) throw std::logic_error("classify_frame disagrees with decode + classify");
   }
 
@@ -557,17 +569,19 @@ int run_all(const Options& o) {
   const std::vector<std::uint8_t> packet = packet_of(f);
   std::vector<std::int16_t> want(kinect::kUsedSubImages * kPixels), got(want.size());
   unpack_packet("reference", packet.data(), want.data(), kWholeFrame);
-  std::printf("\n### 11-bit unpack of a depth packet (9 sub-images of 512x424 packed codes to int16 raw values; "
-              "the decode benchmark's frame as codes; one core)\n\n"
-              "Whole packet, output rows %d..%d (%d rows: the rows of a 48x48 region at the centre) and that region "
-              "(columns %d..%d of those rows). The definition is the unpack as first written (code by code from "
-              "16-bit words, then the device table; whole rows only); before the region-aware unpack a consumer "
-              "of a region paid the whole packet.\n\n",
-              kUnpackRow0, kUnpackRow1, kUnpackRow1 - kUnpackRow0, kUnpackRegion.x0, kUnpackRegion.x1);
-  std::printf("| kernel | whole packet, ms (median of %ld) | best | rows %d..%d, ms (median of %ld) | best | "
-              "48x48 region, ms (median of %ld) | best | equals the definition |\n"
-              "|---|---:|---:|---:|---:|---:|---:|---|\n",
-              frame_reps, kUnpackRow0, kUnpackRow1, roi_reps, roi_reps);
+  std::printf(
+      "\n### 11-bit unpack of a depth packet (9 sub-images of 512x424 packed codes to int16 raw values; "
+      "the decode benchmark's frame as codes; one core)\n\n"
+      "Whole packet, output rows %d..%d (%d rows: the rows of a 48x48 region at the centre) and that region "
+      "(columns %d..%d of those rows). The definition is the unpack as first written (code by code from "
+      "16-bit words, then the device table; whole rows only); before the region-aware unpack a consumer "
+      "of a region paid the whole packet.\n\n",
+      kUnpackRow0, kUnpackRow1, kUnpackRow1 - kUnpackRow0, kUnpackRegion.x0, kUnpackRegion.x1);
+  std::printf(
+      "| kernel | whole packet, ms (median of %ld) | best | rows %d..%d, ms (median of %ld) | best | "
+      "48x48 region, ms (median of %ld) | best | equals the definition |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---|\n",
+      frame_reps, kUnpackRow0, kUnpackRow1, roi_reps, roi_reps);
   for (const char* kname : {"reference", "scalar", "best"}) {
     const std::string k = kname;
     std::fill(got.begin(), got.end(), std::int16_t{0});

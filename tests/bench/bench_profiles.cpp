@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmat_bench_profiles: what each scene profile of tofmatd costs per frame,
 // from the reassembled USB depth packet to the bytes of the event written to
 // a socket. A benchmark, not a test: it prints figures and never fails on
@@ -73,12 +74,12 @@
 #include <utility>
 #include <vector>
 
+#include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/exemplar_table.hpp"
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/fixed_kernel.hpp"
 #include "tofmat/core/frame_smoothing.hpp"
 #include "tofmat/core/pixel_classifier.hpp"
-#include "tofmat/core/compact_table.hpp"
 #include "tofmat/daemon/daemon.hpp"
 #include "tofmat/daemon/frame.hpp"
 #include "tofmat/daemon/profile.hpp"
@@ -113,23 +114,24 @@ double seconds_since(Clock::time_point t0) { return std::chrono::duration<double
 
 struct Options {
   std::string profile = "all", kernel = "best", table = TOFMAT_DB_DIR, sim_data = TOFMAT_SIM_DATA_DIR;
-  long reps = -1;  // -1: 1 for one profile, 7 for all
+  long reps = -1;   // -1: 1 for one profile, 7 for all
   int smooth = -1;  // -1: the profile's default
   int threads = 1;  // segmentation: threads sharing each frame (one core unless told)
   bool truth = true;
   std::vector<std::string> candidates;
 };
 
-const std::vector<std::string> kProfiles{"all",          "handheld",    "sorting",    "sorting-idle", "segmentation",
+const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting",    "sorting-idle",   "segmentation",
                                          "unpack-full", "decode-full", "smooth-box", "smooth-majority"};
 
 [[noreturn]] void usage(const char* why) {
-  std::fprintf(stderr,
-               "error: %s\nusage: tofmat_bench_profiles [--profile "
-               "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
-               "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
-               "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c]\n",
-               why);
+  std::fprintf(
+      stderr,
+      "error: %s\nusage: tofmat_bench_profiles [--profile "
+      "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
+      "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
+      "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c]\n",
+      why);
   std::exit(2);
 }
 
@@ -328,10 +330,10 @@ struct Run {
   bool with_truth = true;
   RawFrame frame;  // its raw buffer (9 x kPixels) is allocated once and reused
   Emitter emit;
-  std::vector<Event>* events = nullptr;  // where the emitter records, if anywhere
+  std::vector<Event>* events = nullptr;                    // where the emitter records, if anywhere
   std::vector<std::vector<std::uint8_t>>* maps = nullptr;  // label maps, if kept
-  double encode_s = 0.0;                 // time inside the emitter (encoding)
-  bool timing = false;                   // time the stages (all mode)
+  double encode_s = 0.0;                                   // time inside the emitter (encoding)
+  bool timing = false;                                     // time the stages (all mode)
   double unpack_s = 0.0, process_s = 0.0;
   std::uint64_t bytes = 0;  // encoded event bytes
 
@@ -572,12 +574,14 @@ std::string fraction(std::size_t a, std::size_t b) {
 int run_all(const Options& o) {
   const long reps = o.reps < 0 ? 7 : std::max(1L, o.reps);
   const auto table = load_table_file(o.table);
-  std::printf("tofmat_bench_profiles: best pixel kernel = %s, unpack kernel = %s; table %s (%zu materials, all "
-              "candidates unless --candidates); one thread; host ms per frame = median of %ld passes over the "
-              "prepared packets (after a warm-up pass), best = fastest pass\n\n",
-              best_pixel_kernel(), kinect::best_unpack_kernel(), o.table.c_str(), table->n_materials(), reps);
-  std::printf("| profile | frames / pass | ms per frame (median) | best | unpack | process | encode | error vs truth | "
-              "agrees with float | float backend ms per frame |\n");
+  std::printf(
+      "tofmat_bench_profiles: best pixel kernel = %s, unpack kernel = %s; table %s (%zu materials, all "
+      "candidates unless --candidates); one thread; host ms per frame = median of %ld passes over the "
+      "prepared packets (after a warm-up pass), best = fastest pass\n\n",
+      best_pixel_kernel(), kinect::best_unpack_kernel(), o.table.c_str(), table->n_materials(), reps);
+  std::printf(
+      "| profile | frames / pass | ms per frame (median) | best | unpack | process | encode | error vs truth | "
+      "agrees with float | float backend ms per frame |\n");
   std::printf("|---|---:|---:|---:|---:|---:|---:|---|---|---:|\n");
   const auto row = [&](const std::string& name, const Packets& ps, const Timed& t, const std::string& truth_err,
                        const std::string& vs_float, const std::string& float_ms) {
@@ -620,7 +624,8 @@ int run_all(const Options& o) {
     {
       std::string said = name + " labels (target: fixed / float):";
       for (std::size_t t = 0; t < ps.targets; ++t) {
-        said += " " + kMaterials[t] + ": " + (lf[t].empty() ? "-" : lf[t]) + " / " + (ll[t].empty() ? "-" : ll[t]) + ";";
+        said +=
+            " " + kMaterials[t] + ": " + (lf[t].empty() ? "-" : lf[t]) + " / " + (ll[t].empty() ? "-" : ll[t]) + ";";
       }
       notes.push_back(said);
     }
@@ -670,9 +675,10 @@ int run_all(const Options& o) {
   const Timed ts = time_passes(seg, ps, "segmentation", reps);
   row("segmentation (smooth " + std::to_string(seg.config.smooth) + ")", ps, ts, err, "- (no float backend)", "-");
 
-  std::printf("\n### Segmentation, step by step (ms per frame, median of %ld passes; each row is the whole of what it "
-              "names)\n\n| step | ms per frame | best |\n|---|---:|---:|\n",
-              reps);
+  std::printf(
+      "\n### Segmentation, step by step (ms per frame, median of %ld passes; each row is the whole of what it "
+      "names)\n\n| step | ms per frame | best |\n|---|---:|---:|\n",
+      reps);
   const auto step = [&](const std::string& what, auto&& f) {
     f();  // warm-up
     std::vector<double> t;

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # Guest instructions per frame / ROI / query of tofmat_bench_fixed (aarch64)
 # under qemu-aarch64 with the instruction-counting plugin (qemu_insn_count.c):
 # for each op and kernel, count(R) - count(0) over R reps, divided by R and by

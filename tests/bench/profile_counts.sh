@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # Guest instructions per frame of each tofmatd scene profile (aarch64), from
 # the reassembled depth packet to the encoded event: tofmat_bench_profiles
 # under qemu-aarch64 with the instruction-counting plugin (qemu_insn_count.c).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Inputs for the daemon's unit tests (test_region_matcher, test_profiles,
 // test_pipeline): the real database as the exemplar table, and raw 512 x 424
 // frames in which rectangles of the image show a material. The frames come from
@@ -55,7 +56,8 @@ inline std::vector<float> varying_p0() {
   std::vector<double> column(kWidth), row(kHeight);
   for (std::size_t g = 0; g < 3; ++g) {
     const double phase = static_cast<double>(g);
-    for (int x = 0; x < kWidth; ++x) column[static_cast<std::size_t>(x)] = mean[g] + 0.25 * std::sin(0.013 * x + 0.7 * phase);
+    for (int x = 0; x < kWidth; ++x)
+      column[static_cast<std::size_t>(x)] = mean[g] + 0.25 * std::sin(0.013 * x + 0.7 * phase);
     for (int y = 0; y < kHeight; ++y) row[static_cast<std::size_t>(y)] = 0.15 * std::cos(0.021 * y - 0.3 * phase);
     for (std::size_t y = 0; y < static_cast<std::size_t>(kHeight); ++y)
       for (std::size_t x = 0; x < static_cast<std::size_t>(kWidth); ++x)
@@ -86,8 +88,7 @@ inline GroupDepths depths_with_features(double combined_mm, double f16, double f
 }
 
 // What `material` looks like at the centre of `bin` of the table.
-inline GroupDepths material_at_bin(const tofmat::ExemplarTable& table, const std::string& material,
-                                   std::uint32_t bin) {
+inline GroupDepths material_at_bin(const tofmat::ExemplarTable& table, const std::string& material, std::uint32_t bin) {
   const auto m = table.index_of(material);
   if (m < 0) throw std::logic_error("test setup: no material " + material);
   const float* v = table.material_values(static_cast<std::size_t>(m));
@@ -121,7 +122,8 @@ inline void paint(tofmat::daemon::RawFrame& f, const std::vector<Patch>& patches
       for (int x = p.region.x0; x < p.region.x1; ++x) {
         const std::size_t i = static_cast<std::size_t>(y) * kWidth + static_cast<std::size_t>(x);
         for (std::size_t g = 0; g < 3; ++g) {
-          const double theta = 2.0 * tofmat::kPi * p.depths.mm[g] / kGroupRangeMm[g] + static_cast<double>(p0[g * kPixels + i]);
+          const double theta =
+              2.0 * tofmat::kPi * p.depths.mm[g] / kGroupRangeMm[g] + static_cast<double>(p0[g * kPixels + i]);
           const double c = std::cos(theta), s = std::sin(theta);
           for (std::size_t j = 0; j < 3; ++j) {
             // cos(theta + phi_j) by the angle sum: two calls per group, not three.

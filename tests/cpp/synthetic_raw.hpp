@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Synthetic raw Kinect v2 frames for the decode tests, from the phasor model
 // m_j = B + A cos(theta + phi_j), whose decoded phasor is 1.5 A e^{i theta}
 // (the three steps cancel the e^{-i theta} term): the float and fixed-point

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The threads that share a segmentation frame (band_workers.hpp): every band
 // runs once per run(), on its own thread, errors come back to the caller and
 // leave the workers ready for the next run, and destruction never hangs.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The simulated belt (sim:belt): items rendered where the belt has carried
 // them, and the simulated light barrier driven at the moments they cross it,
 // with those moments as the edges' timestamps.

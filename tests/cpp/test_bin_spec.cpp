@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // BinSpec: the binning that travels with every table. Its contract is the
 // half-open interval [start + j*width, start + (j+1)*width) per bin, so the
 // edges reported by lower_edge_mm()/end_mm() and index_of() must agree.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's frame queue (firmware/daemon/include/tofmat/daemon/bounded_queue.hpp):
 // first in, first out; when full, push() drops the oldest item and counts it
 // (the camera is never blocked); pop() returns an item, or nothing after its
@@ -141,6 +142,7 @@ TEST(BoundedQueue, ClosedQueueHandsOutWhatItHoldsThenNothingAtOnce) {
   q.close();
   auto rest = std::async(std::launch::async, [&] {
     std::vector<std::optional<int>> out;
+    out.reserve(3);
     for (int i = 0; i < 3; ++i) out.push_back(q.pop(kLongPop));
     return out;
   });
@@ -163,6 +165,7 @@ void producers_and_consumer(std::size_t capacity, int producers, int per_produce
     return got;
   });
   std::vector<std::thread> threads;
+  threads.reserve(static_cast<std::size_t>(producers));
   for (int p = 0; p < producers; ++p)
     threads.emplace_back([&q, p, per_producer] {
       for (int i = 0; i < per_producer; ++i) q.push({p, i});
@@ -247,7 +250,8 @@ TEST(BoundedQueuePushWait, GivesUpWhenStopIsSetOrTheQueueIsClosed) {
     } else {
       stop = true;  // nobody closes the queue: the wait must notice stop itself
     }
-    ASSERT_EQ(pushed.wait_for(kHang), std::future_status::ready) << (by_close ? "close" : "stop") << " did not end the wait";
+    ASSERT_EQ(pushed.wait_for(kHang), std::future_status::ready)
+        << (by_close ? "close" : "stop") << " did not end the wait";
     EXPECT_FALSE(pushed.get()) << (by_close ? "close" : "stop");
     EXPECT_EQ(drain(q), (std::vector<int>{1})) << "the refused item was queued anyway";
     EXPECT_EQ(q.dropped(), 0u);

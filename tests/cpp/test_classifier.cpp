@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Nearest-neighbour classification with partial matching, Eq. (12): distances
 // checked against hand-computed values, ranking order, candidate subsets,
 // refusal of meaningless queries, and accuracy on the real database.
@@ -57,9 +58,9 @@ TEST(Classifier, HandComputedDistances) {
 
 TEST(Classifier, DistanceUsesDoublePrecision) {
   // 0.1f - 0.3f squared, summed in double: compare with the same computation, not a rounded literal.
-  const auto t = std::make_shared<const ExemplarTable>(std::vector<std::string>{"a"},
-                                                       std::vector<tofmat::RowSpec>{{0, 0}}, BinSpec{0.0, 1.0, 2},
-                                                       std::vector<float>{0.3f, -100.0f});
+  const auto t =
+      std::make_shared<const ExemplarTable>(std::vector<std::string>{"a"}, std::vector<tofmat::RowSpec>{{0, 0}},
+                                            BinSpec{0.0, 1.0, 2}, std::vector<float>{0.3f, -100.0f});
   const float q[2] = {0.1f, 100.0f};
   const double d0 = double{0.1f} - double{0.3f}, d1 = 200.0;
   EXPECT_DOUBLE_EQ(FloatClassifier(t).classify(q, 2).best().distance, (d0 * d0 + d1 * d1) / 2);

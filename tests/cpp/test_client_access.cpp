@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // ClientAccess (firmware/daemon/client_access.hpp): tofmatd's roles, slots
 // and token throttling, without sockets (the server tests run them over real
 // ones).
@@ -12,8 +13,8 @@ namespace {
 
 using tofmat::daemon::AccessOptions;
 using tofmat::daemon::ClientAccess;
-using tofmat::daemon::RateBucket;
 using tofmat::daemon::Peer;
+using tofmat::daemon::RateBucket;
 using tofmat::daemon::Role;
 using Verdict = ClientAccess::Verdict;
 
@@ -149,8 +150,9 @@ TEST(ClientAccess, RemembersABoundedNumberOfAddresses) {
   ClientAccess a(options());
   std::uint64_t wait = 0;
   for (std::size_t k = 0; k < ClientAccess::kMaxThrottled + 500; ++k)
-    a.check_token("10." + std::to_string(k / 65536) + "." + std::to_string(k / 256 % 256) + "." + std::to_string(k % 256),
-                  "guess", k, wait);
+    a.check_token(
+        "10." + std::to_string(k / 65536) + "." + std::to_string(k / 256 % 256) + "." + std::to_string(k % 256),
+        "guess", k, wait);
   EXPECT_LE(a.throttled_addresses(), ClientAccess::kMaxThrottled);
   EXPECT_GT(a.throttled_addresses(), ClientAccess::kMaxThrottled / 2);
 }
@@ -166,7 +168,7 @@ TEST(ClientAccess, RequestsAtThePeersRate) {
     a.count_request(flooder);
     ++taken;
   }
-  EXPECT_EQ(taken, 100);  // the burst: a second's worth
+  EXPECT_EQ(taken, 100);          // the burst: a second's worth
   EXPECT_EQ(wait, 10 * kMs + 1);  // then one every 10 ms
   EXPECT_FALSE(a.may_request(flooder, now + 9 * kMs, wait));
   EXPECT_TRUE(a.may_request(flooder, now + 10 * kMs, wait));

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's socket server (firmware/daemon/server.hpp) over real sockets: a
 // Server on a temporary Unix socket and on TCP 127.0.0.1 (any free port) with
 // a token, run on its own thread, answering every command with ok. Clients are
@@ -38,9 +39,9 @@ using tofmat::daemon::ServerOptions;
 using tofmat_test::Bytes;
 using Clock = std::chrono::steady_clock;
 
-constexpr int kPatienceMs = 5000;  // how long anything may take before it counts as not happening
-const std::string kToken = "0123456789abcdef-secret";           // TCP: reads
-const std::string kControlToken = "fedcba9876543210-control";   // TCP: controls
+constexpr int kPatienceMs = 5000;                      // how long anything may take before it counts as not happening
+const std::string kToken = "0123456789abcdef-secret";  // TCP: reads
+const std::string kControlToken = "fedcba9876543210-control";  // TCP: controls
 
 // A raw connection that speaks the framing by hand (or does not).
 class Raw {
@@ -246,12 +247,16 @@ TEST_F(ServerTest, TcpNeedsTheToken) {
   EXPECT_TRUE(good.hello().auth_required);
   EXPECT_EQ(good.role(), "control");
   EXPECT_EQ(good.request("echo")["cmd"], "echo");
-  const std::vector<std::string> wrong = {"", "0123456789abcdef-secreT", "0123456789abcdef-secre",
-                                          kToken + "x", std::string(kToken.size(), '\0') + "a"};
+  const std::vector<std::string> wrong = {"", "0123456789abcdef-secreT", "0123456789abcdef-secre", kToken + "x",
+                                          std::string(kToken.size(), '\0') + "a"};
   for (const auto& token : wrong) {
     SCOPED_TRACE(token);
     std::string code;
-    EXPECT_EQ(client_error_kind([&] { Client c(tcp_address(), ClientOptions{token, kPatienceMs}); }, &code),
+    EXPECT_EQ(client_error_kind(
+                  [&] {
+                    Client c(tcp_address(), ClientOptions{token, kPatienceMs});
+                  },
+                  &code),
               ClientErrorKind::kAuth);
     EXPECT_EQ(code, codes::kAuth);
   }
@@ -690,7 +695,11 @@ TEST_F(ServerTest, LongErrorFromTheHandlerStillReachesTheClient) {
   start();
   Client c(socket_path());
   std::string code;
-  EXPECT_EQ(client_error_kind([&] { c.request("fail", {{"error", std::string(3000, 'e')}}); }, &code),
+  EXPECT_EQ(client_error_kind(
+                [&] {
+                  c.request("fail", {{"error", std::string(3000, 'e')}});
+                },
+                &code),
             ClientErrorKind::kCommand);
   EXPECT_EQ(code, codes::kFailed);
   EXPECT_EQ(c.request("echo")["cmd"], "echo");
@@ -924,6 +933,7 @@ TEST_F(ServerTest, UnixAndTcpHaveTheirOwnSlotsAndEveryPeerItsShare) {
   o.hello_timeout_ms = 60000;  // (they stay for the whole test)
   start(o);
   std::vector<std::unique_ptr<Raw>> unauthenticated;
+  unauthenticated.reserve(6);
   for (int k = 0; k < 6; ++k) unauthenticated.push_back(std::make_unique<Raw>(tcp_address()));
   EXPECT_TRUE(wait_for([&] { return counter("tcp_clients") == 3 && counter("rejected") == 3; }));
   // The refused ones are closed at once; the Unix socket has all its slots.
@@ -934,6 +944,7 @@ TEST_F(ServerTest, UnixAndTcpHaveTheirOwnSlotsAndEveryPeerItsShare) {
   }
   EXPECT_EQ(closed, 3);
   std::vector<std::unique_ptr<Client>> local;
+  local.reserve(4);
   for (int k = 0; k < 4; ++k) local.push_back(std::make_unique<Client>(socket_path()));
   // The fifth from the same user is over its share (one peer: this process's uid).
   EXPECT_EQ(client_error_kind([&] { Client c(socket_path()); }), ClientErrorKind::kClosed);

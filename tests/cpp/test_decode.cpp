@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The float decode (firmware/core decode.hpp, frame_decode.hpp): three phase
 // steps to a phasor and phase, hierarchical unwrapping, the per-frame decode
 // with its saturated/dark flags, and the simulator's noise-free samples
@@ -57,9 +58,10 @@ TEST(Phasor, RecoversThePhaseOfCosineSamplesOverTheWholeCircle) {
   // Tolerance 1e-12 rad: the samples and the phasor are a few roundings of
   // O(A) values, i.e. a relative error of ~1e-15 of the phasor.
   std::vector<double> phases;
+  phases.reserve(2000);
   for (int k = 0; k < 2000; ++k) phases.push_back(kTwoPi * k / 2000.0);
-  for (double p : {0.0, 1e-300, 1e-15, 1e-9, kPi, kTwoPi - 1e-6, kTwoPi - 1e-9, kTwoPi - 1e-12,
-                   std::nextafter(kTwoPi, 0.0)}) {
+  for (double p :
+       {0.0, 1e-300, 1e-15, 1e-9, kPi, kTwoPi - 1e-6, kTwoPi - 1e-9, kTwoPi - 1e-12, std::nextafter(kTwoPi, 0.0)}) {
     phases.push_back(p);
   }
   for (double amplitude : {1.0, 1000.0, 16320.0}) {
@@ -115,7 +117,7 @@ TEST(Phasor, PhaseOfAxesAndZero) {
   EXPECT_DOUBLE_EQ(tofmat::phase_of({0.0, 1.0}), kPi / 2);
   EXPECT_DOUBLE_EQ(tofmat::phase_of({-1.0, 0.0}), kPi);
   EXPECT_DOUBLE_EQ(tofmat::phase_of({0.0, -1.0}), 1.5 * kPi);
-  EXPECT_EQ(tofmat::phase_of({0.0, 0.0}), 0.0);  // "a zero phasor gives 0"
+  EXPECT_EQ(tofmat::phase_of({0.0, 0.0}), 0.0);                // "a zero phasor gives 0"
   const double tiny_below = tofmat::phase_of({1.0, -1e-300});  // atan2 = -1e-300 -> 2 pi rounds: must give 0
   EXPECT_GE(tiny_below, 0.0);
   EXPECT_LT(tiny_below, kTwoPi);
@@ -178,7 +180,8 @@ TEST(Unwrap, Documented937mmToleranceOfD16) {
       auto d = wrapped(depth);
       d[1] += e;
       const auto u = tofmat::unwrap_depths(d);
-      EXPECT_NEAR(u.depth_mm[0], depth + std::copysign(1875.0, e), 1e-9) << "fails here by design: " << depth << " " << e;
+      EXPECT_NEAR(u.depth_mm[0], depth + std::copysign(1875.0, e), 1e-9)
+          << "fails here by design: " << depth << " " << e;
     }
   }
 }
@@ -234,9 +237,9 @@ TEST(DecodeFrame, FlagsSaturatedAndDarkPixelsAndKeepsValidOnes) {
   for (std::size_t px = 0; px < 6; ++px) {
     for (std::size_t g = 0; g < 3; ++g) f.set(px, g, cos_samples(4000.0, psi(g)));
   }
-  f.at(1, 2, 1) = tofmat::kRawSaturated;  // one saturated sample in group 120 MHz
+  f.at(1, 2, 1) = tofmat::kRawSaturated;                             // one saturated sample in group 120 MHz
   for (std::size_t g = 0; g < 3; ++g) f.set(2, g, {0.0, 0.0, 0.0});  // no signal
-  f.set(3, 1, {2.0, -1.0, -1.0});                                   // 16 MHz amplitude 2 < 3
+  f.set(3, 1, {2.0, -1.0, -1.0});                                    // 16 MHz amplitude 2 < 3
   // 80 MHz amplitude 4 >= 3 (the mean is far above 10): valid. Phase 4 pi / 3,
   // d80 = 1250 mm: 139 mm from the other groups' 1111, a consistent unwrapping.
   f.set(4, 0, {-2.0, 4.0, -2.0});
@@ -396,7 +399,8 @@ TEST(IdealDecode, RawSamplesAreTheCosinesOfTheSpec) {
   for (double range : {0.0, 500.0, 1234.5, 8000.0}) {
     for (double dp : {0.0, 0.4}) {
       for (std::size_t g = 0; g < 3; ++g) {
-        const auto m = tofmat::sim::raw_samples(s.device.groups[g], s.w[g], range, dp, 1000.0, 1.0, s.device.saturation_sharpness);
+        const auto m =
+            tofmat::sim::raw_samples(s.device.groups[g], s.w[g], range, dp, 1000.0, 1.0, s.device.saturation_sharpness);
         const double x = kTwoPi * kFreqs[g] * 1e-3 * 2.0 * range / kCTrue - dp;
         for (int j = 0; j < 3; ++j) {
           EXPECT_NEAR(m[static_cast<std::size_t>(j)],
@@ -526,7 +530,8 @@ NoiseStats decode_noisy(double amplitude, double depth, std::size_t pixels, std:
     const auto out = tofmat::decode_frame(raw.data(), n, {});
     for (std::size_t px = 0; px < n; ++px) {
       if (out.flags[px]) {
-        EXPECT_TRUE(std::isnan(out.combined_mm[px]) && std::isnan(out.depth_mm[1][px]) && std::isnan(out.features[0][px]));
+        EXPECT_TRUE(std::isnan(out.combined_mm[px]) && std::isnan(out.depth_mm[1][px]) &&
+                    std::isnan(out.features[0][px]));
         continue;
       }
       ++s.valid;
@@ -568,11 +573,12 @@ TEST(DecodeNoise, ValidPixelsAreRarelyWrongAtAnySignalLevel) {
                     100.0 * s.share_wrong());
       line += buf;
       if (s.valid >= 10000) {
-        EXPECT_LE(s.share_wrong(), 5e-3) << "A " << amplitude << " depth " << depth << ": " << s.wrong << " of " << s.valid;
+        EXPECT_LE(s.share_wrong(), 5e-3) << "A " << amplitude << " depth " << depth << ": " << s.wrong << " of "
+                                         << s.valid;
       }
     }
-    std::printf("[ figures  ] A = %.0f:%s pooled %zu wrong of %zu valid (%.3f %%)\n", amplitude, line.c_str(), pooled.wrong,
-                pooled.valid, 100.0 * pooled.share_wrong());
+    std::printf("[ figures  ] A = %.0f:%s pooled %zu wrong of %zu valid (%.3f %%)\n", amplitude, line.c_str(),
+                pooled.wrong, pooled.valid, 100.0 * pooled.share_wrong());
     RecordProperty("A" + std::to_string(static_cast<int>(amplitude)),
                    std::to_string(pooled.wrong) + " wrong of " + std::to_string(pooled.valid) + " valid");
     EXPECT_LE(pooled.share_wrong(), 5e-3) << "A " << amplitude << ": " << pooled.wrong << " of " << pooled.valid;
@@ -629,7 +635,9 @@ std::vector<std::int16_t> zero_phase_pixel(const std::array<int, 3>& amplitude) 
 }
 
 TEST(DecodeFrame, DarkNeedsEachGroupAt3AndTheMeanAt10) {
-  const auto flags = [](const std::array<int, 3>& a) { return tofmat::decode_frame(zero_phase_pixel(a).data(), 1, {}).flags[0]; };
+  const auto flags = [](const std::array<int, 3>& a) {
+    return tofmat::decode_frame(zero_phase_pixel(a).data(), 1, {}).flags[0];
+  };
   EXPECT_EQ(flags({4, 14, 14}), 0);                    // 80 MHz at 4 >= 3, mean 10.7
   EXPECT_EQ(flags({4, 14, 10}), tofmat::kDecodeDark);  // mean 9.3
   EXPECT_EQ(flags({9, 9, 9}) & tofmat::kDecodeDark, tofmat::kDecodeDark);
@@ -653,7 +661,7 @@ TEST(DecodeFrame, UnwrapFlagWhenTheFrequenciesDisagreeOrThe16MHzGroupIsFaint) {
   const std::vector<Case> cases = {
       {{depth, depth, depth}, {2000, 2000, 2000}, 0},
       {{depth + 900.0, depth, depth}, {2000, 2000, 2000}, tofmat::kDecodeUnwrap},   // |D80 - D16| 900 > 400
-      {{depth + 380.0, depth, depth + 380.0}, {2000, 2000, 2000}, 0},              // 380 <= 400, D120 follows
+      {{depth + 380.0, depth, depth + 380.0}, {2000, 2000, 2000}, 0},               // 380 <= 400, D120 follows
       {{depth, depth, depth + 500.0}, {2000, 2000, 2000}, tofmat::kDecodeUnwrap},   // |D120 - D80| 500 > 300
       {{depth, depth, depth + 280.0}, {2000, 2000, 2000}, 0},                       // 280 <= 300
       {{depth, depth - 1000.0, depth}, {2000, 2000, 2000}, tofmat::kDecodeUnwrap},  // D80 picks 1875 wrong: gap 875
@@ -729,7 +737,8 @@ TEST(DecodeRegion, P0OverloadEqualsTheFullFrameDecodeBitForBit) {
     fill_pixel(raw, n, i, amplitude, {depth, depth + 60.0, depth}, 3.0, gauss);
   }
   for (std::size_t g = 0; g < 3; ++g) {
-    for (std::size_t i = 0; i < n; ++i) p0[g * n + i] = static_cast<float>(0.3 * static_cast<double>(g) + 1e-4 * static_cast<double>(i));
+    for (std::size_t i = 0; i < n; ++i)
+      p0[g * n + i] = static_cast<float>(0.3 * static_cast<double>(g) + 1e-4 * static_cast<double>(i));
   }
   raw[4 * n + 10 * w + 20] = tofmat::kRawSaturated;
   // The p0 shifts phases: with it applied to the samples (decode subtracts it),
@@ -769,7 +778,8 @@ TEST(DecodeRegion, P0OverloadEqualsTheFullFrameDecodeBitForBit) {
       }
     }
   }
-  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, std::vector<float>(3 * n - 1), {0, 0, 1, 1}), std::invalid_argument);
+  EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, std::vector<float>(3 * n - 1), {0, 0, 1, 1}),
+               std::invalid_argument);
   EXPECT_THROW(tofmat::decode_region(raw.data(), w, h, p0, {0, 0, 0, 1}), std::invalid_argument);
   EXPECT_THROW(tofmat::decode_region(raw.data(), 0, h, p0, {0, 0, 1, 1}), std::invalid_argument);
 }

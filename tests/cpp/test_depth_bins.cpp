@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // DepthBinAccumulator: per-frame observations averaged into depth bins, the
 // partial query a hand-held sweep builds up for the classifier.
 #include <gtest/gtest.h>

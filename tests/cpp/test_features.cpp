@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The paper's features (Sec. 4): Eq. (1) phase to depth, the unambiguous
 // range, Eqs. (8), (10), (11), and the table rows built from per-frequency depths.
 #include <gtest/gtest.h>
@@ -40,7 +41,7 @@ TEST(Features, DepthFromPhaseWraps) {
   const double d = depth_from_phase_mm(below, 120.0);
   EXPECT_LT(d, 1250.0);
   EXPECT_NEAR(d, 1250.0, 1e-9);
-  EXPECT_EQ(depth_from_phase_mm(two_pi, 120.0), 0.0);          // a full turn is distance 0
+  EXPECT_EQ(depth_from_phase_mm(two_pi, 120.0), 0.0);  // a full turn is distance 0
   EXPECT_NEAR(depth_from_phase_mm(two_pi + kPi, 120.0), 625.0, 1e-9);
   EXPECT_NEAR(depth_from_phase_mm(-kPi / 2, 120.0), 1250.0 * 0.75, 1e-9);
   EXPECT_NEAR(depth_from_phase_mm(-5 * kPi / 2, 120.0), 1250.0 * 0.75, 1e-9);
@@ -64,8 +65,8 @@ TEST(Features, DepthFromPhaseNonFinite) {
 }
 
 TEST(Features, DistortionEquations) {
-  EXPECT_DOUBLE_EQ(tofmat::absolute_distortion_mm(800.0, 812.5), -12.5);          // Eq. (8): d_true - d(f)
-  EXPECT_DOUBLE_EQ(tofmat::relative_distortion_mm(800.0, 812.5), -12.5);          // Eq. (10): d(ref) - d(f)
+  EXPECT_DOUBLE_EQ(tofmat::absolute_distortion_mm(800.0, 812.5), -12.5);             // Eq. (8): d_true - d(f)
+  EXPECT_DOUBLE_EQ(tofmat::relative_distortion_mm(800.0, 812.5), -12.5);             // Eq. (10): d(ref) - d(f)
   EXPECT_DOUBLE_EQ(tofmat::depth_relative_distortion_mm(700.0, 750.0, 49.0), -1.0);  // Eq. (11)
   EXPECT_DOUBLE_EQ(tofmat::depth_relative_distortion_mm(700.0, 650.0, -50.0), 0.0);
 }

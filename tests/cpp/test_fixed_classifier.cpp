@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The fixed-point path of Eq. (12): the compact table, the squared-sum kernel
 // (scalar against a plain reference everywhere; NEON against scalar bit for
 // bit where the build is aarch64, run under qemu-aarch64), and the fixed
@@ -223,7 +224,8 @@ TEST(FixedClassifierRealDatabase, SameLabelsAsFloatExceptWithinTheQuantisationBo
         ASSERT_EQ(a.ranking.size(), b.ranking.size());
         // Each candidate's distance within the bound (found by index).
         for (const auto& mb : b.ranking) {
-          const auto ma = std::find_if(a.ranking.begin(), a.ranking.end(), [&](const Match& x) { return x.index == mb.index; });
+          const auto ma =
+              std::find_if(a.ranking.begin(), a.ranking.end(), [&](const Match& x) { return x.index == mb.index; });
           ASSERT_NE(ma, a.ranking.end());
           ASSERT_EQ(ma->valid, mb.valid);
           const double bound = step * std::sqrt(ma->distance) + step * step / 4.0;  // mean|d| <= rms
@@ -242,7 +244,7 @@ TEST(FixedClassifierRealDatabase, SameLabelsAsFloatExceptWithinTheQuantisationBo
   std::cout << "[ measured ] fixed vs float on " << queries << " real-database queries: " << disagree
             << " different labels; largest distance difference " << worst_distance_gap << " mm^2\n";
   EXPECT_GE(queries, 5u * 29u * 40u - 10u);  // (a 1-bin window on a missing bin has nothing to classify)
-  EXPECT_LE(disagree * 1000, queries);  // at most 0.1 %
+  EXPECT_LE(disagree * 1000, queries);       // at most 0.1 %
 }
 
 TEST(FixedClassifier, ErrorsAsTheFloatPath) {

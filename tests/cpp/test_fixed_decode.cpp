@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The fixed-point decode against the float reference (frame_decode.hpp) over
 // the whole input range, and its NEON kernel against the scalar one bit for
 // bit (aarch64 builds, run under qemu-aarch64). Inputs come from the phasor
@@ -12,11 +13,11 @@
 #include <random>
 #include <vector>
 
+#include "synthetic_raw.hpp"
 #include "tofmat/core/decode.hpp"
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/frame_decode.hpp"
 #include "tofmat/core/raw_lut.hpp"
-#include "synthetic_raw.hpp"
 
 namespace {
 
@@ -36,7 +37,8 @@ TEST(FixedDecode, MatchesTheFloatDecodeWithinTheErrorBudget) {
   const DecodedFrame f = decode_frame(s.raw.data(), s.n, s.p0);
   const FixedDecodeTables t(s.p0, s.n);
   const FixedDecodedFrame x = decode_frame_fixed(s.raw.data(), t, {}, FixedKernel::kScalar);
-  double worst_phase[3] = {0, 0, 0}, worst_depth[3] = {0, 0, 0}, worst_combined = 0.0, worst_feature = 0.0, worst_amp = 0.0;
+  double worst_phase[3] = {0, 0, 0}, worst_depth[3] = {0, 0, 0}, worst_combined = 0.0, worst_feature = 0.0,
+         worst_amp = 0.0;
   std::size_t both_valid = 0, flag_differs = 0;
   for (std::size_t i = 0; i < s.n; ++i) {
     for (std::size_t g = 0; g < 3; ++g) {
@@ -63,8 +65,8 @@ TEST(FixedDecode, MatchesTheFloatDecodeWithinTheErrorBudget) {
       const bool wrap16 = std::min(wrapped[kGroup16], kRange[kGroup16] - wrapped[kGroup16]) < 0.002;
       EXPECT_TRUE(near(a0, 3, 0.01) || near(a1, 3, 0.01) || near(a2, 3, 0.01) || near(a0 + a1 + a2, 30, 0.01) ||
                   near(a1, 12, 0.01) || near(gap1, 400, 0.01) || near(gap2, 300, 0.01) || wrap16)
-          << "pixel " << i << ": flags " << int(f.flags[i]) << " (float) vs " << int(x.flags[i]) << " (fixed); amplitudes "
-          << a0 << " " << a1 << " " << a2 << ", gaps " << gap1 << " " << gap2;
+          << "pixel " << i << ": flags " << int(f.flags[i]) << " (float) vs " << int(x.flags[i])
+          << " (fixed); amplitudes " << a0 << " " << a1 << " " << a2 << ", gaps " << gap1 << " " << gap2;
       continue;
     }
     if (f.flags[i]) {
@@ -86,10 +88,10 @@ TEST(FixedDecode, MatchesTheFloatDecodeWithinTheErrorBudget) {
     }
   }
   std::cout << "[ measured ] fixed vs float over " << s.n << " pixels: phase " << worst_phase[0] << " / "
-            << worst_phase[1] << " / " << worst_phase[2] << " rad, depth "
-            << worst_depth[0] << " / " << worst_depth[1] << " / " << worst_depth[2] << " mm (80/16/120 MHz), combined "
-            << worst_combined << " mm, features " << worst_feature << " mm, amplitude " << worst_amp
-            << " (relative); flags differ at " << flag_differs << " pixels, both valid " << both_valid << "\n";
+            << worst_phase[1] << " / " << worst_phase[2] << " rad, depth " << worst_depth[0] << " / " << worst_depth[1]
+            << " / " << worst_depth[2] << " mm (80/16/120 MHz), combined " << worst_combined << " mm, features "
+            << worst_feature << " mm, amplitude " << worst_amp << " (relative); flags differ at " << flag_differs
+            << " pixels, both valid " << both_valid << "\n";
   // The budget (docs/numerics.md): 1e-6 rad of phase (the residual's cubic
   // term 1.6e-7, the float reference's own half ulp at 2 pi 2.4e-7), 0.002 mm
   // of per-frequency depth (far below the real curves' 0.3 mm roughness), the
@@ -132,7 +134,8 @@ TEST(FixedDecode, ExtremeSamplesNeitherOverflowNorDisagree) {
   for (std::size_t i = 0; i < n; ++i) {
     EXPECT_EQ(x.flags[i] & kDecodeSaturated, f.flags[i] & kDecodeSaturated) << i;
     for (std::size_t g = 0; g < 3; ++g) {
-      EXPECT_NEAR(x.amplitude_q8[g][i] / 256.0, f.amplitude[g][i], 1e-4 * std::max(1.0f, f.amplitude[g][i]) + 0.004) << i;
+      EXPECT_NEAR(x.amplitude_q8[g][i] / 256.0, f.amplitude[g][i], 1e-4 * std::max(1.0f, f.amplitude[g][i]) + 0.004)
+          << i;
       if (f.amplitude[g][i] > 1.0f) {
         const double ph = x.phase_turns[g][i] * (kTwoPi / 4294967296.0);
         EXPECT_LT(std::fabs(wrapped_diff(ph, f.phase_rad[g][i], kTwoPi)), 1e-6) << i;

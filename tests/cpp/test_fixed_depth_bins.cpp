@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Depth-bin accumulation in fixed point against the float DepthBinAccumulator
 // fed by the float decode of the same frames, its NEON bin kernel against the
 // scalar one bit for bit (aarch64), the per-bin cap, and bad bins.
@@ -54,9 +55,8 @@ TEST(FixedDepthBins, MatchesTheFloatAccumulatorOnDecodedFrames) {
       }
     }
   }
-  std::cout << "[ measured ] fixed vs float accumulation: " << added_fixed << " / " << added_float
-            << " pixels added, " << moved << " observations in a neighbouring bin, worst bin mean difference "
-            << worst_mean << " mm\n";
+  std::cout << "[ measured ] fixed vs float accumulation: " << added_fixed << " / " << added_float << " pixels added, "
+            << moved << " observations in a neighbouring bin, worst bin mean difference " << worst_mean << " mm\n";
   EXPECT_GT(added_fixed, 100000u);
   EXPECT_LE(added_fixed > added_float ? added_fixed - added_float : added_float - added_fixed, added_float / 10000);
   EXPECT_LE(moved, 2 * added_float / 200);  // 2 rows x 0.5 %

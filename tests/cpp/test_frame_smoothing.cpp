@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The segmentation's integer smoothing (frame_smoothing.hpp) against
 // brute-force definitions written here: every window summed or counted from
 // scratch, pixel by pixel. Bands must give what the whole frame gives.
@@ -53,8 +54,10 @@ std::int32_t brute_mean(const Features& f, const std::vector<std::int32_t>& plan
       s += static_cast<std::int64_t>(std::floor((plane[i] + 128.0) / 256.0));
       ++n;
     }
-  const double mean = std::floor((256.0 * static_cast<double>(s) + static_cast<double>(n / 2)) / static_cast<double>(n));
-  return static_cast<std::int32_t>(std::clamp(mean, static_cast<double>(INT32_MIN + 1), static_cast<double>(INT32_MAX)));
+  const double mean =
+      std::floor((256.0 * static_cast<double>(s) + std::floor(static_cast<double>(n) / 2.0)) / static_cast<double>(n));
+  return static_cast<std::int32_t>(
+      std::clamp(mean, static_cast<double>(INT32_MIN + 1), static_cast<double>(INT32_MAX)));
 }
 
 void expect_box_means(const Features& f, int side, const std::vector<std::int32_t>& o0,
@@ -147,7 +150,8 @@ TEST(BoxMeanFilter, TheKernelsAgreeBitForBit) {
       Features f = random_features(w, h, 0.2, static_cast<std::uint32_t>(w + h + wild));
       if (wild) {
         std::mt19937 rng(7);
-        for (std::size_t i = 0; i < f.f0.size(); ++i) f.f0[i] = static_cast<std::int32_t>(rng()), f.f1[i] = -f.f0[i] / 3;
+        for (std::size_t i = 0; i < f.f0.size(); ++i)
+          f.f0[i] = static_cast<std::int32_t>(rng()), f.f1[i] = -f.f0[i] / 3;
       }
       for (int side : {1, 5, 9, 15}) {
         std::vector<std::int32_t> a0(f.f0.size()), a1(f.f0.size()), b0(f.f0.size()), b1(f.f0.size());
@@ -240,8 +244,8 @@ TEST(MajorityFilter, CleansIsolatedPixelsAndKeepsEdges) {
   std::vector<std::uint8_t> out(l.size());
   MajorityFilter mf(w, h, 5, 2);
   mf.apply(l.data(), 0, h, out.data());
-  EXPECT_EQ(out[static_cast<std::size_t>(5 * w + 4)], 0);    // the lone 1: outvoted
-  EXPECT_EQ(out[static_cast<std::size_t>(3 * w + 3)], 0);    // the hole: filled
+  EXPECT_EQ(out[static_cast<std::size_t>(5 * w + 4)], 0);  // the lone 1: outvoted
+  EXPECT_EQ(out[static_cast<std::size_t>(3 * w + 3)], 0);  // the hole: filled
   for (std::size_t i = 0; i < static_cast<std::size_t>(3 * w); ++i)
     EXPECT_EQ(out[i], 255) << i;  // the border: at least 3 of its windows' 5 rows are empty
   for (int y = 3; y < h; ++y) {

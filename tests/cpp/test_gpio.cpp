@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // GPIO backends (firmware/gpio): the line names the configuration takes, the
 // simulated chip's kernel-like rules, and the libgpiod backend failing
 // clearly on a machine without GPIO (these build machines have none).

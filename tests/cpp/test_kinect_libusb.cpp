@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The libusb backend on a machine without a Kinect v2 (CI, this VM): it
 // still runs, and fails with the documented error kind and message.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The Kinect v2 command protocol codec (firmware/kinect/command.hpp) against
 // the documented layouts (shared/docs/kinect2-protocol.md 1.4-1.6, 3.1).
 #include <gtest/gtest.h>
@@ -103,7 +104,7 @@ TEST(Responses, FirmwareVersionsSerialStatus) {
 
   const Bytes st{0x01, 0x00, 0x00, 0x00};
   EXPECT_EQ(parse_status(st.data(), st.size()), 1u);
-  EXPECT_CONTAINS(format_error([&] { parse_status(st.data(), 3); }), "4");
+  EXPECT_CONTAINS(format_error([&] { parse_status(st.data(), 3); }), '4');
 }
 
 TEST(Responses, DepthParamsRoundTripAndValidate) {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // End to end: the simulated Kinect v2 (firmware/sim/kinect_device) -> USB
 // transport -> driver (firmware/kinect/device) -> stream parser -> 11-bit
 // unpack -> float decode, with and without every kind of fault.
@@ -8,8 +9,9 @@
 #include <cmath>
 #include <cstring>
 #include <map>
-#include <string>
 #include <memory>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "tofmat/core/decode.hpp"
@@ -91,7 +93,8 @@ struct Received {
 };
 
 struct Rig {
-  explicit Rig(SimulatedKinect::SceneAt scene = scene_at) : sim(std::make_shared<SimulatedKinect>(renderer(), scene)) {}
+  explicit Rig(SimulatedKinect::SceneAt scene = scene_at)
+      : sim(std::make_shared<SimulatedKinect>(renderer(), std::move(scene))) {}
   std::shared_ptr<SimulatedKinect> sim;
   std::unique_ptr<Kinect2Device> dev;
   std::vector<Received> frames;
@@ -117,7 +120,8 @@ void expect_exact(const Received& r, const Frame& truth) {
   for (std::size_t s = 0; s < 9; ++s) {
     for (std::size_t i = 0; i < kinect::kPixels; ++i) {
       const std::size_t x = i % kinect::kWidth;
-      const std::int16_t want = (x == 0 || x == kinect::kWidth - 1) ? 0 : truth.raw[s * kinect::kPixels + i];
+      const std::int16_t want =
+          (x == 0 || x == kinect::kWidth - 1) ? std::int16_t{0} : truth.raw[s * kinect::kPixels + i];
       ASSERT_EQ(r.raw[s * kinect::kPixels + i], want) << "frame " << r.sequence << " sub-image " << s << " pixel " << i;
     }
   }
@@ -136,8 +140,8 @@ TEST(KinectSim, StartUpReadsTheDevicesIdentityAndTables) {
   for (int g = 0; g < 3; ++g) {
     const auto want = rig.sim->renderer().p0_table(g);
     for (std::size_t i = 0; i < want.size(); i += 1013) {
-      const double diff = std::remainder(static_cast<double>(p0[static_cast<std::size_t>(g) * want.size() + i]) - want[i],
-                                         2.0 * M_PI);
+      const double diff =
+          std::remainder(static_cast<double>(p0[static_cast<std::size_t>(g) * want.size() + i]) - want[i], 2.0 * M_PI);
       ASSERT_LT(std::fabs(diff), 0.5 * kinect::kP0RadPerUnit + 1e-6) << g << " " << i;
     }
   }
@@ -384,12 +388,19 @@ TEST(KinectSimCommands, StartStopAndCloseSendTheDocumentedSequences) {
   Rig rig;
   rig.start();
   const auto start = sent_since(*rig.sim, 0);
-  const std::vector<Sent> want_head{{0x02, {}}, {0x14, {}}, {0x22, {1}}, {0x22, {3}}, {0x22, {2}}, {0x22, {4}},
-                                    {0x4B, {1, 0x00640064, 0, 0}}, {0x4B, {0, 0, 0, 0}}};
+  const std::vector<Sent> want_head{{0x02, {}},
+                                    {0x14, {}},
+                                    {0x22, {1}},
+                                    {0x22, {3}},
+                                    {0x22, {2}},
+                                    {0x22, {4}},
+                                    {0x4B, {1, 0x00640064, 0, 0}},
+                                    {0x4B, {0, 0, 0, 0}}};
   ASSERT_GT(start.size(), want_head.size() + 4);
   EXPECT_EQ(std::vector<Sent>(start.begin(), start.begin() + 8), want_head);
   // Status polls until ready (the simulated device is ready at the second), then the stream start.
-  const std::vector<Sent> want_tail{{0x16, {0x090000}}, {0x16, {0x090000}}, {0x09, {}}, {0x16, {0x090000}}, {0x2B, {1}}};
+  const std::vector<Sent> want_tail{
+      {0x16, {0x090000}}, {0x16, {0x090000}}, {0x09, {}}, {0x16, {0x090000}}, {0x2B, {1}}};
   EXPECT_EQ(std::vector<Sent>(start.begin() + 8, start.end()), want_tail);
   rig.pump(2);
   ASSERT_EQ(rig.frames.size(), 2u);
@@ -397,9 +408,9 @@ TEST(KinectSimCommands, StartStopAndCloseSendTheDocumentedSequences) {
   rig.dev->stop();
   EXPECT_FALSE(rig.dev->streaming());
   const auto stop = sent_since(*rig.sim, start.size());
-  const std::vector<Sent> want_stop{{0x4B, {1, 0x00640064, 0, 0}}, {0x4B, {0, 0, 0, 0}}, {0x0A, {}}, {0x2B, {0}},
-                                    {0x4B, {1, 0, 0, 0}},           {0x4B, {0, 0, 0, 0}}, {0x4B, {1, 0, 0, 0}},
-                                    {0x4B, {0, 0, 0, 0}}};
+  const std::vector<Sent> want_stop{
+      {0x4B, {1, 0x00640064, 0, 0}}, {0x4B, {0, 0, 0, 0}}, {0x0A, {}},           {0x2B, {0}},
+      {0x4B, {1, 0, 0, 0}},          {0x4B, {0, 0, 0, 0}}, {0x4B, {1, 0, 0, 0}}, {0x4B, {0, 0, 0, 0}}};
   EXPECT_EQ(stop, want_stop);
   rig.pump(3);
   EXPECT_EQ(rig.frames.size(), 2u) << "frames after stop";
@@ -472,8 +483,8 @@ TEST(KinectSim, EndToEndPerFrequencyDepthsForSeveralMaterialsAndDepths) {
         // errors; measured |mean| <= 0.17 mm with sd 0.5..37 mm), Gaussian
         // tails (worst <= 4.9 sd measured over 21,600 pixels; 6 sd allowed), and
         // the noise far below a wrap (sd 0.5..37 mm against 1250..9375 mm).
-        const std::string where = "depth " + std::to_string(kDepths[r.sequence % 5]) + " target " +
-                                  std::to_string(t) + " group " + std::to_string(g);
+        const std::string where = "depth " + std::to_string(kDepths[r.sequence % 5]) + " target " + std::to_string(t) +
+                                  " group " + std::to_string(g);
         EXPECT_LT(std::fabs(mean), 0.02 + 5.0 * sd / std::sqrt(static_cast<double>(err.size()))) << where;
         EXPECT_LT(worst, 6.0 * sd) << where;
         EXPECT_LT(sd, 0.01 * wavelength[g]) << where;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The depth stream's pure parts (firmware/kinect): the 11-bit packed layout,
 // sub-packet reassembly and its behaviour under every fault the bus can
 // produce (shared/docs/kinect2-protocol.md 2.1-2.4).
@@ -91,7 +92,7 @@ TEST(RawUnpack, RawValuesGoThroughTheDeviceTable) {
   EXPECT_EQ(raw[kWidth + 1], tofmat::kRawSaturated);
   for (std::size_t i = 0; i < kPixels; ++i) {
     const int x = static_cast<int>(i % kWidth);
-    const std::int16_t want = (x == 0 || x == kWidth - 1) ? 0 : tofmat::raw_code_value(codes[i]);
+    const std::int16_t want = (x == 0 || x == kWidth - 1) ? std::int16_t{0} : tofmat::raw_code_value(codes[i]);
     ASSERT_EQ(raw[i], want) << i;
   }
 }
@@ -103,7 +104,8 @@ TEST(RawUnpack, RawValuesGoThroughTheDeviceTable) {
 // A depth packet whose sub-image s is filled with bytes derived from (frame, s).
 std::vector<std::uint8_t> payload(std::uint32_t frame, int s) {
   std::vector<std::uint8_t> p(kSubImageBytes);
-  for (std::size_t i = 0; i < p.size(); i += 4096) p[i] = static_cast<std::uint8_t>(frame * 16 + static_cast<std::uint32_t>(s));
+  for (std::size_t i = 0; i < p.size(); i += 4096)
+    p[i] = static_cast<std::uint8_t>(frame * 16 + static_cast<std::uint32_t>(s));
   p[0] = static_cast<std::uint8_t>(frame);
   p[1] = static_cast<std::uint8_t>(s);
   return p;
@@ -125,7 +127,8 @@ Packets iso_of_sub(std::uint32_t frame, int s, std::uint32_t timestamp) {
 Packets iso_of_frame(std::uint32_t frame) {
   Packets out;
   for (int s = 0; s < kSubImages; ++s) {
-    for (auto& p : iso_of_sub(frame, s, 1000 + frame * 330 + static_cast<std::uint32_t>(s))) out.push_back(std::move(p));
+    for (auto& p : iso_of_sub(frame, s, 1000 + frame * 330 + static_cast<std::uint32_t>(s)))
+      out.push_back(std::move(p));
   }
   return out;
 }
@@ -244,7 +247,7 @@ TEST(DepthStream, WrongFooterLengthIsRejected) {
   Harness h;
   h.feed(iso_of_frame(0));
   auto f1 = iso_of_frame(1);
-  auto& last = f1[9 * 3 + 8];  // the short packet ending sub-image 3 holds its footer
+  auto& last = f1[9 * 3 + 8];                     // the short packet ending sub-image 3 holds its footer
   last[last.size() - kFooterBytes + 20] ^= 0x01;  // length field
   h.feed(f1);
   h.feed(iso_of_frame(2));

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The belt's motion (firmware/line): a fixed speed, and a quadrature encoder
 // counted forwards and backwards, whose speed follows the belt and which
 // reaches nothing while the belt stands.
@@ -17,7 +18,7 @@ TEST(FixedSpeed, PositionsAndTimes) {
   EXPECT_EQ(belt.time_at(900.0, 2'000 * kMs), 2'000 * kMs) << "already passed: now";
   EXPECT_THROW(FixedSpeed(0.0), std::invalid_argument);
   EXPECT_THROW(FixedSpeed(-1.0), std::invalid_argument);
-  EXPECT_THROW(FixedSpeed(std::numeric_limits<double>::quiet_NaN()), std::invalid_argument);
+  EXPECT_THROW(FixedSpeed{std::numeric_limits<double>::quiet_NaN()}, std::invalid_argument);
 }
 
 // One full cycle forwards, A leading B: A up, B up, A down, B down.

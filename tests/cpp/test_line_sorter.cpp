@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The sorting line's schedule (firmware/line): items followed from the
 // barrier past the camera to their outlets in belt positions, and every way
 // an item can fail sent to reject, with the alarm and a report.
@@ -17,7 +18,8 @@ constexpr std::uint64_t kMs = 1'000'000;
 SorterConfig line_config() {
   SorterConfig c;
   c.camera_mm = 200;
-  c.outlets = {{"wood", {"wood"}, 600, 50 * kMs}, {"cork", {"cork", "corkboard"}, 800, 50 * kMs},
+  c.outlets = {{"wood", {"wood"}, 600, 50 * kMs},
+               {"cork", {"cork", "corkboard"}, 800, 50 * kMs},
                {"reject", {}, 1000, 80 * kMs}};
   c.reject = 2;
   c.decision_margin_ns = 20 * kMs;
@@ -316,7 +318,7 @@ TEST(Sorter, AStoppedBeltDelaysEveryStepWithIt) {
 }
 
 TEST(SorterConfig, WhatCannotWorkIsRefused) {
-  const auto refused = [](SorterConfig c, const std::string& says) {
+  const auto refused = [](const SorterConfig& c, const std::string& says) {
     try {
       validate(c);
       ADD_FAILURE() << "accepted; wanted: " << says;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The light barrier's trigger filter (firmware/line): debounce on the
 // kernel's timestamps, and items too close together reported, never merged.
 #include <gtest/gtest.h>

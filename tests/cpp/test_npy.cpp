@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The .npy reader: the real database's files, the header dialects NumPy has
 // written over the years, and everything a hostile or damaged file can say.
 #include <gtest/gtest.h>
@@ -49,8 +50,8 @@ TEST(Npy, RealDatabaseValuesAreBitExact) {
   ASSERT_DB_PRESENT();
   // Reference values read with NumPy 2.4 (np.load('acryl.npy')[r, c].hex()).
   const auto a = tofmat::read_npy_file(tofmat_test::db_dir() / "acryl.npy");
-  EXPECT_EQ(a.data[0], 0x1.bfc67717f3b08p+6);          // row 0, bin 0
-  EXPECT_EQ(a.data[399], 0x1.318f770111500p+2);        // row 1, bin 199
+  EXPECT_EQ(a.data[0], 0x1.bfc67717f3b08p+6);    // row 0, bin 0
+  EXPECT_EQ(a.data[399], 0x1.318f770111500p+2);  // row 1, bin 199
   const auto p = tofmat::read_npy_file(tofmat_test::db_dir() / "paper.npy");
   for (std::size_t b = 0; b < 6; ++b) EXPECT_EQ(p.data[b], 0.0) << "paper misses bins 0..5 (all-0.0 marker)";
 }
@@ -131,8 +132,8 @@ TEST(Npy, RejectsTrailingBytes) {
 }
 
 TEST(Npy, RejectsAbsurdShapes) {
-  for (const char* shape : {"(100000000, 100000000)", "(16777217,)", "(99999999999999999999999999,)",
-                            "(4096, 4096, 2)", "(18446744073709551616,)"}) {
+  for (const char* shape : {"(100000000, 100000000)", "(16777217,)", "(99999999999999999999999999,)", "(4096, 4096, 2)",
+                            "(18446744073709551616,)"}) {
     SCOPED_TRACE(shape);
     const Bytes b = npy_file(1, 0, dict("<f8", "False", shape), f8_le(kSix));
     EXPECT_CONTAINS(parse_error(b), "absurdly large");

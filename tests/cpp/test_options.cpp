@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's command line and configuration file (firmware/daemon/src/options.cpp):
 // the defaults a box runs with (the camera, never the simulator; the
 // simulator's data only beside an installed program), every flag reaching
@@ -26,6 +27,7 @@ struct Parsed {
 Parsed parse(std::vector<std::string> args) {
   args.insert(args.begin(), "tofmatd");
   std::vector<char*> argv;
+  argv.reserve(args.size());
   for (auto& a : args) argv.push_back(a.data());
   Parsed p;
   p.cl = parse_command_line(static_cast<int>(argv.size()), argv.data(), p.exit_code);
@@ -33,7 +35,7 @@ Parsed parse(std::vector<std::string> args) {
 }
 
 std::filesystem::path temp_file(const std::string& name, const std::string& text) {
-  const auto path = std::filesystem::temp_directory_path() / ("tofmat_test_options_" + name);
+  auto path = std::filesystem::temp_directory_path() / ("tofmat_test_options_" + name);
   std::ofstream(path) << text;
   return path;
 }
@@ -42,7 +44,7 @@ std::filesystem::path temp_file(const std::string& name, const std::string& text
 std::filesystem::path token_file(const std::string& name, const std::string& text,
                                  std::filesystem::perms perms = std::filesystem::perms::owner_read |
                                                                 std::filesystem::perms::owner_write) {
-  const auto path = temp_file(name, text);
+  auto path = temp_file(name, text);
   std::filesystem::permissions(path, perms);
   return path;
 }
@@ -75,14 +77,18 @@ TEST(Options, EveryFlagReachesItsOption) {
   const auto token = token_file("token", "  0123456789abcdef-secret \t\r\nsecond line\n");
   const auto control = token_file("control_token", "control-0123456789abcdef\n",
                                   std::filesystem::perms::owner_read | std::filesystem::perms::group_read);
+  // One flag and its value a pair, as on a command line (clang-format would put one string a line).
+  // clang-format off
   const auto p = parse({"--table", "t.tmx", "--source", "sim:static,material=cork", "--profile", "sorting",
-                        "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600", "--tcp",
-                        "127.0.0.1:7020", "--token-file", token.string(), "--control-token-file", control.string(),
-                        "--control-group", "root", "--max-tcp-clients", "5", "--max-clients-per-peer", "3",
-                        "--idle-timeout", "12", "--peer-request-rate", "50", "--peer-connect-rate", "2.5",
-                        "--roi", "10,20,60,70", "--candidates",
-                        "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--threads", "3", "--queue-frames", "4",
-                        "--max-clients", "9", "--sim-data", "/opt/sim", "--log-level", "debug"});
+                        "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600",
+                        "--tcp", "127.0.0.1:7020", "--token-file", token.string(),
+                        "--control-token-file", control.string(), "--control-group", "root",
+                        "--max-tcp-clients", "5", "--max-clients-per-peer", "3", "--idle-timeout", "12",
+                        "--peer-request-rate", "50", "--peer-connect-rate", "2.5", "--roi", "10,20,60,70",
+                        "--candidates", "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5",
+                        "--threads", "3", "--queue-frames", "4", "--max-clients", "9",
+                        "--sim-data", "/opt/sim", "--log-level", "debug"});
+  // clang-format on
   std::filesystem::remove(token);
   std::filesystem::remove(control);
   ASSERT_TRUE(p.cl.has_value());
@@ -115,9 +121,9 @@ TEST(Options, EveryFlagReachesItsOption) {
 }
 
 TEST(Options, TheResetButtonReachesItsOptionsWithOrWithoutALine) {
-  const auto p = parse({"--table", "t", "--gpio", "libgpiod", "--reset-button", "pinctrl-rp1:GPIO5",
-                        "--reset-button-active-low", "--reset-button-bias", "pull-up", "--reset-button-debounce-ms",
-                        "35"});
+  const auto p =
+      parse({"--table", "t", "--gpio", "libgpiod", "--reset-button", "pinctrl-rp1:GPIO5", "--reset-button-active-low",
+             "--reset-button-bias", "pull-up", "--reset-button-debounce-ms", "35"});
   ASSERT_TRUE(p.cl.has_value());
   const auto& o = p.cl->daemon;
   EXPECT_EQ(o.button.line, "pinctrl-rp1:GPIO5");
@@ -133,8 +139,9 @@ TEST(Options, TheResetButtonReachesItsOptionsWithOrWithoutALine) {
 }
 
 TEST(Options, TheConfigurationFileHasTheFlagsKeysAndTheCommandLineWins) {
-  const auto cfg = temp_file("cfg.toml", "table = \"/usr/share/t.tmx\"\nprofile = \"segmentation\"\nsmooth = 7\n"
-                                         "candidates = [\"cork\", \"paper\"]\nlog-level = \"warn\"\n");
+  const auto cfg = temp_file("cfg.toml",
+                             "table = \"/usr/share/t.tmx\"\nprofile = \"segmentation\"\nsmooth = 7\n"
+                             "candidates = [\"cork\", \"paper\"]\nlog-level = \"warn\"\n");
   const auto from_file = parse({"--config", cfg.string()});
   const auto overridden = parse({"--config", cfg.string(), "--profile", "sorting"});
   std::filesystem::remove(cfg);
@@ -182,34 +189,34 @@ TEST(Options, HelpAndVersionExitWithZero) {
 
 TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   const auto short_token = token_file("short_token", "too short\n");
-  expect_usage_error({});                                                      // no table
-  expect_usage_error({"--table", "t", "--no-such-flag"});                      // unknown flag
-  expect_usage_error({"--table", "t", "stray"});                               // stray argument
-  expect_usage_error({"--table"});                                             // a flag without its value
-  expect_usage_error({"--table", "t", "--top-k", "many"});                     // not a number
-  expect_usage_error({"--table", "t", "--queue-frames", "0"});                 // out of range
-  expect_usage_error({"--table", "t", "--max-clients", "5000"});               // out of range
-  expect_usage_error({"--table", "t", "--threads", "-1"});                     // out of range
-  expect_usage_error({"--config", "/dev/zero"});                               // not a regular file (endless)
-  expect_usage_error({"--table", "t", "--log-level", "chatty"});               // not a level
-  expect_usage_error({"--table", "t", "--backend", "gpu"});                    // not a backend
-  expect_usage_error({"--table", "t", "--roi", "1,2,3"});                      // three numbers
-  expect_usage_error({"--table", "t", "--roi", "1;2;3;4"});                    // wrong separators
-  expect_usage_error({"--table", "t", "--socket-mode", "0999"});               // not octal
-  expect_usage_error({"--table", "t", "--socket-mode", "01777"});              // beyond 0777
-  expect_usage_error({"--table", "t", "--tcp", "127.0.0.1:7020"});             // TCP without a token
-  expect_usage_error({"--table", "t", "--token-file", short_token.string()});  // a token under 16 characters
-  expect_usage_error({"--table", "t", "--token-file", "/nonexistent/token"});  // a token file not there
-  expect_usage_error({"--config", "/nonexistent/tofmatd.toml"});               // a config file not there
-  expect_usage_error({"--table", "t", "--idle-timeout", "-1"});                // out of range
-  expect_usage_error({"--table", "t", "--max-tcp-clients", "0"});              // out of range
-  expect_usage_error({"--table", "t", "--max-clients-per-peer", "0"});         // out of range
-  expect_usage_error({"--table", "t", "--peer-request-rate", "0"});            // out of range
-  expect_usage_error({"--table", "t", "--peer-connect-rate", "nan"});          // not a number in range
+  expect_usage_error({});                                                         // no table
+  expect_usage_error({"--table", "t", "--no-such-flag"});                         // unknown flag
+  expect_usage_error({"--table", "t", "stray"});                                  // stray argument
+  expect_usage_error({"--table"});                                                // a flag without its value
+  expect_usage_error({"--table", "t", "--top-k", "many"});                        // not a number
+  expect_usage_error({"--table", "t", "--queue-frames", "0"});                    // out of range
+  expect_usage_error({"--table", "t", "--max-clients", "5000"});                  // out of range
+  expect_usage_error({"--table", "t", "--threads", "-1"});                        // out of range
+  expect_usage_error({"--config", "/dev/zero"});                                  // not a regular file (endless)
+  expect_usage_error({"--table", "t", "--log-level", "chatty"});                  // not a level
+  expect_usage_error({"--table", "t", "--backend", "gpu"});                       // not a backend
+  expect_usage_error({"--table", "t", "--roi", "1,2,3"});                         // three numbers
+  expect_usage_error({"--table", "t", "--roi", "1;2;3;4"});                       // wrong separators
+  expect_usage_error({"--table", "t", "--socket-mode", "0999"});                  // not octal
+  expect_usage_error({"--table", "t", "--socket-mode", "01777"});                 // beyond 0777
+  expect_usage_error({"--table", "t", "--tcp", "127.0.0.1:7020"});                // TCP without a token
+  expect_usage_error({"--table", "t", "--token-file", short_token.string()});     // a token under 16 characters
+  expect_usage_error({"--table", "t", "--token-file", "/nonexistent/token"});     // a token file not there
+  expect_usage_error({"--config", "/nonexistent/tofmatd.toml"});                  // a config file not there
+  expect_usage_error({"--table", "t", "--idle-timeout", "-1"});                   // out of range
+  expect_usage_error({"--table", "t", "--max-tcp-clients", "0"});                 // out of range
+  expect_usage_error({"--table", "t", "--max-clients-per-peer", "0"});            // out of range
+  expect_usage_error({"--table", "t", "--peer-request-rate", "0"});               // out of range
+  expect_usage_error({"--table", "t", "--peer-connect-rate", "nan"});             // not a number in range
   expect_usage_error({"--table", "t", "--control-group", "no-such-group-here"});  // no such group
-  expect_usage_error({"--table", "t", "--reset-button", "sim:button"});        // a button without --gpio
-  expect_usage_error({"--table", "t", "--gpio", "sim"});                       // GPIO for nothing
-  expect_usage_error({"--table", "t", "--gpio", "sim", "--line-speed", "500"});  // a line without its barrier
+  expect_usage_error({"--table", "t", "--reset-button", "sim:button"});           // a button without --gpio
+  expect_usage_error({"--table", "t", "--gpio", "sim"});                          // GPIO for nothing
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--line-speed", "500"});   // a line without its barrier
   expect_usage_error({"--table", "t", "--gpio", "sim", "--reset-button", "sim:b", "--reset-button-bias", "up"});
   expect_usage_error({"--table", "t", "--gpio", "sim", "--reset-button", "sim:b", "--reset-button-debounce-ms", "-1"});
   std::filesystem::remove(short_token);
@@ -225,7 +232,9 @@ TEST(Options, AccessThatWouldOpenTheBoxIsRefused) {
   const auto readable = token_file("readable_token", "0123456789abcdef-secret\n",
                                    fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
   const auto blank = token_file("blank_token", " \t  \r\n0123456789abcdef-secret\n");
-  const auto control_chars = token_file("control_char_token", "0123456789\x01" "abcdef-secret\n");
+  const auto control_chars = token_file("control_char_token",
+                                        "0123456789\x01"
+                                        "abcdef-secret\n");
   const auto empty = token_file("empty_token", "");
   const std::vector<std::string> tcp = {"--table", "t", "--tcp", "127.0.0.1:7020"};
   const auto with = [&](std::vector<std::string> more) {
@@ -246,8 +255,9 @@ TEST(Options, AccessThatWouldOpenTheBoxIsRefused) {
   expect_usage_error(with({"--token-file", control_chars.string()}));
   expect_usage_error(with({"--token-file", empty.string()}));
   expect_usage_error(with({"--token-file", "/dev/zero"}));  // not a regular file
-  expect_usage_error(with({"--token-file", good.string(), "--control-token-file", good.string()}));  // one token, two roles
-  expect_usage_error({"--table", "t", "--token-file", good.string()});                               // no TCP to use it
+  expect_usage_error(
+      with({"--token-file", good.string(), "--control-token-file", good.string()}));  // one token, two roles
+  expect_usage_error({"--table", "t", "--token-file", good.string()});                // no TCP to use it
   expect_usage_error({"--table", "t", "--control-token-file", good.string()});
   EXPECT_TRUE(parse(with({"--token-file", good.string()})).cl.has_value());
   for (const auto& f : {good, readable, blank, control_chars, empty}) fs::remove(f);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's processing stage (firmware/daemon/src/pipeline.cpp): frames from
 // the bounded queue through the active profile on the processing thread
 // (run()), and the commands from clients on other threads. A command the
@@ -71,9 +72,15 @@ class Events {
   }
 
   // Waits until at least n labels (label maps, depth images) have come.
-  bool wait_labels(std::size_t n) { return wait([&] { return labels_.size() >= n; }); }
-  bool wait_maps(std::size_t n) { return wait([&] { return maps_.size() >= n; }); }
-  bool wait_depths(std::size_t n) { return wait([&] { return depths_.size() >= n; }); }
+  bool wait_labels(std::size_t n) {
+    return wait([&] { return labels_.size() >= n; });
+  }
+  bool wait_maps(std::size_t n) {
+    return wait([&] { return maps_.size() >= n; });
+  }
+  bool wait_depths(std::size_t n) {
+    return wait([&] { return depths_.size() >= n; });
+  }
 
   std::vector<LabelEvent> labels() const { return copy(labels_); }
   std::vector<LabelMapEvent> maps() const { return copy(maps_); }
@@ -176,8 +183,8 @@ TEST(Pipeline, RefusedCommandsChangeNothingNotEvenTheAccumulation) {
   // A table without a current candidate, and one with other rows.
   EXPECT_THROW(p.set_table(subset_table({"copper", "pp"}), "/tables/no-acryl.tmx"), std::invalid_argument);
   const auto& t = *real_table();
-  EXPECT_THROW(p.set_table(std::make_shared<const ExemplarTable>(t.materials(), std::vector<tofmat::RowSpec>{{80, 120}, {16, 120}},
-                                                                 t.bins(), t.values()),
+  EXPECT_THROW(p.set_table(std::make_shared<const ExemplarTable>(
+                               t.materials(), std::vector<tofmat::RowSpec>{{80, 120}, {16, 120}}, t.bins(), t.values()),
                            "/tables/swapped.tmx"),
                std::invalid_argument);
   EXPECT_THROW(p.trigger(3), std::logic_error) << "handheld takes no trigger";

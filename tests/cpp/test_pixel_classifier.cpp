@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // PixelClassifier: the per-pixel Eq. (12) (m = 1) in integers. The scalar
 // kernel against hand-worked cases and the float classifier; the vector
 // kernel against the scalar one bit for bit; the real database's own values
@@ -15,11 +16,11 @@
 #include <string>
 #include <vector>
 
+#include "synthetic_raw.hpp"
 #include "test_util.hpp"
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/exemplar_table.hpp"
-#include "synthetic_raw.hpp"
 
 namespace {
 
@@ -51,10 +52,8 @@ std::uint8_t label_of(const PixelClassifier& pc, std::int32_t bin, double f0_mm,
 TEST(PixelClassifier, HandWorkedCases) {
   // bin 0: m0 (1, 1), m1 (3, 1), m2 only row 0 = 2; bin 1: m0 missing, m1 (0, 0), m2 missing;
   // bin 2: nobody.
-  const ExemplarTable t = make_table({{{1, kNaN, kNaN}, {1, kNaN, kNaN}},
-                                      {{3, 0, kNaN}, {1, 0, kNaN}},
-                                      {{2, kNaN, kNaN}, {kNaN, kNaN, kNaN}}},
-                                     3);
+  const ExemplarTable t = make_table(
+      {{{1, kNaN, kNaN}, {1, kNaN, kNaN}}, {{3, 0, kNaN}, {1, 0, kNaN}}, {{2, kNaN, kNaN}, {kNaN, kNaN, kNaN}}}, 3);
   const CompactTable c(t);
   const PixelClassifier pc(c, t.bins());
   for (FixedKernel k : {FixedKernel::kScalar, FixedKernel::kBest}) {
@@ -69,8 +68,8 @@ TEST(PixelClassifier, HandWorkedCases) {
     // (3.0, 0): m1 0.5, m2 1.0: m1.
     EXPECT_EQ(label_of(pc, 0, 2.6, 0.0, k), 2);
     EXPECT_EQ(label_of(pc, 0, 3.0, 0.0, k), 1);
-    EXPECT_EQ(label_of(pc, 1, 5.0, -3.0, k), 1);  // the only candidate there
-    EXPECT_EQ(label_of(pc, 2, 0.0, 0.0, k), PixelClassifier::kUnclassified);  // nobody has a value
+    EXPECT_EQ(label_of(pc, 1, 5.0, -3.0, k), 1);                               // the only candidate there
+    EXPECT_EQ(label_of(pc, 2, 0.0, 0.0, k), PixelClassifier::kUnclassified);   // nobody has a value
     EXPECT_EQ(label_of(pc, -1, 1.0, 1.0, k), PixelClassifier::kUnclassified);  // no bin
   }
   // Ties go to the lower index: two identical candidates.
@@ -119,14 +118,20 @@ TEST(PixelClassifier, AgreesWithTheFloatClassifierUpToTheQuantisation) {
     for (int trial = 0; trial < 400; ++trial) {
       const auto b = static_cast<std::int32_t>(rng() % bins);
       const std::size_t src = rng() % K;
-      const double f0 = (std::isnan(v[src][0][static_cast<std::size_t>(b)]) ? value(rng) : v[src][0][static_cast<std::size_t>(b)]) + noise(rng);
-      const double f1 = (std::isnan(v[src][1][static_cast<std::size_t>(b)]) ? value(rng) : v[src][1][static_cast<std::size_t>(b)]) + noise(rng);
+      const double f0 =
+          (std::isnan(v[src][0][static_cast<std::size_t>(b)]) ? value(rng) : v[src][0][static_cast<std::size_t>(b)]) +
+          noise(rng);
+      const double f1 =
+          (std::isnan(v[src][1][static_cast<std::size_t>(b)]) ? value(rng) : v[src][1][static_cast<std::size_t>(b)]) +
+          noise(rng);
       const std::uint8_t label = label_of(pc, b, f0, f1, FixedKernel::kScalar);
       std::vector<float> q(table->elements_per_material(), kNaN);
       q[static_cast<std::size_t>(b)] = static_cast<float>(f0);
       q[bins + static_cast<std::size_t>(b)] = static_cast<float>(f1);
       bool anyone = false;
-      for (const auto& m : v) anyone = anyone || !std::isnan(m[0][static_cast<std::size_t>(b)]) || !std::isnan(m[1][static_cast<std::size_t>(b)]);
+      for (const auto& m : v)
+        anyone =
+            anyone || !std::isnan(m[0][static_cast<std::size_t>(b)]) || !std::isnan(m[1][static_cast<std::size_t>(b)]);
       if (!anyone) {
         EXPECT_EQ(label, PixelClassifier::kUnclassified);
         continue;
@@ -146,7 +151,8 @@ TEST(PixelClassifier, AgreesWithTheFloatClassifierUpToTheQuantisation) {
       EXPECT_LE(mine - r.best().distance, reach) << "K " << K << " bin " << b;
     }
   }
-  std::cout << "[ measured ] " << differ << " of " << compared << " labels differ from the float classifier (near ties)\n";
+  std::cout << "[ measured ] " << differ << " of " << compared
+            << " labels differ from the float classifier (near ties)\n";
   EXPECT_LT(differ, compared / 50);
 }
 
@@ -180,8 +186,8 @@ TEST(PixelClassifier, VectorKernelIsBitExactWithScalar) {
       const PixelClassifier pc(c, t.bins());
       const std::size_t n = 3001;
       std::vector<std::int32_t> bin(n), f0(n), f1(n);
-      const std::int32_t extremes[] = {INT32_MIN, INT32_MIN + 1, -(1 << 30) - 1, -32767 * 4096, 0, 2047, 2048,
-                                       32767 * 4096, (1 << 30) + 1, INT32_MAX - 1, INT32_MAX};
+      const std::int32_t extremes[] = {INT32_MIN, INT32_MIN + 1, -(1 << 30) - 1, -32767 * 4096, 0,        2047,
+                                       2048,      32767 * 4096,  (1 << 30) + 1,  INT32_MAX - 1, INT32_MAX};
       for (std::size_t i = 0; i < n; ++i) {
         bin[i] = rng() % 9 == 0 ? -1 : static_cast<std::int32_t>(rng() % bins);
         f0[i] = i % 5 == 0 ? extremes[rng() % 11] : any16(rng) * 4096 + static_cast<std::int32_t>(rng() % 4096);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's scene profiles (firmware/daemon/src/profile.cpp, handheld_profile.cpp,
 // segmentation_profile.cpp, sorting_profile.cpp): the configuration checks
 // that refuse what would break the pipeline (validate, make_profile,
@@ -37,7 +38,6 @@ using tofmat::daemon::candidate_indices;
 using tofmat::daemon::FrameTruth;
 using tofmat::daemon::make_profile;
 using tofmat::daemon::parse_backend;
-using tofmat::daemon::Profile;
 using tofmat::daemon::ProfileConfig;
 using tofmat::daemon::RawFrame;
 using tofmat::daemon::validate;
@@ -76,10 +76,10 @@ TEST(ProfileValidate, RefusesAnUnknownProfile) {
 
 TEST(ProfileValidate, RefusesAnRoiOutsideTheFrameOrEmpty) {
   const std::vector<PixelRegion> bad = {
-      {-1, 0, 48, 48},     // left of the frame
-      {0, -1, 48, 48},     // above it
-      {480, 0, 513, 48},   // one column beyond the right edge
-      {0, 400, 48, 425},   // one row beyond the bottom
+      {-1, 0, 48, 48},       // left of the frame
+      {0, -1, 48, 48},       // above it
+      {480, 0, 513, 48},     // one column beyond the right edge
+      {0, 400, 48, 425},     // one row beyond the bottom
       {100, 100, 100, 148},  // no columns
       {100, 100, 148, 100},  // no rows
       {148, 100, 100, 148},  // inverted
@@ -150,7 +150,8 @@ TEST(ProfileMake, RefusesWhatValidateRefusesAndMakesEveryProfile) {
   c.candidates = {"nope"};
   EXPECT_THROW(make_profile(c, real_table()), std::invalid_argument);
   for (const char* name : {"handheld", "segmentation", "sorting"})
-    for (Backend b : {Backend::kFixed, Backend::kFloat}) EXPECT_TRUE(make_profile(config_of(name, b), real_table())) << name;
+    for (Backend b : {Backend::kFixed, Backend::kFloat})
+      EXPECT_TRUE(make_profile(config_of(name, b), real_table())) << name;
 }
 
 TEST(ProfileCandidates, NamesBecomeTableIndicesInTheOrderGiven) {
@@ -186,7 +187,8 @@ TEST_P(HandheldBackends, LabelsEveryFrameWhileTrackingAndOnceWhenTheTargetLeaves
   const auto emit = log.emitter();
   FrameMaker frames;
   std::uint64_t seq = 100;
-  for (std::uint32_t bin = 40; bin < 100; bin += 10) profile->process(frames.draw(seq++, {target_in_roi("acryl", bin)}), emit);
+  for (std::uint32_t bin = 40; bin < 100; bin += 10)
+    profile->process(frames.draw(seq++, {target_in_roi("acryl", bin)}), emit);
   ASSERT_EQ(log.labels.size(), 6u);
   for (std::size_t k = 0; k < 6; ++k) {
     const auto& l = log.labels[k];
@@ -300,7 +302,8 @@ RawFrame sim_frame(const tofmat::sim::Renderer& r, std::shared_ptr<const tofmat:
   const std::size_t w = static_cast<std::size_t>(rendered.width), h = static_cast<std::size_t>(rendered.height);
   for (std::size_t y = 0; y < h; ++y)
     for (std::size_t x = 0; x < w; ++x) {
-      const std::size_t i = (y + static_cast<std::size_t>(around.y0)) * kWidth + x + static_cast<std::size_t>(around.x0);
+      const std::size_t i =
+          (y + static_cast<std::size_t>(around.y0)) * kWidth + x + static_cast<std::size_t>(around.x0);
       for (std::size_t s = 0; s < 9; ++s) f.raw[s * kPixels + i] = rendered.raw[(s * h + y) * w + x];
       truth->target[i] = rendered.target[y * w + x];
       truth->depth_mm[i] = rendered.depth_mm[y * w + x];
@@ -316,7 +319,9 @@ TEST(HandheldOnTheSimulator, TracksABoardThatComesMovesAndGoes) {
   EventLog log;
   const auto emit = log.emitter();
   std::uint64_t seq = 0;
-  auto show = [&](const tofmat::sim::Scene& scene) { profile->process(sim_frame(*renderer, calibration, scene, seq++), emit); };
+  auto show = [&](const tofmat::sim::Scene& scene) {
+    profile->process(sim_frame(*renderer, calibration, scene, seq++), emit);
+  };
 
   for (int k = 0; k < 5; ++k) show(tofmat::sim::Scene::centred_target("white", 750.0 + 25.0 * k, 0.0, 120));
   ASSERT_EQ(log.labels.size(), 5u);
@@ -537,7 +542,9 @@ bool inside(const PixelRegion& r, int x, int y, int margin) {
 
 class SegmentationSmoothing : public ::testing::TestWithParam<int> {};
 INSTANTIATE_TEST_SUITE_P(Smooth, SegmentationSmoothing, ::testing::Values(9, 1),
-                         [](const ::testing::TestParamInfo<int>& smooth) { return "smooth" + std::to_string(smooth.param); });
+                         [](const ::testing::TestParamInfo<int>& smooth) {
+                           return "smooth" + std::to_string(smooth.param);
+                         });
 
 TEST_P(SegmentationSmoothing, LabelMapOfTheWholeFrameWithEachRegionsMaterial) {
   const auto table = real_table();
@@ -599,9 +606,9 @@ TEST_P(SegmentationSmoothing, LabelMapOfTheWholeFrameWithEachRegionsMaterial) {
           ASSERT_NE(label, kNoLabel) << "at " << x << ", " << y;
           ASSERT_EQ(m.materials[label], scene.materials[k]) << "at " << x << ", " << y;
         }
-        near_region = near_region || inside(PixelRegion{r.x0 - margin - 1, r.y0 - margin - 1, r.x1 + margin + 1,
-                                                        r.y1 + margin + 1},
-                                            x, y, 0);
+        near_region =
+            near_region ||
+            inside(PixelRegion{r.x0 - margin - 1, r.y0 - margin - 1, r.x1 + margin + 1, r.y1 + margin + 1}, x, y, 0);
       }
       if (!near_region) {
         ASSERT_EQ(label, kNoLabel) << "nothing is there, at " << x << ", " << y;
@@ -667,7 +674,8 @@ TEST(Segmentation, NoTruthAccuracyWithoutTruthAndTheFullFrameAsDepthImage) {
   ASSERT_EQ(d.depth_mm.size(), kPixels);
   // Region 1 (copper) sits at bin 40; the background has no depth.
   const auto& r = scene.patches[1].region;
-  const std::size_t centre = static_cast<std::size_t>((r.y0 + r.y1) / 2) * kWidth + static_cast<std::size_t>((r.x0 + r.x1) / 2);
+  const std::size_t centre =
+      static_cast<std::size_t>((r.y0 + r.y1) / 2) * kWidth + static_cast<std::size_t>((r.x0 + r.x1) / 2);
   EXPECT_NEAR(d.depth_mm[centre], table->bins().centre_mm(40), 0.5);
   EXPECT_TRUE(std::isnan(d.depth_mm[0]));
 

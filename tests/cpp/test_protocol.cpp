@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's protocol codec (firmware/protocol, docs/protocol.md): the framing
 // against hand-built bytes, a round trip of every typed message through a
 // MessageReader (byte by byte and in one piece), every bound and malformation
@@ -10,11 +11,11 @@
 
 #include <chrono>
 #include <cmath>
-#include <filesystem>
-#include <thread>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "test_util.hpp"
@@ -50,8 +51,7 @@ Bytes cat(Bytes a, const Bytes& b) {
 }
 
 // Every message a reader yields from `bytes`, fed in one piece or byte by byte.
-std::vector<Message> read_all(const Bytes& bytes, bool byte_by_byte,
-                              std::size_t max_payload = kMaxPayloadBytes) {
+std::vector<Message> read_all(const Bytes& bytes, bool byte_by_byte, std::size_t max_payload = kMaxPayloadBytes) {
   MessageReader r(max_payload);
   std::vector<Message> out;
   if (byte_by_byte) {
@@ -95,8 +95,7 @@ std::string reader_error(const Bytes& bytes, std::size_t max_payload = kMaxPaylo
 }
 
 std::string meta_error(const std::string& text) {
-  return error_of<ProtocolError>(
-      [&] { parse_meta(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()); });
+  return error_of<ProtocolError>([&] { parse_meta(reinterpret_cast<const std::uint8_t*>(text.data()), text.size()); });
 }
 
 Message event(const Json& meta, Bytes blob = {}) {
@@ -176,7 +175,8 @@ TEST(Wire, BufferStaysBoundedOverManyMessages) {
   Bytes stream;
   std::size_t largest = 0;
   for (int i = 0; i < 20000; ++i) {
-    const Bytes f = frame(4, "{\"event\":\"label\",\"i\":" + std::to_string(i) + "}", Bytes(static_cast<std::size_t>(i % 97)));
+    const Bytes f =
+        frame(4, "{\"event\":\"label\",\"i\":" + std::to_string(i) + "}", Bytes(static_cast<std::size_t>(i % 97)));
     largest = std::max(largest, f.size());
     stream.insert(stream.end(), f.begin(), f.end());
   }
@@ -265,7 +265,8 @@ TEST(Wire, PayloadOverTheLimitFailsOnTheHeaderAlone) {
   EXPECT_CONTAINS(reader_error(header_with(kMaxPayloadBytes + 1), std::numeric_limits<std::size_t>::max()),
                   "payload length");
   // A payload too short for its meta length field.
-  for (std::int64_t p : {0, 1, 3}) EXPECT_CONTAINS(reader_error(header_with(static_cast<std::size_t>(p))), "payload length");
+  for (std::int64_t p : {0, 1, 3})
+    EXPECT_CONTAINS(reader_error(header_with(static_cast<std::size_t>(p))), "payload length");
 }
 
 TEST(Wire, MetaLengthMustFitThePayloadAndItsBound) {
@@ -535,8 +536,8 @@ TEST(Messages, DepthRoundTripEveryKind) {
     e.y0 = 188;
     e.width = 4;
     e.height = 2;
-    e.depth_mm = {1000.5f, -0.0f, std::numeric_limits<float>::quiet_NaN(), 1e-38f, 4095.25f, 0.0f,
-                  std::numeric_limits<float>::infinity(), 3.0f};
+    e.depth_mm = {1000.5f,  -0.0f, std::numeric_limits<float>::quiet_NaN(), 1e-38f,
+                  4095.25f, 0.0f,  std::numeric_limits<float>::infinity(),  3.0f};
     const Message m = through_reader(encode_depth(e));
     ASSERT_EQ(m.blob.size(), 32u);
     EXPECT_EQ(m.meta["dtype"], "float32");
@@ -549,7 +550,12 @@ TEST(Messages, DepthRoundTripEveryKind) {
     EXPECT_EQ(d.width, 4);
     EXPECT_EQ(d.height, 2);
     ASSERT_EQ(d.depth_mm.size(), 8u);
-    EXPECT_EQ(std::memcmp(d.depth_mm.data(), e.depth_mm.data(), 32), 0);  // bit for bit, NaN included
+    const auto bits = [](const std::vector<float>& v) {
+      std::vector<std::uint32_t> b(v.size());
+      std::memcpy(b.data(), v.data(), v.size() * sizeof(float));
+      return b;
+    };
+    EXPECT_EQ(bits(d.depth_mm), bits(e.depth_mm));  // bit for bit, NaN included
     EXPECT_TRUE(std::isnan(d.depth_mm[2]));
   }
   EXPECT_TRUE(valid_depth_kind("combined"));
@@ -557,8 +563,8 @@ TEST(Messages, DepthRoundTripEveryKind) {
 }
 
 TEST(Messages, DeviceEventAndEventName) {
-  const Message m = through_reader(
-      event({{"event", "device"}, {"state", "streaming"}, {"message", "sim"}, {"timestamp_ns", 5}}));
+  const Message m =
+      through_reader(event({{"event", "device"}, {"state", "streaming"}, {"message", "sim"}, {"timestamp_ns", 5}}));
   EXPECT_EQ(event_name(m), "device");
   Message reply;
   reply.type = MessageType::kReply;
@@ -620,7 +626,7 @@ TEST(Messages, HelloBounds) {
 }
 
 TEST(Messages, RequestBounds) {
-  const auto err = [](const std::string& meta, Bytes blob = {}) {
+  const auto err = [](const std::string& meta, const Bytes& blob = {}) {
     const auto ms = read_all(frame(2, meta, blob), false, kMaxRequestPayloadBytes);
     EXPECT_EQ(ms.size(), 1u);
     return ms.size() == 1 ? error_of<ProtocolError>([&] { decode_request(ms[0]); }) : std::string();
@@ -652,10 +658,10 @@ TEST(Messages, ReplyBounds) {
   EXPECT_CONTAINS(err("{\"id\":1,\"ok\":1}"), "ok");
   EXPECT_CONTAINS(err("{\"id\":1,\"ok\":false,\"error\":\"x\"}"), "code");
   EXPECT_CONTAINS(err("{\"id\":1,\"ok\":false,\"code\":\"auth\"}"), "error");
-  EXPECT_CONTAINS(err("{\"id\":1,\"ok\":false,\"code\":\"" + std::string(kMaxNameBytes + 1, 'c') + "\",\"error\":\"x\"}"),
-                  "code");
-  EXPECT_CONTAINS(err("{\"id\":1,\"ok\":false,\"code\":\"c\",\"error\":\"" + std::string(kMaxTextBytes + 1, 'e') + "\"}"),
-                  "error");
+  EXPECT_CONTAINS(
+      err("{\"id\":1,\"ok\":false,\"code\":\"" + std::string(kMaxNameBytes + 1, 'c') + "\",\"error\":\"x\"}"), "code");
+  EXPECT_CONTAINS(
+      err("{\"id\":1,\"ok\":false,\"code\":\"c\",\"error\":\"" + std::string(kMaxTextBytes + 1, 'e') + "\"}"), "error");
   EXPECT_CONTAINS(err("{\"id\":1,\"ok\":true,\"result\":[1]}"), "result");
   EXPECT_CONTAINS(err("{\"id\":1,\"ok\":true,\"result\":null}"), "result");
 }
@@ -749,8 +755,7 @@ TEST(Messages, NonFiniteDistancesEncodeAsNullAndDoNotDecode) {
     EXPECT_CONTAINS(error_of<ProtocolError>([&] { decode_label(sent(encode_label(e))); }), "depth_mm");
     LabelMapEvent lm;
     lm.truth_accuracy = bad;
-    EXPECT_CONTAINS(error_of<ProtocolError>([&] { decode_label_map(sent(encode_label_map(lm))); }),
-                    "truth_accuracy");
+    EXPECT_CONTAINS(error_of<ProtocolError>([&] { decode_label_map(sent(encode_label_map(lm))); }), "truth_accuracy");
   }
   // Written by hand: NaN and Infinity are not JSON, 1e400 overflows a double.
   for (const char* v : {"NaN", "Infinity", "-Infinity", "1e400", "-1e400"}) {
@@ -851,8 +856,8 @@ TEST(Messages, DepthBounds) {
 }
 
 TEST(Messages, FieldReaders) {
-  const Json j = {{"u", 5},       {"neg", -5},   {"big", std::numeric_limits<std::uint64_t>::max()},
-                  {"f", 2.5},     {"s", "abc"},  {"list", {"a", "b"}},
+  const Json j = {{"u", 5},   {"neg", -5},  {"big", std::numeric_limits<std::uint64_t>::max()},
+                  {"f", 2.5}, {"s", "abc"}, {"list", {"a", "b"}},
                   {"b", true}};
   EXPECT_EQ(get_uint(j, "u", 5), 5u);
   EXPECT_CONTAINS(error_of<ProtocolError>([&] { get_uint(j, "u", 4); }), "maximum");

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The Kinect v2's 11-bit sample code and its 16-bit value
 // (shared/docs/kinect2-protocol.md 2.4): bit 10 the sign, the low 10 bits a
 // companded magnitude, code 1024 the saturation marker 32767. The expected

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The 11-bit unpack's kernels (firmware/kinect/raw_unpack.hpp) against its
 // definition (unpack_raw_reference: the layout of kinect2-protocol.md 2.3 read
 // code by code, mapped through the device table of 2.4), bit for bit: the
@@ -93,8 +94,8 @@ void expect_region(const std::vector<std::int16_t>& got, const std::vector<std::
     for (int x = 0; x < kWidth; ++x) {
       const std::size_t i = static_cast<std::size_t>(y) * kWidth + static_cast<std::size_t>(x);
       if (y >= g.y0 && y < g.y1 && x >= g.x0 && x < g.x1) {
-        ASSERT_EQ(got[i], want[i]) << what << ": region x [" << g.x0 << ", " << g.x1 << ") y [" << g.y0 << ", "
-                                   << g.y1 << "), at x " << x << " y " << y;
+        ASSERT_EQ(got[i], want[i]) << what << ": region x [" << g.x0 << ", " << g.x1 << ") y [" << g.y0 << ", " << g.y1
+                                   << "), at x " << x << " y " << y;
       } else {
         ASSERT_EQ(got[i], kUnwritten) << what << ": region x [" << g.x0 << ", " << g.x1 << ") y [" << g.y0 << ", "
                                       << g.y1 << ") wrote x " << x << " y " << y;
@@ -125,7 +126,7 @@ void expect_every_kernel_gives_the_device_values(const std::uint8_t* sub, const 
     k.rows(sub, got.data(), 0, kHeight);
     for (std::size_t i = 0; i < kPixels; ++i) {
       const int x = static_cast<int>(i % kWidth);
-      const std::int16_t want = (x == 0 || x == kWidth - 1) ? 0 : tofmat::raw_code_value(codes[i]);
+      const std::int16_t want = (x == 0 || x == kWidth - 1) ? std::int16_t{0} : tofmat::raw_code_value(codes[i]);
       ASSERT_EQ(got[i], want) << what << ", " << k.name << ": pixel " << i << " code " << codes[i];
     }
   }
@@ -218,9 +219,9 @@ TEST(RawUnpackKernels, EqualTheDefinitionOnUniformAndExtremeSubImages) {
   }
 }
 
-const std::vector<std::pair<int, int>> kRanges = {
-    {0, 424}, {0, 1},     {423, 424}, {211, 212}, {212, 213}, {211, 213}, {210, 214}, {0, 212},
-    {212, 424}, {188, 236}, {1, 423}, {100, 101}, {300, 301}, {0, 0},     {212, 212}, {424, 424}};
+const std::vector<std::pair<int, int>> kRanges = {{0, 424},   {0, 1},   {423, 424}, {211, 212}, {212, 213}, {211, 213},
+                                                  {210, 214}, {0, 212}, {212, 424}, {188, 236}, {1, 423},   {100, 101},
+                                                  {300, 301}, {0, 0},   {212, 212}, {424, 424}};
 
 TEST(RawUnpackKernels, RowRangesWriteTheirRowsAndNothingElse) {
   const auto sub = random_bytes(kSubImageBytes, 21);
@@ -240,6 +241,7 @@ TEST(RawUnpackKernels, PacketRowsFillEverySubImagesRowsAndNothingElse) {
   // A packet of exactly nine sub-images (the tenth is optional).
   const auto packet = random_bytes(kUsedSubImages * kSubImageBytes, 31);
   std::vector<std::vector<std::int16_t>> want;
+  want.reserve(kUsedSubImages);
   for (int s = 0; s < kUsedSubImages; ++s) want.push_back(reference(packet.data() + s * kSubImageBytes));
   for (FixedKernel kernel : {FixedKernel::kScalar, FixedKernel::kBest}) {
     for (const auto& [y0, y1] : kRanges) {
@@ -268,8 +270,8 @@ TEST(RawUnpackKernels, ColumnRangesWriteTheirPixelsAndNothingElse) {
   const auto want = reference(sub.data());
   // Block edges (32 columns: NEON and scalar; 64: AVX2) and their
   // neighbours, the border columns, a 48-column region at the centre.
-  const std::vector<int> xs = {0, 1, 2, 3, 4, 5, 31, 32, 33, 63, 64, 65, 96, 127, 128, 232, 255, 256, 257,
-                               280, 383, 384, 447, 448, 449, 479, 480, 481, 500, 508, 509, 510, 511, 512};
+  const std::vector<int> xs = {0,   1,   2,   3,   4,   5,   31,  32,  33,  63,  64,  65,  96,  127, 128, 232, 255,
+                               256, 257, 280, 383, 384, 447, 448, 449, 479, 480, 481, 500, 508, 509, 510, 511, 512};
   const auto all = kernels();
   std::vector<std::int16_t> got(kPixels, kUnwritten);
   for (const auto& [y0, y1] : std::vector<std::pair<int, int>>{{211, 213}, {423, 424}, {0, 1}, {100, 101}}) {
@@ -328,9 +330,9 @@ TEST(RawUnpackKernels, RowsOutsideTheFrameAreRefused) {
     EXPECT_THROW(unpack_raw_rows(sub.data(), raw.data(), y0, y1), std::invalid_argument) << y0 << " " << y1;
     EXPECT_THROW(unpack_raw_reference(sub.data(), raw.data(), y0, y1), std::invalid_argument) << y0 << " " << y1;
   }
-  for (const tofmat::PixelRegion& g : {tofmat::PixelRegion{-1, 0, 10, 10}, tofmat::PixelRegion{0, 0, 513, 10},
-                                       tofmat::PixelRegion{20, 0, 19, 10}, tofmat::PixelRegion{0, 5, 10, 4},
-                                       tofmat::PixelRegion{0, 0, 10, 425}}) {
+  for (const tofmat::PixelRegion& g :
+       {tofmat::PixelRegion{-1, 0, 10, 10}, tofmat::PixelRegion{0, 0, 513, 10}, tofmat::PixelRegion{20, 0, 19, 10},
+        tofmat::PixelRegion{0, 5, 10, 4}, tofmat::PixelRegion{0, 0, 10, 425}}) {
     EXPECT_THROW(unpack_raw_region(sub.data(), raw.data(), g), std::invalid_argument) << g.x0 << " " << g.x1;
   }
   std::vector<std::uint8_t> packet(kUsedSubImages * kSubImageBytes);
@@ -378,9 +380,11 @@ TEST(RawUnpackKernels, ReadOnlyTheStoredRowOfTheirRow) {
       std::uint8_t* row = guard.row(against_end);
       std::memcpy(row, sub.data() + stored * kRowBytes, kRowBytes);
       // The sub-image's start as the kernels compute it back from the row
-      // (only the row itself is ever dereferenced).
-      const auto* start = reinterpret_cast<const std::uint8_t*>(reinterpret_cast<std::uintptr_t>(row) -
-                                                                stored * kRowBytes);
+      // (only the row itself is ever dereferenced). It lies before the
+      // buffer, where pointer arithmetic would be undefined: hence integers.
+      const std::uintptr_t start_address = reinterpret_cast<std::uintptr_t>(row) - stored * kRowBytes;
+      // NOLINTNEXTLINE(performance-no-int-to-ptr): the integer detour above is the point; nothing to optimise.
+      const auto* start = reinterpret_cast<const std::uint8_t*>(start_address);
       for (const auto& k : all) {
         std::vector<std::int16_t> got(kPixels, kUnwritten);
         k.rows(start, got.data(), y, y + 1);
@@ -388,7 +392,8 @@ TEST(RawUnpackKernels, ReadOnlyTheStoredRowOfTheirRow) {
       }
       // The first and the last block alone, through the column-range path.
       for (const auto& k : kernels()) {
-        for (const tofmat::PixelRegion& g : {tofmat::PixelRegion{0, y, 5, y + 1}, tofmat::PixelRegion{500, y, 512, y + 1}}) {
+        for (const tofmat::PixelRegion& g :
+             {tofmat::PixelRegion{0, y, 5, y + 1}, tofmat::PixelRegion{500, y, 512, y + 1}}) {
           std::vector<std::int16_t> got(kPixels, kUnwritten);
           k.region(start, got.data(), g);
           expect_region(got, want, g, k.name + (against_end ? " (guard after)" : " (guard before)"));

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // What the handheld and sorting profiles share (firmware/daemon/src/region_matcher.cpp):
 // decoding a pixel region, accumulating its Eq. (10) features into depth bins
 // over frames, and Eq. (12) partial matching of the growing query, on the
@@ -29,17 +30,13 @@ namespace {
 
 using namespace tofmat_test;
 using tofmat::BinSpec;
-using tofmat::Classification;
 using tofmat::ExemplarTable;
-using tofmat::PixelRegion;
 using tofmat::daemon::Backend;
 using tofmat::daemon::FrameTruth;
 using tofmat::daemon::ProfileConfig;
 using tofmat::daemon::RawFrame;
 using tofmat::daemon::RegionMatcher;
 using tofmat::protocol::LabelEvent;
-
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 std::string backend_name(Backend b) { return b == Backend::kFixed ? "fixed" : "float"; }
 
@@ -153,8 +150,8 @@ std::shared_ptr<const ExemplarTable> partial_table() {
       at(2, 1, j) = f80 + apart + 3.0f;
     }
   }
-  return std::make_shared<const ExemplarTable>(std::vector<std::string>{"a", "b", "c"},
-                                               tofmat::kinect2_database_rows(), BinSpec{600.0, 10.0, n}, v);
+  return std::make_shared<const ExemplarTable>(std::vector<std::string>{"a", "b", "c"}, tofmat::kinect2_database_rows(),
+                                               BinSpec{600.0, 10.0, n}, v);
 }
 
 TEST_P(RegionMatcherBackends, PartialMatchingComparesOnlyTheElementsObserved) {
@@ -188,7 +185,7 @@ TEST_P(RegionMatcherBackends, PartialMatchingComparesOnlyTheElementsObserved) {
   EXPECT_EQ(c->ranking[2].index, 0u);
   EXPECT_EQ(by_index[0].valid, 20u);
   EXPECT_EQ(by_index[1].valid, 20u);
-  EXPECT_EQ(by_index[2].valid, 10u);                  // only the bins c holds
+  EXPECT_EQ(by_index[2].valid, 10u);                       // only the bins c holds
   EXPECT_NEAR(by_index[0].distance, 10 * 64.0 / 20, 0.5);  // 8 mm on half of a's elements
   EXPECT_NEAR(by_index[1].distance, 0.0, 0.05);
   EXPECT_NEAR(by_index[2].distance, 9.0, 0.5);  // 3 mm on each common element
@@ -262,7 +259,7 @@ TEST_P(RegionMatcherBackends, LabelEventCarriesTheBestMatchAndTheTopKOfTheRankin
     EXPECT_EQ(e.ranking[i].distance, c->ranking[i].distance);
   }
   EXPECT_EQ(m.label_event(*c, 64).ranking.size(), table->n_materials());  // no more than there are
-  EXPECT_EQ(m.label_event(*c, 0).ranking.size(), 1u);                      // never an empty ranking
+  EXPECT_EQ(m.label_event(*c, 0).ranking.size(), 1u);                     // never an empty ranking
 }
 
 TEST(RegionMatcher, FixedAndFloatBackendsAgreeOnCleanData) {
@@ -434,9 +431,8 @@ TEST_P(RegionMatcherBackends, HandheldStartsAfreshWhenTheTargetJumpsByMoreThanJu
 }
 
 TEST_P(RegionMatcherBackends, HandheldStartsAfreshAfterTheTargetLeaves) {
-  const std::vector<std::vector<Patch>> frames = {{target_in_roi("pp", 50)}, {target_in_roi("pp", 55)},
-                                                  {},                        {target_in_roi("pp", 60)},
-                                                  {target_in_roi("pp", 65)}};
+  const std::vector<std::vector<Patch>> frames = {
+      {target_in_roi("pp", 50)}, {target_in_roi("pp", 55)}, {}, {target_in_roi("pp", 60)}, {target_in_roi("pp", 65)}};
   const auto labels = handheld(handheld_config(GetParam()), frames);
   ASSERT_EQ(labels.size(), 5u);
   EXPECT_EQ(labels[1].bins_covered, 2u);

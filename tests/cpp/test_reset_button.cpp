@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The front panel's reset button on the simulated chip, in real time: a press
 // held past the debounce resets once, at the edge's timestamp; bounces and a
 // touch shorter than the debounce do not; a second press under the hold-off
@@ -30,7 +31,7 @@ ButtonOptions options() {
 }
 
 struct Harness {
-  explicit Harness(ButtonOptions o = options()) : gpio(gpio::SimGpio::create()) {
+  explicit Harness(const ButtonOptions& o = options()) : gpio(gpio::SimGpio::create()) {
     gpio->drive("button", true, protocol::monotonic_ns());  // released
     button = std::make_unique<ResetButton>(o, gpio, [this](std::uint64_t t) {
       std::lock_guard<std::mutex> lock(mutex);
@@ -79,11 +80,11 @@ TEST(ResetButton, APressHeldPastTheDebounceResetsOnceAtItsEdge) {
 TEST(ResetButton, BouncesAndTouchesAreNoPressAndTheSameFingerIsIgnored) {
   Harness h;
   const auto t = protocol::monotonic_ns();
-  h.press(t, 5);                      // a touch under the debounce: nothing
-  h.press(t + 40 * kMs, 2);           // a bounce ...
-  h.press(t + 43 * kMs, 150);         // ... then held: one press, at its last bounce
-  h.press(t + 260 * kMs, 100);        // again 217 ms later (under the 300 ms hold-off): ignored
-  h.press(t + 600 * kMs, 100);        // a new press
+  h.press(t, 5);                // a touch under the debounce: nothing
+  h.press(t + 40 * kMs, 2);     // a bounce ...
+  h.press(t + 43 * kMs, 150);   // ... then held: one press, at its last bounce
+  h.press(t + 260 * kMs, 100);  // again 217 ms later (under the 300 ms hold-off): ignored
+  h.press(t + 600 * kMs, 100);  // a new press
   const auto got = h.wait_presses(2, 3000);
   ASSERT_EQ(got.size(), 2u);
   EXPECT_EQ(got[0], t + 43 * kMs);

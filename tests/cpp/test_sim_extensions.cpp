@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The model terms the calibration needs beyond the first simulator
 // (docs/simulator-model.md, sections marked Extensions): tap full-well
 // saturation, signal scales, decode offsets, the double kernel, harmonics above
@@ -40,9 +41,9 @@ TEST(SaturateTap, IdentityWithoutFullWellAndOddWithIt) {
 
 TEST(SaturateTap, LinearFarBelowAndFlatFarAboveTheWell) {
   const double w = 1000.0, p = 12.0;
-  EXPECT_NEAR(saturate_tap(200.0, w, p), 200.0, 200.0 * 1e-8);     // (0.2)^12 / 12 ~ 3e-10
+  EXPECT_NEAR(saturate_tap(200.0, w, p), 200.0, 200.0 * 1e-8);  // (0.2)^12 / 12 ~ 3e-10
   EXPECT_NEAR(saturate_tap(w, w, p), w * std::pow(2.0, -1.0 / p), 1e-9);
-  EXPECT_NEAR(saturate_tap(50.0 * w, w, p), w, 1e-6 * w);          // never above the well
+  EXPECT_NEAR(saturate_tap(50.0 * w, w, p), w, 1e-6 * w);  // never above the well
   double prev = 0.0;
   for (int k = 1; k <= 400; ++k) {  // monotonic: more light never reads as less
     const double v = saturate_tap(k * 10.0, w, p);
@@ -115,7 +116,8 @@ TEST(DoubleKernel, IsTwoExponentialsSharingTheFresnelShare) {
       const double inc = inc_deg * kTwoPi / 360.0;
       const double t = (1.0 - schlick_reflectance(1.5, inc)) / (1.0 - schlick_reflectance(1.5, 0.0));
       const double w = kTwoPi * f;
-      const cd want = 0.4 * ((1.0 - 0.5 * t - 0.1 * t) + 0.5 * t / cd(1.0, w * 150e-12) + 0.1 * t / cd(1.0, w * 3000e-12));
+      const cd want =
+          0.4 * ((1.0 - 0.5 * t - 0.1 * t) + 0.5 * t / cd(1.0, w * 150e-12) + 0.1 * t / cd(1.0, w * 3000e-12));
       EXPECT_NEAR(std::abs(material_response(m, f, inc) - want), 0.0, 1e-14) << f << " " << inc_deg;
     }
   }

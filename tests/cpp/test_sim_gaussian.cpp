@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // FastNormal (firmware/sim gaussian.hpp): the ziggurat standard normal used for
 // sensor noise. Moments, tails, the shape of the distribution, independence of
 // successive samples, and determinism by seed.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Material responses in closed form (docs/simulator-model.md section 1;
 // firmware/sim material.hpp): the kernels against long double evaluations of
 // the textbook formulas, their limits, the Fresnel share, the slab transit
@@ -56,12 +57,14 @@ cld one_minus_exp_neg(cld z) {
 cld slab_textbook(double omega, double tau, double transit, double backing) {
   const cld z(static_cast<long double>(transit / tau), static_cast<long double>(omega * transit));
   const cld e = std::exp(-z);
-  return one_minus_exp_neg(z) / cld(1.0L, static_cast<long double>(omega * tau)) + static_cast<long double>(backing) * e;
+  return one_minus_exp_neg(z) / cld(1.0L, static_cast<long double>(omega * tau)) +
+         static_cast<long double>(backing) * e;
 }
 
 std::vector<double> log_grid(double lo_exp, double hi_exp, double per_decade) {
   std::vector<double> out;
-  for (double e = lo_exp; e <= hi_exp + 1e-9; e += 1.0 / per_decade) out.push_back(std::pow(10.0, e));
+  for (int k = 0; lo_exp + static_cast<double>(k) / per_decade <= hi_exp + 1e-9; ++k)
+    out.push_back(std::pow(10.0, lo_exp + static_cast<double>(k) / per_decade));
   return out;
 }
 
@@ -144,7 +147,8 @@ TEST(Kernels, SlabMatchesLongDouble) {
 TEST(Kernels, ExponentialAndGammaAreOneAtZeroFrequency) {
   for (double tau : {1e-15, 1e-12, 1e-7, 1e-3}) {
     EXPECT_EQ(exponential_kernel(0.0, tau), cd(1.0, 0.0)) << tau;
-    for (double k : {1e-3, 0.5, 1.0, 3.0, 20.0, 1000.0}) EXPECT_EQ(gamma_kernel(0.0, tau, k), cd(1.0, 0.0)) << tau << " " << k;
+    for (double k : {1e-3, 0.5, 1.0, 3.0, 20.0, 1000.0})
+      EXPECT_EQ(gamma_kernel(0.0, tau, k), cd(1.0, 0.0)) << tau << " " << k;
   }
 }
 
@@ -368,7 +372,7 @@ TEST(Response, FiniteAtGrazingIncidence) {
 // validate
 // ---------------------------------------------------------------------------
 
-void expect_rejects(Material m, const std::string& field) {
+void expect_rejects(const Material& m, const std::string& field) {
   try {
     m.validate();
     ADD_FAILURE() << "accepted " << field;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Device profiles and material libraries as versioned JSON (firmware/sim
 // profile_io.hpp): every malformed input is a tofmat::FormatError naming the
 // key; serialisation round-trips exactly. Inputs are JSON text written here by
@@ -30,8 +31,7 @@ using tofmat::sim::MaterialLibrary;
 using tofmat::sim::ResponseKind;
 using tofmat_test::error_of;
 
-const std::string kFreqs =
-    R"("frequencies": [{"freq_mhz": 80}, {"freq_mhz": 16}, {"freq_mhz": 120}])";
+const std::string kFreqs = R"("frequencies": [{"freq_mhz": 80}, {"freq_mhz": 16}, {"freq_mhz": 120}])";
 
 std::string device_json(const std::string& extra = "", const std::string& freqs = kFreqs) {
   return R"({"name": "dev", "version": 1, )" + freqs + (extra.empty() ? "" : ", " + extra) + "}";
@@ -48,7 +48,8 @@ std::string device_error(const std::string& text) {
 const std::string kMat = R"({"name": "cork", "kind": "exponential", "albedo": 0.5, "subsurface": 0.3, "tau_ps": 200})";
 
 std::string library_json(const std::string& materials, const std::string& extra = "") {
-  return R"({"name": "lib", "version": 1, "materials": [)" + materials + "]" + (extra.empty() ? "" : ", " + extra) + "}";
+  return R"({"name": "lib", "version": 1, "materials": [)" + materials + "]" + (extra.empty() ? "" : ", " + extra) +
+         "}";
 }
 
 std::string library_error(const std::string& text) {
@@ -122,10 +123,12 @@ TEST(DeviceJson, RejectsWrongTypes) {
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("step_gain": [1, "1", 1])"))), "step_gain");
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("step_offset": 0)"))), "step_offset");
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": {"h": 2})"))), "harmonics");
-  EXPECT_CONTAINS(device_error(device_json("", R"("frequencies": [{"freq_mhz": "80"}, {"freq_mhz": 16}, {"freq_mhz": 120}])")),
-                  "freq_mhz");
+  EXPECT_CONTAINS(
+      device_error(device_json("", R"("frequencies": [{"freq_mhz": "80"}, {"freq_mhz": 16}, {"freq_mhz": 120}])")),
+      "freq_mhz");
   EXPECT_CONTAINS(device_error(device_json("", R"("frequencies": {"freq_mhz": 80})")), "frequencies");
-  EXPECT_CONTAINS(device_error(device_json("", R"("frequencies": [{"freq_mhz": 80}, {"freq_mhz": 16}])")), "frequencies");
+  EXPECT_CONTAINS(device_error(device_json("", R"("frequencies": [{"freq_mhz": 80}, {"freq_mhz": 16}])")),
+                  "frequencies");
   EXPECT_CONTAINS(device_error(device_json("", R"("frequencies": [1, 2, 3])")), "frequencies[0]");
   EXPECT_CONTAINS(device_error(device_json(R"("noise": {"read_noise": null})")), "read_noise");
   EXPECT_CONTAINS(device_error(device_json(R"("noise": [1])")), "noise");
@@ -137,10 +140,11 @@ TEST(DeviceJson, RejectsWrongTypes) {
 
 TEST(DeviceJson, RejectsHarmonicOrderOutside2To32) {
   for (const char* h : {"0", "1", "33", "-2", "2.5", "1e9", "\"2\""}) {
-    const std::string text = device_json("", freqs_with(std::string(R"("harmonics": [{"h": )") + h + R"(, "amplitude": 0.1}])"));
+    const std::string text =
+        device_json("", freqs_with(std::string(R"("harmonics": [{"h": )") + h + R"(, "amplitude": 0.1}])"));
     EXPECT_CONTAINS(device_error(text), ".h") << "h = " << h;  // "...harmonics.h" or "h must be"
   }
-  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": [{"amplitude": 0.1}])"))), "h");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": [{"amplitude": 0.1}])"))), 'h');
   for (int h = 2; h <= 7; ++h) {
     EXPECT_NO_THROW(device_from_json(
         device_json("", freqs_with(R"("harmonics": [{"h": )" + std::to_string(h) + R"(, "amplitude": 0.1}])"))))
@@ -149,9 +153,11 @@ TEST(DeviceJson, RejectsHarmonicOrderOutside2To32) {
 }
 
 TEST(DeviceJson, RejectsOutOfRangeValuesAsFormatError) {
-  EXPECT_CONTAINS(device_error(device_json("", R"("frequencies": [{"freq_mhz": -80}, {"freq_mhz": 16}, {"freq_mhz": 120}])")),
-                  "freq_mhz");
-  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 1.5}])"))), "harmonic");
+  EXPECT_CONTAINS(
+      device_error(device_json("", R"("frequencies": [{"freq_mhz": -80}, {"freq_mhz": 16}, {"freq_mhz": 120}])")),
+      "freq_mhz");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 1.5}])"))),
+                  "harmonic");
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("step_gain": [1, 3, 1])"))), "step gains");
   EXPECT_CONTAINS(device_error(device_json(R"("noise": {"read_noise": -1})")), "noise");
   EXPECT_CONTAINS(device_error(device_json(R"("signal": {"saturation": 20000})")), "saturation");
@@ -171,7 +177,8 @@ TEST(DeviceJson, RejectsNonJsonAndNonObjects) {
 // precondition; libstdc++ asserts it in debug mode), and the profile would
 // silently stand for amplitude |a| at phase + pi.
 TEST(DeviceJson, RejectsNegativeHarmonicAmplitude) {
-  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": -0.05}])"))), "amplitude");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": -0.05}])"))),
+                  "amplitude");
 }
 
 // Integer fields read through a double and a static_cast: a fraction is
@@ -221,7 +228,8 @@ void expect_same(const DeviceProfile& a, const DeviceProfile& b) {
     EXPECT_EQ(a.groups[g].step_gain, b.groups[g].step_gain) << g;
     EXPECT_EQ(a.groups[g].step_offset, b.groups[g].step_offset) << g;
     for (std::size_t h = 1; h <= 7; ++h) {
-      EXPECT_EQ(a.groups[g].harmonic(static_cast<int>(h)), b.groups[g].harmonic(static_cast<int>(h))) << "group " << g << " h " << h;
+      EXPECT_EQ(a.groups[g].harmonic(static_cast<int>(h)), b.groups[g].harmonic(static_cast<int>(h)))
+          << "group " << g << " h " << h;
     }
   }
   EXPECT_EQ(a.pixel_phase.mean_rad, b.pixel_phase.mean_rad);
@@ -274,8 +282,8 @@ TEST(DeviceJson, RoundTripOfGeneralHarmonicsIsExact) {
     }
   }
   // Written as JSON by hand, read, written and read again: the second read must equal the first.
-  const DeviceProfile once = device_from_json(
-      device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 0.05, "phase_rad": 0.3}])")));
+  const DeviceProfile once =
+      device_from_json(device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 0.05, "phase_rad": 0.3}])")));
   const DeviceProfile twice = device_from_json(device_to_json(once));
   EXPECT_EQ(twice.groups[0].harmonic(2), once.groups[0].harmonic(2));
 }
@@ -283,8 +291,8 @@ TEST(DeviceJson, RoundTripOfGeneralHarmonicsIsExact) {
 // Session drift (docs/simulator-model.md 2.2): parsed like the harmonics, written only when
 // present, and a session moves every group's G_h by t_f dG_h.
 TEST(DeviceJson, SessionDriftParsesAndRoundTrips) {
-  const DeviceProfile d = device_from_json(device_json(
-      "", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 0.05, "phase_rad": 0.5}],
+  const DeviceProfile d =
+      device_from_json(device_json("", freqs_with(R"("harmonics": [{"h": 2, "amplitude": 0.05, "phase_rad": 0.5}],
                         "session_drift": [{"h": 2, "amplitude": 0.01, "phase_rad": -1.0}, {"h": 4, "amplitude": 0.002}])")));
   EXPECT_EQ(d.groups[0].drift_amplitude[2], 0.01);
   EXPECT_EQ(d.groups[0].drift_phase_rad[2], -1.0);
@@ -302,7 +310,8 @@ TEST(DeviceJson, SessionDriftParsesAndRoundTrips) {
 
 TEST(DeviceJson, RejectsBadSessionDrift) {
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": {"h": 2})"))), "session_drift");
-  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 1, "amplitude": 0.1}])"))), "h must be");
+  EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 1, "amplitude": 0.1}])"))),
+                  "h must be");
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 2, "amplitude": -0.1}])"))),
                   "session drift amplitudes");
   EXPECT_CONTAINS(device_error(device_json("", freqs_with(R"("session_drift": [{"h": 2, "gain": 0.1}])"))), "gain");
@@ -318,7 +327,7 @@ TEST(DeviceSession, MovesEachGroupAlongItsDrift) {
   const DeviceProfile s = d.in_session({2.0, 7.0, -0.5});
   const std::complex<double> want = std::polar(0.05, 0.5) + 2.0 * std::polar(0.01, -1.0);
   EXPECT_NEAR(std::abs(s.groups[0].harmonic(2) - want), 0.0, 1e-15);
-  EXPECT_EQ(s.groups[1].harmonic(2), 0.0);                                   // group 16 MHz has no drift
+  EXPECT_EQ(s.groups[1].harmonic(2), 0.0);                                     // group 16 MHz has no drift
   EXPECT_NEAR(std::abs(s.groups[2].harmonic(5) - (-0.5 * 0.02)), 0.0, 1e-15);  // t < 0: the opposite way
   for (std::size_t g = 0; g < 3; ++g) {
     for (std::size_t h = 0; h <= 32; ++h) EXPECT_EQ(s.groups[g].drift_amplitude[h], 0.0) << g << " " << h;
@@ -357,7 +366,8 @@ TEST(DeviceJson, SeedRoundTripsAllSixtyFourBits) {
 
 TEST(LibraryJson, ParsesMaterials) {
   const MaterialLibrary lib = library_from_json(library_json(
-      kMat + R"(, {"name": "felt", "kind": "slab", "subsurface": 1, "tau_ps": 50, "thickness_mm": 2, "backing": 0.3, "notes": "x"})",
+      kMat +
+          R"(, {"name": "felt", "kind": "slab", "subsurface": 1, "tau_ps": 50, "thickness_mm": 2, "backing": 0.3, "notes": "x"})",
       R"("device": "kinect", "fit": {}, "notes": "n")"));
   ASSERT_EQ(lib.materials.size(), 2u);
   EXPECT_EQ(lib.find("cork").kind, ResponseKind::kExponential);
@@ -450,7 +460,8 @@ TEST(ProfileFiles, LoadByNameAndByPath) {
   EXPECT_EQ(tofmat::sim::load_device("dev", dir.path()).name, "dev");
   EXPECT_EQ(tofmat::sim::load_device((dir.path() / "devices" / "dev.json").string(), "/nonexistent").name, "dev");
   EXPECT_EQ(tofmat::sim::load_library("lib", dir.path()).materials.size(), 1u);
-  const std::string e = error_of<FormatError>([&] { tofmat::sim::load_device((dir.path() / "broken.json").string(), dir.path()); });
+  const std::string e =
+      error_of<FormatError>([&] { tofmat::sim::load_device((dir.path() / "broken.json").string(), dir.path()); });
   EXPECT_CONTAINS(e, "broken.json");
   EXPECT_CONTAINS(e, "bogus");
   EXPECT_THROW(tofmat::sim::load_device("missing", dir.path()), tofmat::IoError);

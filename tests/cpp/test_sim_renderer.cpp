@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The raw frame renderer (firmware/sim renderer.hpp): determinism, the
 // noise-free samples against the model computed here, their decode, noise
 // statistics and convergence, saturation, pixels without a return, the
@@ -237,11 +238,12 @@ void check_noise_free_decode(double depth_mm, double yaw_deg, const std::string&
           const double m = amp * d.groups[g].signal_scale * std::cos(x_phase + kTwoPi * static_cast<double>(j) / 3.0);
           const double got = raw_at(f, g * 3 + j, i);
           const double e = std::fabs(got - m);
-          ASSERT_LE(e, 0.5 * lut_spacing(m) + 0.55) << "pixel " << x << "," << y << " group " << g << " step " << j
-                                                     << ": raw " << got << " model " << m;
+          ASSERT_LE(e, 0.5 * lut_spacing(m) + 0.55)
+              << "pixel " << x << "," << y << " group " << g << " step " << j << ": raw " << got << " model " << m;
           e_sum += e;
         }
-        const double bound = kWrapDev[g] / kTwoPi * std::asin(std::min(1.0, e_sum / (1.5 * amp * d.groups[g].signal_scale))) + 2e-3;
+        const double bound =
+            kWrapDev[g] / kTwoPi * std::asin(std::min(1.0, e_sum / (1.5 * amp * d.groups[g].signal_scale))) + 2e-3;
         ASSERT_LE(circ(dec.depth_mm[g][i], range * kScale, kWrapDev[g]), bound)
             << "pixel " << x << "," << y << " group " << g;
       }
@@ -251,7 +253,8 @@ void check_noise_free_decode(double depth_mm, double yaw_deg, const std::string&
       ++count;
     }
   }
-  EXPECT_LT(std::fabs(sum_err / static_cast<double>(count)), 0.1) << "mean combined error over the target at depth " << depth_mm << " yaw " << yaw_deg;
+  EXPECT_LT(std::fabs(sum_err / static_cast<double>(count)), 0.1)
+      << "mean combined error over the target at depth " << depth_mm << " yaw " << yaw_deg;
   ::testing::Test::RecordProperty("mean_error_mm", std::to_string(sum_err / static_cast<double>(count)));
 }
 
@@ -295,8 +298,12 @@ TEST(RendererDecode, QuantisationIsUnbiased) {
           if (std::fabs(m) < 300.0 || std::fabs(m) > 16000.0) continue;
           const double got = raw_at(f, g * 3 + j, i);
           sum_signed += std::fabs(got) - std::fabs(m);
-          const double spacing = std::fabs(got) < 512 ? 2.0 : std::fabs(got) < 1024 ? 4.0 : std::fabs(got) < 2048 ? 8.0
-                                 : std::fabs(got) < 4096 ? 16.0 : std::fabs(got) < 8192 ? 32.0 : 64.0;
+          const double spacing = std::fabs(got) < 512    ? 2.0
+                                 : std::fabs(got) < 1024 ? 4.0
+                                 : std::fabs(got) < 2048 ? 8.0
+                                 : std::fabs(got) < 4096 ? 16.0
+                                 : std::fabs(got) < 8192 ? 32.0
+                                                         : 64.0;
           const double excess = std::fabs(got - m) - 0.5 * spacing;
           worst = std::max(worst, excess);
           beyond_half_spacing += excess > 0.05 ? 1u : 0u;
@@ -320,16 +327,19 @@ TEST(RendererDecode, PixelPhasePatternIsUndoneByP0) {
   d.signal.counts_at_1m = 10000.0;
   const Renderer r(d, library());
   // The documented pattern: mean + radial * r2 (+ scatter), r2 = 1 at the corners.
-  const Renderer flat([&] {
-    DeviceProfile e = d;
-    e.pixel_phase.scatter_rad = 0.0;
-    return e;
-  }(), library());
+  const Renderer flat(
+      [&] {
+        DeviceProfile e = d;
+        e.pixel_phase.scatter_rad = 0.0;
+        return e;
+      }(),
+      library());
   for (int g = 0; g < 3; ++g) {
     const auto& pp = flat.pixel_phase(g);
-    EXPECT_NEAR(pp[0], d.pixel_phase.mean_rad[static_cast<std::size_t>(g)] +
-                           d.pixel_phase.radial_rad[static_cast<std::size_t>(g)] * 0.5 *
-                               (std::pow((0.5 - 40.0) / 40.0, 2) + std::pow((0.5 - 30.0) / 30.0, 2)),
+    EXPECT_NEAR(pp[0],
+                d.pixel_phase.mean_rad[static_cast<std::size_t>(g)] +
+                    d.pixel_phase.radial_rad[static_cast<std::size_t>(g)] * 0.5 *
+                        (std::pow((0.5 - 40.0) / 40.0, 2) + std::pow((0.5 - 30.0) / 30.0, 2)),
                 1e-6);
   }
   const Frame f = r.render(scene_of({target("white", 1000.0, 0, 0, 80, 60)}), 1, false);
@@ -349,7 +359,7 @@ TEST(RendererDecode, PixelPhasePatternIsUndoneByP0) {
       mean_bad += circ(bad.depth_mm[g][i], want, kWrapDev[g]) / kWrapDev[g];
     }
   }
-  EXPECT_LT(worst_good, 1e-3);  // phase within 2 pi * 1e-3 (quantisation ~1/512 of the amplitude)
+  EXPECT_LT(worst_good, 1e-3);               // phase within 2 pi * 1e-3 (quantisation ~1/512 of the amplitude)
   EXPECT_GT(mean_bad / (3.0 * n_px), 0.03);  // without p0 the pattern (0.2..2.5 rad) remains
 }
 
@@ -376,7 +386,7 @@ TEST(RendererNoise, NoReturnPixelsArePureReadNoise) {
     // Rounding to integer counts adds 1/12 (Sheppard; exact to ~1e-8 for sd >= 1).
     const double want_sd = std::sqrt(read_noise * read_noise + 1.0 / 12.0);
     EXPECT_NEAR(mean, 0.0, 5.0 * want_sd / std::sqrt(static_cast<double>(n)));  // 5 standard errors
-    EXPECT_NEAR(std::sqrt(var) / want_sd, 1.0, 5e-3);  // se of the sd: 1/sqrt(2n) = 5e-4
+    EXPECT_NEAR(std::sqrt(var) / want_sd, 1.0, 5e-3);                           // se of the sd: 1/sqrt(2n) = 5e-4
     for (std::size_t i = 0; i < f.range_mm.size(); ++i) {
       ASSERT_TRUE(std::isnan(f.range_mm[i]));
       ASSERT_TRUE(std::isnan(f.depth_mm[i]));
@@ -445,8 +455,8 @@ TEST(RendererNoise, MeanOverFramesConvergesAsOneOverSqrtN) {
   for (std::size_t k = 1; k < 4; ++k) {
     EXPECT_NEAR(rms_at[k - 1] / rms_at[k], 2.0, 0.3) << "N = " << (1 << (2 * (k - 1))) << " -> " << (1 << (2 * k));
   }
-  EXPECT_GT(rms_at[0], 1.0);   // the noise is really there (~2.3 mm per frame)
-  EXPECT_LT(rms_at[3], 0.5);   // and averages away
+  EXPECT_GT(rms_at[0], 1.0);                // the noise is really there (~2.3 mm per frame)
+  EXPECT_LT(rms_at[3], 0.5);                // and averages away
   EXPECT_LT(std::fabs(mean_err_64), 0.05);  // no bias: se 0.29 mm / sqrt(3072) = 5e-3 mm
   RecordProperty("rms_mm_1_4_16_64", std::to_string(rms_at[0]) + " " + std::to_string(rms_at[1]) + " " +
                                          std::to_string(rms_at[2]) + " " + std::to_string(rms_at[3]));
@@ -591,7 +601,8 @@ TEST(RendererTruth, YawedTargetIncidence) {
     EXPECT_TRUE(yaw > 0 ? right > left : right < left) << yaw << ": " << left << " " << right;
     // Range: the ray meets the plane through the centre pixel's point at depth_mm.
     const double cxp = 0.5 * (t.x0 + t.x1 - 1), cyp = 0.5 * (t.y0 + t.y1 - 1);
-    const V3 p{(cxp + 0.5 - d.camera.cx) / d.camera.fx * 1000.0, (cyp + 0.5 - d.camera.cy) / d.camera.fy * 1000.0, 1000.0};
+    const V3 p{(cxp + 0.5 - d.camera.cx) / d.camera.fx * 1000.0, (cyp + 0.5 - d.camera.cy) / d.camera.fy * 1000.0,
+               1000.0};
     for (int x = t.x0; x < t.x1; x += 7) {
       const V3 rv = ray(d, x, cy);
       ASSERT_NEAR(f.range_mm[px_index(f, x, cy)], dot(n, p) / dot(n, rv), 1e-6 * 1500.0) << yaw << " " << x;
@@ -647,9 +658,10 @@ TEST(RendererTruth, FoldedTargetHasTwoIncidenceGroups) {
 TEST(RendererTruth, BackgroundWallAndTargetOrder) {
   const DeviceProfile d = DeviceProfile::ideal_kinect2();
   const Renderer r(d, library());
-  const Frame f = r.render(
-      scene_of({target("white", 1000.0, 100, 100, 300, 300), target("grey", 800.0, 250, 250, 350, 350)}, "grey", 2800.0),
-      1, false);
+  const Frame f =
+      r.render(scene_of({target("white", 1000.0, 100, 100, 300, 300), target("grey", 800.0, 250, 250, 350, 350)},
+                        "grey", 2800.0),
+               1, false);
   EXPECT_EQ(f.target[px_index(f, 150, 150)], 0);
   EXPECT_EQ(f.target[px_index(f, 260, 260)], 1);  // later targets cover earlier ones
   EXPECT_EQ(f.target[px_index(f, 340, 340)], 1);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The segmentation's integer box mean (BoxMeanFilter) against the float
 // reference: OpenCV's box filter in double precision over the features in mm
 // and the valid mask, divided. The written error budget (docs/numerics.md):

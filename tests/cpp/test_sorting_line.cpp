@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's sorting line on the simulated chip, in real time: the barrier's
 // edge starts an item, the item's burst is asked for when it is under the
 // camera, its label picks the outlet and the pusher is driven when the item
@@ -25,7 +26,7 @@ LineOptions options() {
   o.barrier = "sim:barrier";
   o.barrier_active_low = true;  // (a common light barrier: open collector, low while interrupted)
   o.barrier_bias = "pull-up";
-  o.speed_mm_s = 1000;          // 1 mm a ms
+  o.speed_mm_s = 1000;  // 1 mm a ms
   o.camera_mm = 50;
   o.outlets = {"wood:position=150,line=sim:push_wood,materials=wood,pulse=30",
                "cork:position=200,line=sim:push_cork,materials=cork,pulse=30",
@@ -38,7 +39,7 @@ LineOptions options() {
 }
 
 struct Harness {
-  explicit Harness(LineOptions o = options()) : gpio(gpio::SimGpio::create()) {
+  explicit Harness(const LineOptions& o = options()) : gpio(gpio::SimGpio::create()) {
     SortingLine::Hooks h;
     h.start_burst = [this](std::string& why) -> std::optional<std::uint64_t> {
       std::lock_guard<std::mutex> lock(mutex);
@@ -127,8 +128,9 @@ TEST(SortingLine, AnItemIsPushedAtItsOutletOnTimeFromTheBarriersTimestamp) {
   std::this_thread::sleep_for(std::chrono::milliseconds(60));
   const auto changes = h.gpio->changes("push_cork");
   ASSERT_EQ(changes.size(), 3u) << "initial off, on, off";
-  const double late_ms =
-      static_cast<double>(static_cast<std::int64_t>(changes[1].timestamp_ns) - static_cast<std::int64_t>(edge + 200 * kMs)) / 1e6;
+  const double late_ms = static_cast<double>(static_cast<std::int64_t>(changes[1].timestamp_ns) -
+                                             static_cast<std::int64_t>(edge + 200 * kMs)) /
+                         1e6;
   EXPECT_GE(changes[1].timestamp_ns + 1000, edge + 200 * kMs) << "never early (but for a double's rounding)";
   EXPECT_LT(late_ms, 15.0) << "the pusher fired " << late_ms << " ms late";
   EXPECT_NEAR(static_cast<double>(changes[2].timestamp_ns - changes[1].timestamp_ns) / 1e6, 30.0, 15.0);
@@ -173,18 +175,19 @@ TEST(SortingLine, WithAnEncoderThePusherWaitsWhileTheBeltStandsOrRunsBack) {
   belt.move(60);                        // past the camera (50 mm)
   ASSERT_TRUE(h.wait_for([&] { return !h.bursts.empty(); }, 1000)) << "no burst";
   EXPECT_GE(h.bursts[0] + 2 * kMs, belt.reached.at(50)) << "the burst starts when the belt has carried the item there";
-  h.label(41, "cork");  // the cork outlet: 200 mm past the barrier
-  belt.move(60);        // 120 mm
+  h.label(41, "cork");   // the cork outlet: 200 mm past the barrier
+  belt.move(60);         // 120 mm
   belt.move(10, false);  // the belt jolts back: 110 mm
   belt.stand(300);
   EXPECT_EQ(h.gpio->changes("push_cork").size(), 1u) << "fired while the item was still 90 mm away";
   const auto stood_until = protocol::monotonic_ns();
-  belt.move(100);  // 210 mm: past the outlet
+  belt.move(100);                                                                       // 210 mm: past the outlet
   ASSERT_TRUE(h.wait_for([&] { return h.sorts.size() >= 2; }, 1000)) << "never fired";  // (decided, fired)
   const auto changes = h.gpio->changes("push_cork");
   ASSERT_GE(changes.size(), 2u);
   EXPECT_GT(changes[1].timestamp_ns, stood_until);
-  const double off_ms = (static_cast<double>(changes[1].timestamp_ns) - static_cast<double>(belt.reached.at(200))) / 1e6;
+  const double off_ms =
+      (static_cast<double>(changes[1].timestamp_ns) - static_cast<double>(belt.reached.at(200))) / 1e6;
   EXPECT_GT(off_ms, -3.0) << "fired before the item was at its outlet";
   EXPECT_LT(off_ms, 15.0) << "fired " << off_ms << " ms after the item was at its outlet";
   EXPECT_EQ(h.sort_events("decided").at(0)["outlet"], "cork");
@@ -227,7 +230,7 @@ TEST(SortingLine, TheCameraLostRejectsAndAlarmsUntilItIsBack) {
 
 TEST(SortingLine, AClientSeesWhatIsWrongWithTheConfiguration) {
   auto gpio = gpio::SimGpio::create();
-  const auto refused = [&](LineOptions o, const std::string& says) {
+  const auto refused = [&](const LineOptions& o, const std::string& says) {
     try {
       SortingLine l(o, gpio, {"wood", "cork", "pvc"}, {});
       ADD_FAILURE() << "accepted; wanted: " << says;

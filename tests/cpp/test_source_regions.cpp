@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A camera source unpacks only the pixels the pipeline asks for
 // (SourceCallbacks::region, Pipeline::wanted_region): a region of interest
 // and nothing else, nothing at all when the profile needs no frame (sorting

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The exemplar table (construction, loading the real database) and its
 // compact .tmx file: exact layout, quantisation error bound, every way a
 // damaged file can look, and atomic saving.
@@ -82,12 +83,12 @@ std::string decode_error(const Bytes& b) {
 // 3 materials x 2 rows x 5 bins, with missing elements and one all-missing bin.
 ExemplarTable synthetic() {
   std::vector<float> v = {
-      1.25f, -3.5f,  kNaN, 100.37f, 0.001f,   // alpha row 0
-      2.0f,  kNaN,   kNaN, -99.99f, 7.77f,    // alpha row 1
-      0.0f,  0.5f,   kNaN, 12.3456f, -0.3f,   // beta
-      -1.0f, 1.0f,   kNaN, 3.14159f, 2.71f,
-      kNaN,  kNaN,   kNaN, kNaN, 42.0f,       // gamma: nearly all missing
-      kNaN,  kNaN,   kNaN, kNaN, -42.0f,
+      1.25f, -3.5f, kNaN, 100.37f,  0.001f,  // alpha row 0
+      2.0f,  kNaN,  kNaN, -99.99f,  7.77f,   // alpha row 1
+      0.0f,  0.5f,  kNaN, 12.3456f, -0.3f,   // beta row 0
+      -1.0f, 1.0f,  kNaN, 3.14159f, 2.71f,   // beta row 1
+      kNaN,  kNaN,  kNaN, kNaN,     42.0f,   // gamma row 0: nearly all missing
+      kNaN,  kNaN,  kNaN, kNaN,     -42.0f,  // gamma row 1
   };
   return ExemplarTable({"alpha", "beta", "gamma"}, tofmat::kinect2_database_rows(), BinSpec{600.0, 3.0, 5},
                        std::move(v));
@@ -127,12 +128,12 @@ TEST(ExemplarTable, RejectsInconsistentContent) {
   };
   EXPECT_NO_THROW(make({"a"}, {1, 2, 3, 4}));
   EXPECT_THROW(make({}, {}), std::invalid_argument);
-  EXPECT_THROW(make({"a"}, {1, 2, 3}), std::invalid_argument);                          // wrong size
-  EXPECT_THROW(make({"a", "a"}, {1, 2, 3, 4, 1, 2, 3, 4}), std::invalid_argument);      // duplicate
-  EXPECT_THROW(make({"a b"}, {1, 2, 3, 4}), std::invalid_argument);                     // space
-  EXPECT_THROW(make({std::string(65, 'x')}, {1, 2, 3, 4}), std::invalid_argument);      // too long
+  EXPECT_THROW(make({"a"}, {1, 2, 3}), std::invalid_argument);                      // wrong size
+  EXPECT_THROW(make({"a", "a"}, {1, 2, 3, 4, 1, 2, 3, 4}), std::invalid_argument);  // duplicate
+  EXPECT_THROW(make({"a b"}, {1, 2, 3, 4}), std::invalid_argument);                 // space
+  EXPECT_THROW(make({std::string(65, 'x')}, {1, 2, 3, 4}), std::invalid_argument);  // too long
   EXPECT_THROW(make({"a"}, {1, std::numeric_limits<float>::infinity(), 3, 4}), std::invalid_argument);
-  EXPECT_THROW(ExemplarTable({"a"}, {}, bins, {}), std::invalid_argument);              // no rows
+  EXPECT_THROW(ExemplarTable({"a"}, {}, bins, {}), std::invalid_argument);  // no rows
   EXPECT_THROW(ExemplarTable({"a"}, rows, BinSpec{0.0, 0.0, 2}, {1, 2, 3, 4}), std::invalid_argument);
   EXPECT_THROW(ExemplarTable({"a"}, rows, bins, {1, 2, 3, 4}, -1.0), std::invalid_argument);
 }
@@ -340,9 +341,14 @@ TEST(TableFile, RejectsDimensionsOverLimits) {
     const char* needle;
   };
   const Case cases[] = {
-      {0, 1, 2, "material count"}, {256, 1, 2, "material count"}, {0xffffffffu, 1, 2, "material count"},
-      {1, 0, 2, "row count"},      {1, 17, 2, "row count"},       {1, 1, 0, "bin count"},
-      {1, 1, 65536, "bin count"},  {255, 16, 65535, "file size limit"},
+      {0, 1, 2, "material count"},
+      {256, 1, 2, "material count"},
+      {0xffffffffu, 1, 2, "material count"},
+      {1, 0, 2, "row count"},
+      {1, 17, 2, "row count"},
+      {1, 1, 0, "bin count"},
+      {1, 1, 65536, "bin count"},
+      {255, 16, 65535, "file size limit"},
   };
   for (const auto& c : cases) {
     SCOPED_TRACE(c.needle);
@@ -479,7 +485,8 @@ TEST(TableFile, LoadErrors) {
   const auto path = dir.path() / "bad.tmx";
   Bytes b = tofmat::encode_table(synthetic());
   b[b.size() / 2] ^= 0x10;
-  std::ofstream(path, std::ios::binary).write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+  std::ofstream(path, std::ios::binary)
+      .write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
   const std::string msg = error_of<FormatError>([&] { tofmat::load_table(path); });
   EXPECT_CONTAINS(msg, path.string());
   EXPECT_CONTAINS(msg, "checksum");

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Helpers shared by the core test executables. Test inputs are built here by
 // hand (byte by byte), never through the code under test, so a bug in a
 // writer cannot hide the same bug in the matching reader.
@@ -36,9 +37,9 @@ inline std::vector<std::filesystem::path> db_files() {
 
 // The real database is ground truth: its absence is a failure, not a skip,
 // so a misconfigured TOFMAT_DB_DIR can never turn into a green run.
-#define ASSERT_DB_PRESENT()                                                                              \
-  ASSERT_EQ(::tofmat_test::db_files().size(), 29u)                                                       \
-      << "the real Kinect v2 database (29 <material>.npy files) is missing or incomplete at '"          \
+#define ASSERT_DB_PRESENT()                                                                    \
+  ASSERT_EQ(::tofmat_test::db_files().size(), 29u)                                             \
+      << "the real Kinect v2 database (29 <material>.npy files) is missing or incomplete at '" \
       << ::tofmat_test::db_dir().string() << "'; set the CMake cache variable TOFMAT_DB_DIR to its folder"
 
 inline void put_le(Bytes& b, std::uint64_t v, int n) {
@@ -95,8 +96,8 @@ std::string error_of(F&& f) {
   return {};
 }
 
-#define EXPECT_CONTAINS(haystack, needle)                                                              \
-  EXPECT_NE(std::string(haystack).find(needle), std::string::npos)                                     \
+#define EXPECT_CONTAINS(haystack, needle)                          \
+  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) \
       << "message '" << (haystack) << "' does not mention '" << (needle) << "'"
 
 // A fresh directory, removed with its contents at scope exit.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: tofmatd's configuration file (--config FILE, CLI11's
 // TOML/INI reader behind parse_command_line). Each input is written to a
 // file and parsed as the daemon would at start: any input ends in options or

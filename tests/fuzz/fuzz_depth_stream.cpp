@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: the depth stream parser under any sequence of bus faults.
 // The input is a program of 3-byte steps (op, 16-bit parameter) acting on a
 // clean scripted stream of numbered frames: pass the next packet, drop it,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: the P0 tables parser's accepting path. A response is
 // 1,302,572 bytes, far beyond the inputs libFuzzer grows from small seeds, so
 // the input is written over a well-formed response (zero tables) at an offset

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: the command protocol's parsers (command, completion,
 // firmware versions, serial, depth parameters, P0 tables, status) on
 // arbitrary bytes. The first byte picks the parser. The only acceptable
@@ -32,9 +33,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         if (c.params.size() > kMaxCommandParams) __builtin_trap();
         break;
       }
-      case 1:
-        parse_completion(p, n);
-        break;
+      case 1: parse_completion(p, n); break;
       case 2: {
         const auto v = parse_firmware_versions(p, n);
         if (v.empty() || v.size() > 7 || v.size() * 16 > n) __builtin_trap();
@@ -45,15 +44,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         if (s.empty() || s.size() > (n + 1) / 2) __builtin_trap();
         break;
       }
-      case 4:
-        parse_depth_params(p, n);
-        break;
+      case 4: parse_depth_params(p, n); break;
       case 5:  // (its accepting path: fuzz_kinect_p0)
         check_p0(parse_p0_tables(p, n));
         break;
-      default:
-        parse_status(p, n);
-        break;
+      default: parse_status(p, n); break;
     }
   } catch (const tofmat::FormatError&) {
   }

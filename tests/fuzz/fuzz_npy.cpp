@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: parse_npy on arbitrary bytes. The only acceptable outcomes
 // are a self-consistent array or tofmat::FormatError; any other exception
 // escapes to libFuzzer (a finding), as do crashes and sanitizer reports.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: tofmatd's protocol codec (firmware/protocol) on arbitrary
 // bytes, as the daemon meets them from a client: a MessageReader with the
 // request limit (kMaxRequestPayloadBytes), and every typed decoder on every

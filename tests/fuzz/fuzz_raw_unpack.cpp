@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: the 11-bit unpack of a depth packet (kinect2-protocol.md
 // 2.3, 2.4; firmware/kinect/raw_unpack.hpp) on arbitrary bytes. The dispatched
 // packet unpack (kBest: AVX2 or NEON where the machine has it) and the scalar

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: parse_recording (firmware/daemon/recording.hpp) with
 // max_frames 2. The only acceptable refusal is tofmat::FormatError.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: tofmatd's socket server (firmware/daemon/server.hpp) on
 // sequences of requests, as one client sends them over a real connection:
 // one Server, started once, on a Unix socket and on TCP 127.0.0.1 with a

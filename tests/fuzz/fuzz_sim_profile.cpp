@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: the simulator's device profiles and material libraries
 // (profile_io: JSON files read by name or path, 4 MiB limit). The first byte
 // picks the parser, the rest is the text. Only tofmat::FormatError is an

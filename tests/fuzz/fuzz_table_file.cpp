@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // libFuzzer target: decode_table on arbitrary bytes. Only tofmat::FormatError
 // is an acceptable refusal; any other exception, crash or sanitizer report is
 // a finding.
@@ -38,7 +39,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (size >= 4 && size <= tofmat::kTableMaxFileBytes) {
     std::vector<std::uint8_t> fixed(data, data + size);
     const uLong crc = crc32(crc32(0L, Z_NULL, 0), fixed.data(), static_cast<uInt>(size - 4));
-    for (int i = 0; i < 4; ++i) fixed[size - 4 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+    for (int i = 0; i < 4; ++i)
+      fixed[size - 4 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
     check(fixed.data(), fixed.size());
   }
   return 0;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// BinSpec: bins spread over a depth range, their validation, and the bin index of a depth.
 #include "tofmat/core/bin_spec.hpp"
 
 #include <cmath>

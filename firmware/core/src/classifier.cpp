@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// FloatClassifier: Eq. (12) partial matching of a query against the candidate materials in double precision.
 #include "tofmat/core/classifier.hpp"
 
 #include <algorithm>

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Builds the CompactTable: the candidates' exemplars quantised to int16 table steps, padded rows and validity bitsets.
 #include "tofmat/core/compact_table.hpp"
 
 #include <algorithm>

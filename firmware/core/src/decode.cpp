@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The float reference decode of one pixel: phasor and phase from three samples, and the unwrapping of the three depths.
 #include "tofmat/core/decode.hpp"
 
 #include <cmath>

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// DepthBinAccumulator: per-bin sums and counts of observations, and the partial query of their means.
 #include "tofmat/core/depth_bins.hpp"
 
 #include <algorithm>

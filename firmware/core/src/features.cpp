@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The paper's features: unambiguous range, depth from phase (Eq. (1)) and the per-row relative distortions (Eq. (10)).
 #include "tofmat/core/features.hpp"
 
 #include <cmath>

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// FixedClassifier: the query quantised, integer squared sums by the build's kernel, exact ranking of the means.
 #include "tofmat/core/fixed_classifier.hpp"
 
 #include <algorithm>

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The fixed-point decode of frames and regions: the scalar CORDIC kernel, unwrapping, flags and kernel dispatch.
 #include "tofmat/core/fixed_decode.hpp"
 
 #include <algorithm>
@@ -77,14 +79,15 @@ void phase_amplitude_scalar(const std::int16_t* m0, const std::int16_t* m1, cons
     const float r = t - (t * t2) * kThirdF;
     angle += static_cast<std::uint32_t>(static_cast<std::int32_t>(std::nearbyint(r * kTurnsPerRadF)));
     x += static_cast<std::int32_t>(std::nearbyint((xf * t2) * 0.5f));  // < 2^30 (1 + 4.9e-4)
-    phase[i] = angle - p0[i];  // mod 2^32: the wrap into [0, 2 pi)
+    phase[i] = angle - p0[i];                                          // mod 2^32: the wrap into [0, 2 pi)
     amp_q8[i] = static_cast<std::uint32_t>((static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * kAmpScale) >>
                                            (kAmpScaleBits + sh));
   }
 }
 
 FixedDecodeTables::FixedDecodeTables(const std::vector<float>& p0_rad, std::size_t n) : pixels(n) {
-  if (!p0_rad.empty() && p0_rad.size() != 3 * n) throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
+  if (!p0_rad.empty() && p0_rad.size() != 3 * n)
+    throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
   const double turns_per_rad = 4294967296.0 / (2.0 * kPi);
   for (std::size_t g = 0; g < 3; ++g) {
     auto& t = p0_turns[g];
@@ -123,7 +126,8 @@ void finish_pixels_scalar(const FixedPlanes& p, std::size_t n, const FixedThresh
     std::uint64_t amp_sum = 0;
     bool dark = false;
     for (std::size_t g = 0; g < 3; ++g) {
-      d[g] = static_cast<std::int32_t>((static_cast<std::uint64_t>(p.phase[g][k]) * static_cast<std::uint64_t>(kRangeMm[g])) >> 16);
+      d[g] = static_cast<std::int32_t>(
+          (static_cast<std::uint64_t>(p.phase[g][k]) * static_cast<std::uint64_t>(kRangeMm[g])) >> 16);
       dark = dark || p.amp[g][k] < th.amp;
       amp_sum += p.amp[g][k];
     }
@@ -133,7 +137,8 @@ void finish_pixels_scalar(const FixedPlanes& p, std::size_t n, const FixedThresh
     // D120 = d120 + k' R120 nearest to D80 (halves round up), offsets keep the
     // dividends positive.
     const std::int32_t D16 = d[kGroup16];
-    const std::int32_t k80 = (D16 - d[kGroup80] + kRangeQ16[kGroup80] / 2 + kRangeQ16[kGroup80]) / kRangeQ16[kGroup80] - 1;
+    const std::int32_t k80 =
+        (D16 - d[kGroup80] + kRangeQ16[kGroup80] / 2 + kRangeQ16[kGroup80]) / kRangeQ16[kGroup80] - 1;
     const std::int32_t D80 = d[kGroup80] + k80 * kRangeQ16[kGroup80];
     const std::int32_t k120 =
         (D80 - d[kGroup120] + kRangeQ16[kGroup120] / 2 + 2 * kRangeQ16[kGroup120]) / kRangeQ16[kGroup120] - 2;
@@ -147,7 +152,8 @@ void finish_pixels_scalar(const FixedPlanes& p, std::size_t n, const FixedThresh
     for (std::size_t g = 0; g < 3; ++g) p.depth[g][k] = d[g];
     // (80 D80 + 16 D16 + 120 D120) / 216 = (10 D80 + 2 D16 + 15 D120) / 27, in Q8.
     const std::int64_t num8 = (10 * static_cast<std::int64_t>(D80) + 2 * static_cast<std::int64_t>(D16) +
-                               15 * static_cast<std::int64_t>(D120)) >> (kDepthFracBits - kCombinedFracBits);
+                               15 * static_cast<std::int64_t>(D120)) >>
+                              (kDepthFracBits - kCombinedFracBits);
     p.combined[k] = static_cast<std::int32_t>((num8 * kInv27) >> 32);
     p.features[0][k] = d[kGroup16] - d[kGroup120];
     p.features[1][k] = d[kGroup80] - d[kGroup120];
@@ -260,7 +266,8 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
   FixedDecodedFrame out;
   size_fixed_frame(out, rw * static_cast<std::size_t>(r.y1 - r.y0));
   for (int y = r.y0; y < r.y1; ++y) {  // a row of the region is contiguous in every plane
-    const std::size_t src = static_cast<std::size_t>(y) * static_cast<std::size_t>(width) + static_cast<std::size_t>(r.x0);
+    const std::size_t src =
+        static_cast<std::size_t>(y) * static_cast<std::size_t>(width) + static_cast<std::size_t>(r.x0);
     const std::size_t dst = static_cast<std::size_t>(y - r.y0) * rw;
     for (std::size_t g = 0; g < 3; ++g) {
       const std::int16_t* m = raw + 3 * g * n + src;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The AVX2 kernel of the fixed-point phase and amplitude (x86-64 hosts whose
 // CPU has AVX2; the scalar kernel in fixed_decode.cpp is its definition):
 // eight pixels a step, the same integers bit for bit. Compiled with a target
@@ -55,14 +56,14 @@ TOFMAT_AVX2 __m256i rounding_doubling_mul_high8(__m256i a, std::int32_t b) {
   return _mm256_blend_epi32(even, _mm256_slli_epi64(odd, 32), 0xAA);
 }
 
-
 // The steps before the CORDIC for 8 pixels: saturation flags, the phasor,
 // the scaling, the half-plane turn (as the scalar kernel).
 struct Prepared {
   __m256i x, y, angle, sh, none;
 };
 
-TOFMAT_AVX2 Prepared prepare(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2, std::uint8_t* flags) {
+TOFMAT_AVX2 Prepared prepare(const std::int16_t* m0, const std::int16_t* m1, const std::int16_t* m2,
+                             std::uint8_t* flags) {
   const __m256i sat = _mm256_set1_epi32(kRawSaturated);
   const __m256i zero = _mm256_setzero_si256();
   const __m256i a0 = _mm256_cvtepi16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(m0)));
@@ -83,8 +84,8 @@ TOFMAT_AVX2 Prepared prepare(const std::int16_t* m0, const std::int16_t* m1, con
   // conversion to float is exact, so the exponent field is floor(log2 mx)
   // and clz = 31 - floor(log2 mx); sh = 27 - floor(log2 mx) >= 10.
   const __m256i mx = _mm256_or_si256(_mm256_max_epi32(_mm256_abs_epi32(X), _mm256_abs_epi32(W)), _mm256_set1_epi32(1));
-  const __m256i e = _mm256_sub_epi32(_mm256_srli_epi32(_mm256_castps_si256(_mm256_cvtepi32_ps(mx)), 23),
-                                     _mm256_set1_epi32(127));
+  const __m256i e =
+      _mm256_sub_epi32(_mm256_srli_epi32(_mm256_castps_si256(_mm256_cvtepi32_ps(mx)), 23), _mm256_set1_epi32(127));
   p.sh = _mm256_sub_epi32(_mm256_set1_epi32(27), e);
   __m256i x = _mm256_sllv_epi32(X, p.sh);
   __m256i y = _mm256_slli_epi32(rounding_doubling_mul_high8(_mm256_sllv_epi32(W, p.sh), kHalfSqrt3Q31), 1);
@@ -102,7 +103,8 @@ TOFMAT_AVX2 void finish(const Prepared& p, __m256i x, __m256i angle, const std::
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(phase), _mm256_andnot_si256(p.none, ph));
   const __m256i scale = _mm256_set1_epi32(static_cast<std::int32_t>(kAmpScale));
   const __m256i rs = _mm256_add_epi32(p.sh, _mm256_set1_epi32(kAmpScaleBits));
-  const __m256i even = _mm256_srlv_epi64(_mm256_mul_epu32(x, scale), _mm256_and_si256(rs, _mm256_set1_epi64x(0xFFFFFFFF)));
+  const __m256i even =
+      _mm256_srlv_epi64(_mm256_mul_epu32(x, scale), _mm256_and_si256(rs, _mm256_set1_epi64x(0xFFFFFFFF)));
   const __m256i odd = _mm256_srlv_epi64(_mm256_mul_epu32(_mm256_srli_epi64(x, 32), scale), _mm256_srli_epi64(rs, 32));
   const __m256i amp = _mm256_blend_epi32(even, _mm256_slli_epi64(odd, 32), 0xAA);
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(amp_q8), _mm256_andnot_si256(p.none, amp));
@@ -163,7 +165,8 @@ TOFMAT_AVX2 void store(void* p, __m256i v) { _mm256_storeu_si256(static_cast<__m
 
 }  // namespace
 
-__attribute__((target("avx2"))) void finish_pixels_avx2(const FixedPlanes& p, std::size_t n, const FixedThresholds& th) {
+__attribute__((target("avx2"))) void finish_pixels_avx2(const FixedPlanes& p, std::size_t n,
+                                                        const FixedThresholds& th) {
   const __m256i invalid = _mm256_set1_epi32(kFixedInvalid);
   const __m256i th_amp = _mm256_set1_epi32(static_cast<std::int32_t>(th.amp));
   const __m256i th_mean = _mm256_set1_epi32(static_cast<std::int32_t>(th.mean_sum));
@@ -198,10 +201,12 @@ __attribute__((target("avx2"))) void finish_pixels_avx2(const FixedPlanes& p, st
     const __m256i bad = _mm256_xor_si256(_mm256_cmpeq_epi32(flags, _mm256_setzero_si256()), _mm256_set1_epi32(-1));
     // Unwrap (as the scalar code; k80 + 1 and k120 + 2 are the quotients).
     const __m256i D16 = d[kGroup16];
-    const __m256i n1 = _mm256_add_epi32(_mm256_sub_epi32(D16, d[kGroup80]), _mm256_set1_epi32((1875 << 16) / 2 + (1875 << 16)));
+    const __m256i n1 =
+        _mm256_add_epi32(_mm256_sub_epi32(D16, d[kGroup80]), _mm256_set1_epi32((1875 << 16) / 2 + (1875 << 16)));
     const __m256i k80 = _mm256_sub_epi32(div_range_q16(n1, kDiv80), _mm256_set1_epi32(1));
     const __m256i D80 = _mm256_add_epi32(d[kGroup80], _mm256_mullo_epi32(k80, R80));
-    const __m256i n2 = _mm256_add_epi32(_mm256_sub_epi32(D80, d[kGroup120]), _mm256_set1_epi32((1250 << 16) / 2 + 2 * (1250 << 16)));
+    const __m256i n2 =
+        _mm256_add_epi32(_mm256_sub_epi32(D80, d[kGroup120]), _mm256_set1_epi32((1250 << 16) / 2 + 2 * (1250 << 16)));
     const __m256i k120 = _mm256_sub_epi32(div_range_q16(n2, kDiv120), _mm256_set1_epi32(2));
     const __m256i D120 = _mm256_add_epi32(d[kGroup120], _mm256_mullo_epi32(k120, R120));
     const __m256i gap1 = _mm256_abs_epi32(_mm256_sub_epi32(D80, D16));
@@ -214,7 +219,8 @@ __attribute__((target("avx2"))) void finish_pixels_avx2(const FixedPlanes& p, st
     for (std::size_t g = 0; g < 3; ++g) store(p.depth[g] + i, _mm256_blendv_epi8(d[g], invalid, off));
     // num8 = (10 D80 + 2 D16 + 15 D120) >> 8 exactly in 32 bits: D = 256 (D >> 8) + (D & 255).
     const __m256i hi = weighted_sum(_mm256_srai_epi32(D80, 8), _mm256_srai_epi32(D16, 8), _mm256_srai_epi32(D120, 8));
-    const __m256i lo = weighted_sum(_mm256_and_si256(D80, low8), _mm256_and_si256(D16, low8), _mm256_and_si256(D120, low8));
+    const __m256i lo =
+        weighted_sum(_mm256_and_si256(D80, low8), _mm256_and_si256(D16, low8), _mm256_and_si256(D120, low8));
     const __m256i num8 = _mm256_add_epi32(hi, _mm256_srli_epi32(lo, 8));
     // (num8 * ceil(2^32 / 27)) >> 32: the high half of a signed 64-bit product.
     const __m256i inv27 = _mm256_set1_epi32(159072863);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The NEON kernel of the fixed-point phase and amplitude (aarch64 only; the
 // scalar kernel in fixed_decode.cpp is its definition): four pixels a step,
 // the CORDIC's branch replaced by selects, the same integers bit for bit.
@@ -99,7 +100,8 @@ void finish_pixels_neon(const FixedPlanes& p, std::size_t n, const FixedThreshol
   using fixed_decode_detail::kDiv80;
   static_assert(kDiv80.shift == 22 && kDiv120.shift == 23, "the shifts below are immediates");
   const int32x4_t invalid = vdupq_n_s32(kFixedInvalid);
-  const uint32x4_t th_amp = vdupq_n_u32(th.amp), th_mean = vdupq_n_u32(th.mean_sum), th_unwrap = vdupq_n_u32(th.unwrap_amp);
+  const uint32x4_t th_amp = vdupq_n_u32(th.amp), th_mean = vdupq_n_u32(th.mean_sum),
+                   th_unwrap = vdupq_n_u32(th.unwrap_amp);
   // Gaps are < 2^31: a threshold beyond is never exceeded; -1 always is.
   const int32x4_t th_gap1 = vdupq_n_s32(static_cast<std::int32_t>(std::min<std::int64_t>(th.gap_16_80, 0x7FFFFFFF)));
   const int32x4_t th_gap2 = vdupq_n_s32(static_cast<std::int32_t>(std::min<std::int64_t>(th.gap_80_120, 0x7FFFFFFF)));
@@ -129,19 +131,22 @@ void finish_pixels_neon(const FixedPlanes& p, std::size_t n, const FixedThreshol
     // positive dividends, by the exact multiply-and-shift of DivisionMagic).
     const int32x4_t D16 = d[kGroup16];
     const uint32x4_t n1 = vreinterpretq_u32_s32(vaddq_s32(vsubq_s32(D16, d[kGroup80]), vdupq_n_s32(R80 / 2 + R80)));
-    const int32x4_t k80 = vsubq_s32(
-        vreinterpretq_s32_u32(vshrq_n_u32(vmulq_n_u32(vshrq_n_u32(n1, 16), static_cast<std::uint32_t>(kDiv80.magic)), 22)),
-        vdupq_n_s32(1));
+    const int32x4_t k80 =
+        vsubq_s32(vreinterpretq_s32_u32(
+                      vshrq_n_u32(vmulq_n_u32(vshrq_n_u32(n1, 16), static_cast<std::uint32_t>(kDiv80.magic)), 22)),
+                  vdupq_n_s32(1));
     const int32x4_t D80 = vmlaq_n_s32(d[kGroup80], k80, R80);
-    const uint32x4_t n2 = vreinterpretq_u32_s32(vaddq_s32(vsubq_s32(D80, d[kGroup120]), vdupq_n_s32(R120 / 2 + 2 * R120)));
-    const int32x4_t k120 = vsubq_s32(
-        vreinterpretq_s32_u32(vshrq_n_u32(vmulq_n_u32(vshrq_n_u32(n2, 16), static_cast<std::uint32_t>(kDiv120.magic)), 23)),
-        vdupq_n_s32(2));
+    const uint32x4_t n2 =
+        vreinterpretq_u32_s32(vaddq_s32(vsubq_s32(D80, d[kGroup120]), vdupq_n_s32(R120 / 2 + 2 * R120)));
+    const int32x4_t k120 =
+        vsubq_s32(vreinterpretq_s32_u32(
+                      vshrq_n_u32(vmulq_n_u32(vshrq_n_u32(n2, 16), static_cast<std::uint32_t>(kDiv120.magic)), 23)),
+                  vdupq_n_s32(2));
     const int32x4_t D120 = vmlaq_n_s32(d[kGroup120], k120, R120);
     const int32x4_t gap1 = vabsq_s32(vsubq_s32(D80, D16)), gap2 = vabsq_s32(vsubq_s32(D120, D80));
-    const uint32x4_t unwrap_bad =
-        vbicq_u32(vorrq_u32(vcltq_u32(a[kGroup16], th_unwrap), vorrq_u32(vcgtq_s32(gap1, th_gap1), vcgtq_s32(gap2, th_gap2))),
-                  bad);
+    const uint32x4_t unwrap_bad = vbicq_u32(
+        vorrq_u32(vcltq_u32(a[kGroup16], th_unwrap), vorrq_u32(vcgtq_s32(gap1, th_gap1), vcgtq_s32(gap2, th_gap2))),
+        bad);
     flags = vbslq_u32(unwrap_bad, vdupq_n_u32(kDecodeUnwrap), flags);
     const uint32x4_t off = vorrq_u32(bad, unwrap_bad);
     for (std::size_t g = 0; g < 3; ++g) vst1q_s32(p.depth[g] + i, vbslq_s32(off, invalid, d[g]));

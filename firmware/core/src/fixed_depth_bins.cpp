@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// FixedDepthBinAccumulator: the scalar bin-index kernel, the integer sums per bin, and the query of their means.
 #include "tofmat/core/fixed_depth_bins.hpp"
 
 #include <cmath>
@@ -52,7 +54,8 @@ FixedDepthBinAccumulator::FixedDepthBinAccumulator(BinSpec bins, std::uint32_t n
 
 std::size_t FixedDepthBinAccumulator::add_frame(const FixedDecodedFrame& f, FixedKernel kernel) {
   const std::size_t n = f.pixels;
-  if (f.combined_q8.size() != n || f.flags.size() != n || f.features_q16[0].size() != n || f.features_q16[1].size() != n) {
+  if (f.combined_q8.size() != n || f.flags.size() != n || f.features_q16[0].size() != n ||
+      f.features_q16[1].size() != n) {
     throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
   }
   bin_.resize(n);
@@ -97,7 +100,8 @@ std::uint32_t FixedDepthBinAccumulator::bins_covered(std::uint64_t min_count) co
   std::uint32_t n = 0;
   for (std::uint32_t j = 0; j < bins_.count; ++j) {
     bool any = false;
-    for (std::uint32_t r = 0; r < n_rows_; ++r) any = any || count_[static_cast<std::size_t>(r) * bins_.count + j] >= std::max<std::uint64_t>(1, min_count);
+    for (std::uint32_t r = 0; r < n_rows_; ++r)
+      any = any || count_[static_cast<std::size_t>(r) * bins_.count + j] >= std::max<std::uint64_t>(1, min_count);
     n += any;
   }
   return n;

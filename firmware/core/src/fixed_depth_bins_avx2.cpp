@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The AVX2 kernel of the depth-bin index (fixed_depth_bins.hpp; the scalar
 // kernel is its definition): eight pixels a step, the same indices. Compiled
 // with a target attribute; called only when the CPU reports AVX2.
@@ -28,9 +29,9 @@ __attribute__((target("avx2"))) void bin_indices_avx2(const std::int32_t* depth_
     const __m256i even = _mm256_srli_epi64(_mm256_mul_epu32(off, inv), 32);
     const __m256i odd = _mm256_mul_epu32(_mm256_srli_epi64(off, 32), inv);
     const __m256i j = _mm256_blend_epi32(even, odd, 0xAA);  // < 2^30
-    const __m256i bad = _mm256_or_si256(
-        _mm256_or_si256(below, _mm256_cmpeq_epi32(d, invalid)),
-        _mm256_or_si256(_mm256_xor_si256(_mm256_cmpeq_epi32(f, zero), none), _mm256_xor_si256(_mm256_cmpgt_epi32(count, j), none)));
+    const __m256i bad = _mm256_or_si256(_mm256_or_si256(below, _mm256_cmpeq_epi32(d, invalid)),
+                                        _mm256_or_si256(_mm256_xor_si256(_mm256_cmpeq_epi32(f, zero), none),
+                                                        _mm256_xor_si256(_mm256_cmpgt_epi32(count, j), none)));
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(bin + i), _mm256_blendv_epi8(j, none, bad));
   }
   if (i < n) bin_indices_scalar(depth_q8 + i, flags + i, n - i, b, bin + i);

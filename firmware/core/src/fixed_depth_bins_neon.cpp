@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The NEON kernel of bin_indices (aarch64 only; the scalar one in
 // fixed_depth_bins.cpp is its definition): four pixels a step.
 #include "tofmat/core/fixed_depth_bins.hpp"

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The scalar squared-sum kernel of Eq. (12) in integers, its dispatch, and the element-major copy of a table for NEON.
 #include "tofmat/core/fixed_distance.hpp"
 
 namespace tofmat {
@@ -23,8 +25,8 @@ void squared_sums_scalar(const CompactTable& table, std::size_t block0, std::siz
                          const std::uint8_t* qmask, SquaredSum* acc) {
   for (std::size_t k = 0; k < table.n_candidates(); ++k) {
     const std::uint8_t* em = table.validity(k);
-    const SquaredSum s = squared_sum_scalar(q, qmask, table.values(k) + block0 * kCompactBlock, em ? em + block0 : nullptr,
-                                            blocks);
+    const SquaredSum s =
+        squared_sum_scalar(q, qmask, table.values(k) + block0 * kCompactBlock, em ? em + block0 : nullptr, blocks);
     acc[k].sum += s.sum;
     acc[k].count += s.count;
   }

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The NEON kernel of squared_sum (aarch64 only; see fixed_distance.hpp).
 // Per block of 8: absolute differences widen to uint32 (vabdl), square in
 // uint32 (no wrap: < 2^32) and pairwise-add into uint64 lanes; a partly valid
@@ -179,20 +180,11 @@ void squared_sums_elements_neon(const ElementMajorTable& em, const CompactTable&
                                 SquaredSum* acc) {
   std::uint64_t sums[256];
   switch (em.slots / 8) {
-    case 1:
-      element_sums<1>(em, ranges, n_ranges, q, qmask, sums);
-      break;
-    case 2:
-      element_sums<2>(em, ranges, n_ranges, q, qmask, sums);
-      break;
-    case 3:
-      element_sums<3>(em, ranges, n_ranges, q, qmask, sums);
-      break;
-    case 4:
-      element_sums<4>(em, ranges, n_ranges, q, qmask, sums);
-      break;
-    default:
-      element_sums<0>(em, ranges, n_ranges, q, qmask, sums);
+    case 1: element_sums<1>(em, ranges, n_ranges, q, qmask, sums); break;
+    case 2: element_sums<2>(em, ranges, n_ranges, q, qmask, sums); break;
+    case 3: element_sums<3>(em, ranges, n_ranges, q, qmask, sums); break;
+    case 4: element_sums<4>(em, ranges, n_ranges, q, qmask, sums); break;
+    default: element_sums<0>(em, ranges, n_ranges, q, qmask, sums);
   }
   // Counts: the query's valid elements, then for the candidates with gaps
   // the elements they miss taken off (a popcount a block).

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Which fixed-point kernel runs on this build and CPU (AVX2 detection on x86-64, NEON on aarch64, scalar otherwise).
 #include "tofmat/core/fixed_kernel.hpp"
 
 namespace tofmat {

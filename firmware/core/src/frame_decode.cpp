@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The float reference decode of a raw frame or a pixel region into per-frequency phase, amplitude and depth, and flags.
 #include "tofmat/core/frame_decode.hpp"
 
 #include <cmath>
@@ -103,7 +105,8 @@ DecodedFrame decode_region_pixels(const std::int16_t* raw, int width, int height
 }  // namespace
 
 DecodeTables::DecodeTables(const std::vector<float>& p0_rad, std::size_t n) : pixels(n) {
-  if (!p0_rad.empty() && p0_rad.size() != 3 * n) throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
+  if (!p0_rad.empty() && p0_rad.size() != 3 * n)
+    throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
   for (std::size_t g = 0; g < 3; ++g) {
     cos_p0[g].assign(n, 1.0f);
     sin_p0[g].assign(n, 0.0f);
@@ -131,7 +134,8 @@ DecodedFrame decode_region(const std::int16_t* raw, int width, int height, const
                            const PixelRegion& r, const DecodeOptions& options) {
   check_region(width, height, r);
   const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
-  if (!p0_rad.empty() && p0_rad.size() != 3 * pixels) throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
+  if (!p0_rad.empty() && p0_rad.size() != 3 * pixels)
+    throw std::invalid_argument("p0 corrections must hold 3 x pixels values");
   // Tables of the region's pixels only (slot order), from the same float
   // corrections: the same cos/sin values as the whole frame's tables.
   const std::size_t rw = static_cast<std::size_t>(r.x1 - r.x0);
@@ -151,8 +155,8 @@ DecodedFrame decode_region(const std::int16_t* raw, int width, int height, const
   return decode_region_pixels(raw, width, height, t, r, options, [](std::size_t, std::size_t k) { return k; });
 }
 
-DecodedFrame decode_region(const std::int16_t* raw, int width, int height, const DecodeTables& t,
-                           const PixelRegion& r, const DecodeOptions& options) {
+DecodedFrame decode_region(const std::int16_t* raw, int width, int height, const DecodeTables& t, const PixelRegion& r,
+                           const DecodeOptions& options) {
   check_region(width, height, r);
   const std::size_t pixels = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   if (t.pixels != pixels) throw std::invalid_argument("decode tables are for a frame of another size");

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Box mean of the features and majority filter of the label map
 // (frame_smoothing.hpp). Both keep, per column, the sum over the window's
 // rows and slide it down one row at a time (one row in, one row out), and
@@ -11,8 +12,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "tofmat/core/fixed_decode.hpp"
 #include "frame_smoothing_kernels.hpp"
+#include "tofmat/core/fixed_decode.hpp"
 
 #if defined(__aarch64__)
 #include <arm_neon.h>
@@ -113,8 +114,8 @@ void box_prefix_scalar(std::size_t w, std::size_t r, const BoxColumns& c) {
   for (; k < w + 2 * r + 1; ++k) c.pre0[k] = a0, c.pre1[k] = a1, c.pren[k] = an;
 }
 
-void box_means_scalar(std::size_t w, std::size_t r, const BoxColumns& c, const std::uint8_t* flags,
-                      std::int32_t* out0, std::int32_t* out1) {
+void box_means_scalar(std::size_t w, std::size_t r, const BoxColumns& c, const std::uint8_t* flags, std::int32_t* out0,
+                      std::int32_t* out1) {
   const std::size_t span = 2 * r + 1;
   const auto mean = [](std::int32_t s, double half_n, double inv) {
     const auto q = static_cast<std::int64_t>((256.0 * static_cast<double>(s) + half_n) * inv) - kMeanBias;
@@ -180,7 +181,8 @@ void BoxMeanFilter::apply(const std::int32_t* f0, const std::int32_t* f1, const 
     prefix(uw, ur, c);
     means(uw, ur, c, flags + row(y), out0 + row(y), out1 + row(y));
     BoxRows next;  // row y + r + 1 in, row y - r out
-    if (y + r + 1 < h) next.in0 = f0 + row(y + r + 1), next.in1 = f1 + row(y + r + 1), next.in_flags = flags + row(y + r + 1);
+    if (y + r + 1 < h)
+      next.in0 = f0 + row(y + r + 1), next.in1 = f1 + row(y + r + 1), next.in_flags = flags + row(y + r + 1);
     if (y - r >= 0) next.out0 = f0 + row(y - r), next.out1 = f1 + row(y - r), next.out_flags = flags + row(y - r);
     if (next.in0 != nullptr || next.out0 != nullptr) slide(next, uw, c);
   }
@@ -299,7 +301,8 @@ void MajorityFilter::apply_chunks(const std::uint8_t* labels, int y0, int y1, st
     if (own < classes && count_of<C>(window, own) == m) return own;
     for (std::size_t j = 0;; ++j) {  // the lowest class with m votes (there is one)
       const V16 v = window[j] & keep[j];
-      if (horizontal_max(v) == m) return static_cast<std::uint8_t>(16 * j + static_cast<std::size_t>(first_equal(v, m)));
+      if (horizontal_max(v) == m)
+        return static_cast<std::uint8_t>(16 * j + static_cast<std::size_t>(first_equal(v, m)));
     }
   };
   for (int y = y0; y < y1; ++y) {

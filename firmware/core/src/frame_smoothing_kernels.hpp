@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The box mean's three steps per output row (frame_smoothing.cpp): internal
 // to the core. The scalar kernels are the definition; the NEON ones
 // (frame_smoothing_neon.cpp, aarch64) give the same integers bit for bit.
@@ -37,8 +38,8 @@ void box_prefix_scalar(std::size_t w, std::size_t r, const BoxColumns& c);
 // trunc((256 S + floor(n / 2) + 1/2 + n 2^31) x (1 / n)) - 2^31 in binary64
 // (each step exact or rounded once, none fused), clamped to
 // [INT32_MIN + 1, INT32_MAX]; kFixedInvalid where the pixel's flag is not 0.
-void box_means_scalar(std::size_t w, std::size_t r, const BoxColumns& c, const std::uint8_t* flags,
-                      std::int32_t* out0, std::int32_t* out1);
+void box_means_scalar(std::size_t w, std::size_t r, const BoxColumns& c, const std::uint8_t* flags, std::int32_t* out0,
+                      std::int32_t* out1);
 
 #if defined(__aarch64__)
 void box_slide_neon(const BoxRows& rows, std::size_t w, const BoxColumns& c);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The box mean's NEON kernels (aarch64 only; the scalar ones in
 // frame_smoothing.cpp are their definition): four columns or pixels a step,
 // the same integers bit for bit.

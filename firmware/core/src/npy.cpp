@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The bounded .npy reader: header parsing of every accepted dialect, and conversion of the data to doubles.
 #include "tofmat/core/npy.hpp"
 
 #include <cctype>

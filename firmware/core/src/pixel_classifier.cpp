@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// PixelClassifier: the table rearranged bin-major at construction, the scalar per-pixel kernel and the kernel dispatch.
 #include "tofmat/core/pixel_classifier.hpp"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The AVX2 kernel of the per-pixel classification (pixel_classifier.hpp; the
 // scalar kernel is its definition): per pixel, eight candidates an
 // instruction: saturating int16 differences of the packed value pairs, their
@@ -31,9 +32,11 @@ TOFMAT_AVX2 __m256i sums8(const Arrays& t, std::size_t s, __m256i q) {
   // subs saturates to [-32768, 32767]; the max takes -32768 to -32767 (as
   // the scalar clamp), so that no square pair reaches 2^31.
   __m256i d = _mm256_max_epi16(_mm256_subs_epi16(q, e), _mm256_set1_epi16(-32767));
-  if constexpr (OneValid) d = _mm256_and_si256(d, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(t.elem_mask + s)));
+  if constexpr (OneValid)
+    d = _mm256_and_si256(d, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(t.elem_mask + s)));
   __m256i sum = _mm256_madd_epi16(d, d);
-  if constexpr (OneValid) sum = _mm256_sllv_epi32(sum, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(t.doubled + s)));
+  if constexpr (OneValid)
+    sum = _mm256_sllv_epi32(sum, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(t.doubled + s)));
   if constexpr (Absent) sum = _mm256_or_si256(sum, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(t.absent + s)));
   return sum;
 }
@@ -80,7 +83,8 @@ TOFMAT_AVX2 std::uint8_t label_of(const Arrays& t, std::size_t base, std::size_t
   } else {
     for (std::size_t b = 0;; ++b) {  // the first block holding the least: its lowest lane
       const int hit = _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(s[b], least)));
-      if (hit != 0) return static_cast<std::uint8_t>(b * B + static_cast<std::size_t>(__builtin_ctz(static_cast<unsigned>(hit))));
+      if (hit != 0)
+        return static_cast<std::uint8_t>(b * B + static_cast<std::size_t>(__builtin_ctz(static_cast<unsigned>(hit))));
     }
   }
 }
@@ -113,16 +117,11 @@ template <bool OneValid>
 std::size_t dispatch_blocks(const PixelClassifier::Layout& t, const std::int32_t* bin, const std::int32_t* q,
                             std::size_t n, std::uint8_t* labels) {
   switch (t.slots / PixelClassifier::kSlotBlock) {
-    case 1:
-      return classify_pixels_avx2_t<1, OneValid>(t, bin, q, n, labels);
-    case 2:
-      return classify_pixels_avx2_t<2, OneValid>(t, bin, q, n, labels);
-    case 3:
-      return classify_pixels_avx2_t<3, OneValid>(t, bin, q, n, labels);
-    case 4:
-      return classify_pixels_avx2_t<4, OneValid>(t, bin, q, n, labels);
-    default:
-      return classify_pixels_avx2_t<0, OneValid>(t, bin, q, n, labels);
+    case 1: return classify_pixels_avx2_t<1, OneValid>(t, bin, q, n, labels);
+    case 2: return classify_pixels_avx2_t<2, OneValid>(t, bin, q, n, labels);
+    case 3: return classify_pixels_avx2_t<3, OneValid>(t, bin, q, n, labels);
+    case 4: return classify_pixels_avx2_t<4, OneValid>(t, bin, q, n, labels);
+    default: return classify_pixels_avx2_t<0, OneValid>(t, bin, q, n, labels);
   }
 }
 

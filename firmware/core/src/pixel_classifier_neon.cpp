@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The NEON kernel of the per-pixel classification (pixel_classifier.hpp; the
 // scalar kernel is its definition; aarch64 only): per pixel, four candidates
 // an instruction: saturating int16 differences of the packed value pairs,
@@ -23,8 +24,8 @@ inline int32x4_t sums4(const PixelClassifier::Layout& t, std::size_t s, int16x8_
   int16x8_t d = vmaxq_s16(vqsubq_s16(q, e), vdupq_n_s16(-32767));  // clamp(q - e, +-32767)
   if constexpr (OneValid) d = vandq_s16(d, vreinterpretq_s16_s32(vld1q_s32(t.elem_mask.data() + s)));
   const int32x4_t lo = vmull_s16(vget_low_s16(d), vget_low_s16(d));  // d0^2 d1^2 of slots 0, 1
-  const int32x4_t hi = vmull_high_s16(d, d);                          // of slots 2, 3
-  int32x4_t sum = vpaddq_s32(lo, hi);                                  // <= 2 * 32767^2 < 2^31
+  const int32x4_t hi = vmull_high_s16(d, d);                         // of slots 2, 3
+  int32x4_t sum = vpaddq_s32(lo, hi);                                // <= 2 * 32767^2 < 2^31
   if constexpr (OneValid) sum = vshlq_s32(sum, vld1q_s32(t.doubled.data() + s));
   if constexpr (Absent) sum = vorrq_s32(sum, vld1q_s32(t.absent.data() + s));
   return sum;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The 11-bit sample code's table of 16-bit values, its inverse (nearest code), and quantisation of simulated samples.
 #include "tofmat/core/raw_lut.hpp"
 
 #include <array>
@@ -61,7 +63,6 @@ std::uint16_t raw_code_nearest(double v) {
   return static_cast<std::uint16_t>(v < 0 ? (0x400 | c) : c);
 }
 
-
 // raw_magnitude_nearest with the step taken from the float exponent instead
 // of comparisons (GCC turns a chain of comparisons into branches). This file
 // is compiled with -fno-trapping-math: the selects below only vectorise when
@@ -79,7 +80,7 @@ void raw_quantise(const double* samples, std::size_t n, double saturation, std::
     e &= ~(e >> 31);
     const float step = bits_float((127 + e) << 23);
     const float lo = static_cast<float>(static_cast<int>(m * bits_float((127 - e) << 23))) * step;  // exact
-    const float code = lo + (2.0f * m > 2.0f * lo + step ? step : 0.0f);  // ties go down
+    const float code = lo + (2.0f * m > 2.0f * lo + step ? step : 0.0f);                            // ties go down
     const float value = x < 0.0f ? -code : code;
     out[c] = static_cast<std::int16_t>(!(av <= sat) ? static_cast<float>(kRawSaturated) : value);
   }

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Encoding, decoding (with every bound and the CRC-32 checked), saving and loading of .tmx table files.
 #include "tofmat/core/table_file.hpp"
 
 #include <zlib.h>
@@ -141,7 +143,8 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
       continue;
     }
     const double v = q * step;
-    if (std::fabs(v) > static_cast<double>(FLT_MAX)) fail("a value times the quantisation step exceeds the float range");
+    if (std::fabs(v) > static_cast<double>(FLT_MAX))
+      fail("a value times the quantisation step exceeds the float range");
     values[i] = static_cast<float>(v);
   }
   try {

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// BandWorkers: the worker threads, one per extra band, and the hand-over of a frame's work to them.
 #include "tofmat/daemon/band_workers.hpp"
 
 #include <stdexcept>

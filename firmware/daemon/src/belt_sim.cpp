@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// BeltSim: the items generated along the belt, the scene the camera sees at a time, and the barrier edges they cause.
 #include "tofmat/daemon/belt_sim.hpp"
 
 #include <time.h>
@@ -45,8 +47,8 @@ const BeltSim::Item& BeltSim::item(std::uint64_t number) {
     // The next: the mean gap varied by the jitter, but never onto this one
     // (a loader puts items down one after another, 20 mm apart at least).
     const double u = std::uniform_real_distribution<double>(-0.5, 0.5)(rng_);
-    const double gap_s = std::max(60.0 / spec_.rate_per_min * (1.0 + spec_.jitter * u),
-                                  (spec_.item_mm + 20.0) / spec_.speed_mm_s);
+    const double gap_s =
+        std::max(60.0 / spec_.rate_per_min * (1.0 + spec_.jitter * u), (spec_.item_mm + 20.0) / spec_.speed_mm_s);
     next_arrival_ns_ += ns(gap_s);
     items_.push_back(std::move(it));
     if (items_.size() > kMaxItems) items_.pop_front();
@@ -98,7 +100,8 @@ std::vector<BeltSim::Item> BeltSim::items_until(std::uint64_t now_ns) {
   const std::uint64_t t = now_ns > t0 ? now_ns - t0 : 0;
   std::lock_guard<std::mutex> lock(mutex_);
   std::vector<Item> out;
-  for (std::uint64_t n = items_.empty() ? 1 : items_.front().number; item(n).arrival_ns <= t; ++n) out.push_back(item(n));
+  for (std::uint64_t n = items_.empty() ? 1 : items_.front().number; item(n).arrival_ns <= t; ++n)
+    out.push_back(item(n));
   return out;
 }
 

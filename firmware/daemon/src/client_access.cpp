@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// ClientAccess: peer identification, roles from uid, group or token, connection slots and per-peer rate buckets.
 #include "tofmat/daemon/client_access.hpp"
 
 #include <arpa/inet.h>
@@ -9,8 +11,8 @@
 
 #include <algorithm>
 #include <cerrno>
-#include <cstring>
 #include <stdexcept>
+#include <system_error>
 #include <vector>
 
 namespace tofmat::daemon {
@@ -54,7 +56,7 @@ Peer peer_of(int fd, bool tcp) {
     ucred cred{};
     socklen_t len = sizeof cred;
     if (::getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cred, &len) != 0)
-      throw std::runtime_error(std::string("SO_PEERCRED: ") + std::strerror(errno));
+      throw std::runtime_error(std::string("SO_PEERCRED: ") + std::generic_category().message(errno));
     p.uid = cred.uid;
     p.gid = cred.gid;
     return p;
@@ -62,7 +64,7 @@ Peer peer_of(int fd, bool tcp) {
   sockaddr_in sa{};
   socklen_t len = sizeof sa;
   if (::getpeername(fd, reinterpret_cast<sockaddr*>(&sa), &len) != 0)
-    throw std::runtime_error(std::string("getpeername: ") + std::strerror(errno));
+    throw std::runtime_error(std::string("getpeername: ") + std::generic_category().message(errno));
   char text[INET_ADDRSTRLEN] = {};
   if (!::inet_ntop(AF_INET, &sa.sin_addr, text, sizeof text)) throw std::runtime_error("inet_ntop failed");
   p.address = text;
@@ -165,7 +167,8 @@ ClientAccess::Verdict ClientAccess::check_token(const std::string& address, cons
                                                 std::uint64_t now_ns, std::uint64_t& wait_ms) {
   wait_ms = 0;
   auto it = throttle_.find(address);
-  if (it != throttle_.end() && now_ns > it->second.until_ns + kForgetNs) it->second.count = 0;  // long quiet: a fresh start
+  if (it != throttle_.end() && now_ns > it->second.until_ns + kForgetNs)
+    it->second.count = 0;  // long quiet: a fresh start
   if (it != throttle_.end() && now_ns < it->second.until_ns) {
     wait_ms = (it->second.until_ns - now_ns + 999'999) / 1'000'000;
     return Verdict::kThrottled;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Daemon: starts and stops the source, pipeline, server, sorting line and reset button, and handles clients' commands.
 #include "tofmat/daemon/daemon.hpp"
 
 #include <pthread.h>
@@ -56,9 +58,8 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
     options_.table_dir = std::filesystem::absolute(options_.table).lexically_normal().parent_path().string();
   options_.table_dir = std::filesystem::weakly_canonical(options_.table_dir).string();
   options_.server.server_name = kVersion;
-  options_.server.capabilities = {"labels",      "label_map",  "depth",         "device",  "status",
-                                  "reset",       "set_profile", "set_roi",      "set_candidates",
-                                  "load_table",  "trigger"};
+  options_.server.capabilities = {"labels",      "label_map", "depth",          "device",     "status", "reset",
+                                  "set_profile", "set_roi",   "set_candidates", "load_table", "trigger"};
   if (options_.line.enabled())
     options_.server.capabilities.insert(options_.server.capabilities.end(), {"sort", "line"});
   // The sockets first: a second daemon started on a live one's socket is
@@ -100,7 +101,9 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
     server_->publish("label_map", protocol::encode_label_map(e));
   };
   emit.wants_depth = [this](const std::string& kind) { return server_->has_subscribers("depth:" + kind); };
-  emit.depth = [this](const protocol::DepthEvent& e) { server_->publish("depth:" + e.kind, protocol::encode_depth(e)); };
+  emit.depth = [this](const protocol::DepthEvent& e) {
+    server_->publish("depth:" + e.kind, protocol::encode_depth(e));
+  };
   pipeline_->set_emitter(std::move(emit));
 }
 
@@ -174,7 +177,9 @@ void Daemon::start() {
       spdlog::info("device {}: {}", device_state_name(s), message);
       if (line_) line_->camera(s == DeviceState::kStreaming);
       protocol::Message m;
-      m.meta = {{"event", "device"}, {"state", device_state_name(s)}, {"message", message},
+      m.meta = {{"event", "device"},
+                {"state", device_state_name(s)},
+                {"message", message},
                 {"timestamp_ns", protocol::monotonic_ns()}};
       server_->publish("device", m);
     };
@@ -235,7 +240,8 @@ nlohmann::json Daemon::status() const {
   s["source"] = source_->describe();
   s["simulated"] = source_->simulated();
   s["source_counters"] = source_->counters();
-  s["device"] = {{"state", device_state_name(device_state_)}, {"message", device_message_}, {"changes", device_changes_}};
+  s["device"] = {
+      {"state", device_state_name(device_state_)}, {"message", device_message_}, {"changes", device_changes_}};
   s["clients"] = server_->status();
   s["uptime_s"] = static_cast<double>(protocol::monotonic_ns() - started_ns_) * 1e-9;
   s["last_reload"] = last_reload_;
@@ -265,21 +271,24 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
       roi.y1 = static_cast<int>(protocol::get_int(a, "y1", 0, kHeight));
       pipeline_->set_roi(roi);
     } else if (req.cmd == "set_candidates") {
-      pipeline_->set_candidates(protocol::get_string_list(a, "materials", protocol::kMaxMaterials, protocol::kMaxNameBytes));
+      pipeline_->set_candidates(
+          protocol::get_string_list(a, "materials", protocol::kMaxMaterials, protocol::kMaxNameBytes));
     } else if (req.cmd == "load_table") {
       const std::string path = table_in(options_.table_dir, protocol::get_string(a, "path", protocol::kMaxTextBytes));
       std::shared_ptr<const ExemplarTable> table;
       try {
         table = load_table_file(path);
       } catch (const std::exception& e) {
-        return failure(req.id, codes::kFailed, "table \"" + path + "\" not loaded (the old one keeps serving): " + e.what());
+        return failure(req.id, codes::kFailed,
+                       "table \"" + path + "\" not loaded (the old one keeps serving): " + e.what());
       }
       pipeline_->set_table(table, path);
       r.result = {{"materials", table->materials()}};
     } else if (req.cmd == "trigger") {
       if (line_)
-        return failure(req.id, codes::kInvalidArgument,
-                       "the light barrier triggers this sorting line; a trigger from a client would take an item's burst");
+        return failure(
+            req.id, codes::kInvalidArgument,
+            "the light barrier triggers this sorting line; a trigger from a client would take an item's burst");
       const int burst = a.contains("burst") ? static_cast<int>(protocol::get_int(a, "burst", 1, 300)) : 0;
       r.result = {{"trigger", pipeline_->trigger(burst)}};
     } else {

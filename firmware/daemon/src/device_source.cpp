@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// DeviceSource: opens the Kinect v2 through the driver, streams its frames, and reopens it after it goes away.
 #include "tofmat/daemon/device_source.hpp"
 
 #include <spdlog/spdlog.h>
@@ -68,9 +70,8 @@ void DeviceSource::stream(const SourceCallbacks& callbacks, const std::atomic<bo
     std::lock_guard<std::mutex> lock(mutex_);
     ++opens_;
   }
-  callbacks.state(DeviceState::kStreaming,
-                  "streaming from " + device.describe() + " (serial " + identity.serial + ", firmware " +
-                      identity.firmware + ")");
+  callbacks.state(DeviceState::kStreaming, "streaming from " + device.describe() + " (serial " + identity.serial +
+                                               ", firmware " + identity.firmware + ")");
   while (!stop.load()) {
     device.pump(100);
     std::lock_guard<std::mutex> lock(mutex_);

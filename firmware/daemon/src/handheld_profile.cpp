@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The handheld profile: a person moves the target through the depth range in
 // front of the camera; every frame adds the ROI's features to their depth
 // bins and the growing partial query is matched (Eq. (12)), as the paper's
@@ -12,7 +13,7 @@ namespace {
 class HandheldProfile : public Profile {
  public:
   HandheldProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
-      : config_(c), table_(table), matcher_(table, candidate_indices(*table, c.candidates), c.backend) {}
+      : config_(c), table_(std::move(table)), matcher_(table_, candidate_indices(*table_, c.candidates), c.backend) {}
 
   std::optional<PixelRegion> input_region() const override { return config_.roi; }
 

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// LogLimiter: the per-kind burst and interval that decide whether a log line is written or counted.
 #include "tofmat/daemon/log_limiter.hpp"
 
 namespace tofmat::daemon {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd: the daemon's entry point. Signals are taken synchronously on this
 // thread (blocked everywhere else): SIGTERM/SIGINT stop cleanly, SIGHUP
 // reloads the table.
@@ -23,7 +24,7 @@ int main(int argc, char** argv) {
   sigemptyset(&signals);
   for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&signals, s);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);  // before any thread starts: they inherit it
-  ::signal(SIGPIPE, SIG_IGN);                      // a client gone mid-send is an error return, not a signal
+  ::signal(SIGPIPE, SIG_IGN);                     // a client gone mid-send is an error return, not a signal
 
   std::unique_ptr<tofmat::daemon::Daemon> daemon;
   try {

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// tofmatd's flags and configuration file parsed with CLI11 into a CommandLine, with every value checked.
 #include "tofmat/daemon/options.hpp"
 
 #include <fcntl.h>
@@ -9,7 +11,6 @@
 
 #include <cerrno>
 #include <cstdio>
-#include <cstring>
 
 #include <filesystem>
 #include <fstream>
@@ -51,7 +52,8 @@ constexpr std::size_t kMaxTokenFileBytes = 4096;
 
 std::string read_token(const std::string& flag, const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
-  if (fd < 0) throw CLI::ValidationError(flag, "cannot read \"" + path + "\": " + std::strerror(errno));
+  if (fd < 0)
+    throw CLI::ValidationError(flag, "cannot read \"" + path + "\": " + std::generic_category().message(errno));
   struct stat st {};
   std::string text;
   const bool ok = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_size <= static_cast<off_t>(kMaxTokenFileBytes);
@@ -62,16 +64,15 @@ std::string read_token(const std::string& flag, const std::string& path) {
   }
   ::close(fd);
   if (!ok)
-    throw CLI::ValidationError(flag, "\"" + path + "\" is not a regular file of at most " +
-                                         std::to_string(kMaxTokenFileBytes) + " bytes");
+    throw CLI::ValidationError(
+        flag, "\"" + path + "\" is not a regular file of at most " + std::to_string(kMaxTokenFileBytes) + " bytes");
   if ((st.st_mode & 0007) != 0)
-    throw CLI::ValidationError(flag, "\"" + path + "\" can be read or written by other users (mode " +
-                                         [&] {
-                                           char m[8];
-                                           std::snprintf(m, sizeof m, "%04o", static_cast<unsigned>(st.st_mode & 07777));
-                                           return std::string(m);
-                                         }() +
-                                         "): chmod o-rwx it");
+    throw CLI::ValidationError(
+        flag, "\"" + path + "\" can be read or written by other users (mode " + [&] {
+          char m[8];
+          std::snprintf(m, sizeof m, "%04o", static_cast<unsigned>(st.st_mode & 07777));
+          return std::string(m);
+        }() + "): chmod o-rwx it");
   std::string token = text.substr(0, text.find('\n'));
   const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
   while (!token.empty() && blank(token.back())) token.pop_back();
@@ -105,9 +106,12 @@ std::string check_config_file(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     std::string path;
-    if (a == "--config" && i + 1 < argc) path = argv[i + 1];
-    else if (a.rfind("--config=", 0) == 0) path = a.substr(9);
-    else continue;
+    if (a == "--config" && i + 1 < argc)
+      path = argv[i + 1];
+    else if (a.rfind("--config=", 0) == 0)
+      path = a.substr(9);
+    else
+      continue;
     named = path;
     std::error_code ec;
     const auto st = fs::status(path, ec);
@@ -115,7 +119,8 @@ std::string check_config_file(int argc, char** argv) {
     if (!fs::is_regular_file(st)) throw CLI::ValidationError("--config", "\"" + path + "\" is not a regular file");
     const auto size = fs::file_size(path, ec);
     if (ec || size > kMaxConfigBytes)
-      throw CLI::ValidationError("--config", "\"" + path + "\" is larger than " + std::to_string(kMaxConfigBytes / 1024) +
+      throw CLI::ValidationError("--config", "\"" + path + "\" is larger than " +
+                                                 std::to_string(kMaxConfigBytes / 1024) +
                                                  " KiB: not a tofmatd configuration");
   }
   return named;
@@ -129,7 +134,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
   o.source_options.sim_data_dir = installed_sim_data_dir();
   std::string profile = o.profile.name, backend = "fixed", roi, tcp, token_file, control_token_file, control_group,
-      socket_mode = "0660";
+              socket_mode = "0660";
   int idle_timeout_s = o.server.idle_timeout_ms / 1000;
   std::vector<std::string> candidates;
 
@@ -139,14 +144,16 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   // A key that is not a flag is an error (a misspelling would otherwise be
   // ignored and its setting silently not applied).
   app.allow_config_extras(CLI::config_extras_mode::error);
-  app.add_option("--source", o.source, "kinect[:SERIAL] (the camera) | sim[:SCENE[,key=value...]] | replay:FILE[,loop=0|1][,pace=0|1]")
+  app.add_option("--source", o.source,
+                 "kinect[:SERIAL] (the camera) | sim[:SCENE[,key=value...]] | replay:FILE[,loop=0|1][,pace=0|1]")
       ->capture_default_str();
   app.add_option("--profile", profile, "handheld | segmentation | sorting")->capture_default_str();
   app.add_option("--table", o.table, "exemplar table (.tmx, or a folder of <material>.npy)")->required();
   app.add_option("--table-dir", o.table_dir,
                  "folder a client's load_table may read from (default: the folder holding --table)");
   app.add_option("--socket", o.server.socket_path, "Unix socket path (\"\" for none)")->capture_default_str();
-  app.add_option("--socket-mode", socket_mode, "permissions of the Unix socket (octal, at most 0660)")->capture_default_str();
+  app.add_option("--socket-mode", socket_mode, "permissions of the Unix socket (octal, at most 0660)")
+      ->capture_default_str();
   app.add_option("--control-group", control_group,
                  "Unix clients in this group may control (profile, ROI, candidates, trigger, reset, load_table); "
                  "the daemon's user and root always may, everyone else reads only");
@@ -167,7 +174,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       [](std::string& text) {
         double v = 0;
         return CLI::detail::lexical_cast(text, v) && v >= 1.0 && v <= 1e6 ? std::string()
-                                                                            : "must be a number from 1 to 1000000";
+                                                                          : "must be a number from 1 to 1000000";
       },
       "RATE in [1 - 1000000]");
   app.add_option("--peer-request-rate", o.server.peer_request_rate,
@@ -196,7 +203,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--queue-frames", o.queue_frames, "frames waiting for processing before the oldest is dropped")
       ->capture_default_str()
       ->check(CLI::Range(1, 64));
-  app.add_option("--max-clients", o.server.max_clients, "Unix connections at once")->capture_default_str()->check(CLI::Range(1, 1024));
+  app.add_option("--max-clients", o.server.max_clients, "Unix connections at once")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1024));
   app.add_option("--sim-data", o.source_options.sim_data_dir,
                  "simulator device profiles and material libraries (default: installed beside tofmatd)")
       ->capture_default_str();
@@ -213,7 +222,8 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                  "chip); none by default")
       ->check(CLI::IsMember({"libgpiod", "sim"}));
   app.add_option("--line-barrier", line.barrier, "the light barrier's input, CHIP:LINE (chip label or /dev path)");
-  app.add_flag("--line-barrier-active-low", line.barrier_active_low, "the barrier's line is low while the beam is interrupted");
+  app.add_flag("--line-barrier-active-low", line.barrier_active_low,
+               "the barrier's line is low while the beam is interrupted");
   app.add_option("--line-barrier-bias", line.barrier_bias, "as-is | disabled | pull-up | pull-down")
       ->capture_default_str()
       ->check(CLI::IsMember({"as-is", "disabled", "pull-up", "pull-down"}));
@@ -238,7 +248,8 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                  "for each; position from the barrier)");
   app.add_option("--line-reject", line.reject,
                  "the outlet that takes rejects (default: none, they ride to the belt's end)");
-  app.add_option("--line-alarm", line.alarm, "an alarm output, CHIP:LINE: on while the camera is lost or labels come late");
+  app.add_option("--line-alarm", line.alarm,
+                 "an alarm output, CHIP:LINE: on while the camera is lost or labels come late");
   app.add_option("--line-margin-ms", line.margin_ms, "a label must come this long before its outlet fires")
       ->capture_default_str()
       ->check(non_negative);
@@ -274,10 +285,12 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                               !line.encoder_a.empty() || !line.encoder_b.empty() || !line.alarm.empty() ||
                               !line.reject.empty();
     if (line.gpio.empty() && (line_options || button.enabled()))
-      throw CLI::ValidationError("--gpio", "the sorting line's and the reset button's options need --gpio libgpiod (or sim)");
+      throw CLI::ValidationError("--gpio",
+                                 "the sorting line's and the reset button's options need --gpio libgpiod (or sim)");
     if (!line.gpio.empty() && !line_options && !button.enabled())
-      throw CLI::ValidationError("--gpio", "--gpio drives a sorting line (--line-barrier ...) or a reset button "
-                                           "(--reset-button): give one of them");
+      throw CLI::ValidationError("--gpio",
+                                 "--gpio drives a sorting line (--line-barrier ...) or a reset button "
+                                 "(--reset-button): give one of them");
     if (line_options && line.barrier.empty())
       throw CLI::ValidationError("--line-barrier", "the sorting line needs its light barrier, CHIP:LINE");
     o.server.tcp = tcp;
@@ -296,12 +309,13 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.server.idle_timeout_ms = idle_timeout_s * 1000;
     std::size_t used = 0;
     const unsigned long mode = socket_mode.empty() ? 01000 : std::stoul(socket_mode, &used, 8);
-    if (used != socket_mode.size() || mode > 0777) throw CLI::ValidationError("--socket-mode", "expected octal like 0660");
+    if (used != socket_mode.size() || mode > 0777)
+      throw CLI::ValidationError("--socket-mode", "expected octal like 0660");
     // Anyone who can connect may read the labels: that is the group's
     // business, never every user's (and nobody executes a socket).
     if ((mode & ~0660ul) != 0)
-      throw CLI::ValidationError("--socket-mode", "\"" + socket_mode +
-                                                      "\" is wider than 0660: give access through the socket's group");
+      throw CLI::ValidationError("--socket-mode",
+                                 "\"" + socket_mode + "\" is wider than 0660: give access through the socket's group");
     o.server.socket_mode = static_cast<unsigned>(mode);
   } catch (const CLI::ConfigError& e) {
     // (CLI11's text names the key, not the file: say which file.)

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Pipeline: the processing thread's frame loop, and the commands that change its profile, ROI, candidates or table.
 #include "tofmat/daemon/pipeline.hpp"
 
 #include <spdlog/spdlog.h>
@@ -8,8 +10,8 @@
 
 namespace tofmat::daemon {
 
-Pipeline::Pipeline(std::shared_ptr<const ExemplarTable> table, std::string table_path, ProfileConfig config,
-                   std::size_t queue_frames)
+Pipeline::Pipeline(std::shared_ptr<const ExemplarTable> table, const std::string& table_path,
+                   const ProfileConfig& config, std::size_t queue_frames)
     : queue_(queue_frames) {
   apply(config, std::move(table), table_path);
 }
@@ -74,8 +76,7 @@ void Pipeline::run(const std::atomic<bool>& stop) {
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
         process_ms_ewma_ = processed_ + errors_ <= 1 ? ms : 0.9 * process_ms_ewma_ + 0.1 * ms;
         recent_ns_.push_back(frame->arrival_ns);
-        while (!recent_ns_.empty() && recent_ns_.front() + 1'000'000'000ull < frame->arrival_ns)
-          recent_ns_.pop_front();
+        while (!recent_ns_.empty() && recent_ns_.front() + 1'000'000'000ull < frame->arrival_ns) recent_ns_.pop_front();
       }
       publish_wanted_region();  // a burst may have ended
     }

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Backend names, candidate lookup, profile configuration checks, and the factory of the scene profiles.
 #include "tofmat/daemon/profile.hpp"
 
 #include <stdexcept>
@@ -8,7 +10,7 @@ namespace tofmat::daemon {
 
 std::unique_ptr<Profile> make_handheld(const ProfileConfig&, std::shared_ptr<const ExemplarTable>);
 std::unique_ptr<Profile> make_segmentation(const ProfileConfig&, std::shared_ptr<const ExemplarTable>);
-std::unique_ptr<Profile> make_sorting(const ProfileConfig&, std::shared_ptr<const ExemplarTable>);
+std::unique_ptr<Profile> make_sorting(const ProfileConfig&, const std::shared_ptr<const ExemplarTable>&);
 
 Backend parse_backend(const std::string& name) {
   if (name == "fixed") return Backend::kFixed;
@@ -57,7 +59,7 @@ std::unique_ptr<Profile> make_profile(const ProfileConfig& config, std::shared_p
   validate(config, *table);
   if (config.name == "handheld") return make_handheld(config, std::move(table));
   if (config.name == "segmentation") return make_segmentation(config, std::move(table));
-  return make_sorting(config, std::move(table));
+  return make_sorting(config, table);
 }
 
 }  // namespace tofmat::daemon

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Writing, reading and checking raw-stream recordings, and the replay source that plays them back.
 #include "tofmat/daemon/recording.hpp"
 
 #include <algorithm>
@@ -50,13 +52,15 @@ Header parse_header(const std::uint8_t* h) {
   if (width != static_cast<std::uint32_t>(kWidth) || height != static_cast<std::uint32_t>(kHeight))
     throw FormatError("recording is " + std::to_string(width) + " x " + std::to_string(height) +
                       ", expected the Kinect v2's 512 x 424");
-  if ((flags & ~kRecordingFlagSimulated) != 0) throw FormatError("recording has unknown flags " + std::to_string(flags));
+  if ((flags & ~kRecordingFlagSimulated) != 0)
+    throw FormatError("recording has unknown flags " + std::to_string(flags));
   Header header;
   header.simulated = (flags & kRecordingFlagSimulated) != 0;
   header.p0_rad.resize(3 * kPixels);
   std::memcpy(header.p0_rad.data(), h + 20, header.p0_rad.size() * sizeof(float));
   for (float v : header.p0_rad)
-    if (!std::isfinite(v) || std::abs(v) > 1000.0f) throw FormatError("recording holds a P0 correction that is not a finite phase");
+    if (!std::isfinite(v) || std::abs(v) > 1000.0f)
+      throw FormatError("recording holds a P0 correction that is not a finite phase");
   return header;
 }
 
@@ -84,7 +88,8 @@ RecordingWriter::RecordingWriter(const std::string& path, const std::vector<floa
 }
 
 void RecordingWriter::write(const RawFrame& frame) {
-  if (frame.raw.size() != 9 * kPixels) throw std::invalid_argument("recording: a frame must hold 9 x 512 x 424 samples");
+  if (frame.raw.size() != 9 * kPixels)
+    throw std::invalid_argument("recording: a frame must hold 9 x 512 x 424 samples");
   if (frames_ == 0) first_ns_ = frame.arrival_ns;
   out_.write(kFrameMagic, 4);
   put_u64(out_, frame.sequence);
@@ -184,7 +189,8 @@ class ReplaySource : public Source {
       if (paced_) {
         const auto due = start + std::chrono::nanoseconds(last_ns);
         while (!stop.load() && std::chrono::steady_clock::now() < due)
-          std::this_thread::sleep_until(std::min(due, std::chrono::steady_clock::now() + std::chrono::milliseconds(100)));
+          std::this_thread::sleep_until(
+              std::min(due, std::chrono::steady_clock::now() + std::chrono::milliseconds(100)));
       }
       RawFrame frame;
       frame.sequence = f->sequence;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// RegionMatcher: decode, depth-bin accumulation and classification of a pixel region on the fixed-point or float path.
 #include "tofmat/daemon/region_matcher.hpp"
 
 #include <algorithm>
@@ -24,9 +26,9 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
   if (backend_ == Backend::kFixed)
-    fixed_ = std::make_unique<FixedClassifier>(table_, candidates);
+    fixed_ = std::make_unique<FixedClassifier>(table_, std::move(candidates));
   else
-    float_ = std::make_unique<FloatClassifier>(table_, candidates);
+    float_ = std::make_unique<FloatClassifier>(table_, std::move(candidates));
 }
 
 RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelRegion& region) const {

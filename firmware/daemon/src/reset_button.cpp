@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// ResetButton: the thread that debounces the button's GPIO line and resets the accumulation on a press.
 #include "tofmat/daemon/reset_button.hpp"
 
 #include <poll.h>
@@ -26,9 +28,7 @@ ResetButton::ResetButton(const ButtonOptions& options, std::shared_ptr<gpio::Bac
                                    {options.active_low, gpio::parse_bias(options.bias)}, "tofmatd-button");
 }
 
-void ResetButton::wake() {
-  wake_fd_.wake();
-}
+void ResetButton::wake() { wake_fd_.wake(); }
 
 void ResetButton::run(const std::atomic<bool>& stop) {
   std::vector<gpio::EdgeEvent> edges;

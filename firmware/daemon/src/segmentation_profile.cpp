@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The segmentation profile: a scene of several materials at once, each pixel
 // labelled from one position (m = 1: the two Eq. (10) features at the bin of
 // the pixel's own depth) among a short candidate list. The features are
@@ -92,8 +93,8 @@ class SegmentationProfile : public Profile {
         f0 = mean_[0].data();
         f1 = mean_[1].data();
       }
-      pixels_.classify_range(frame_.combined_q8.data() + at(y0), frame_.flags.data() + at(y0), f0 + at(y0),
-                             f1 + at(y0), at(y1) - at(y0), (smooth ? unclean_.data() : labels) + at(y0));
+      pixels_.classify_range(frame_.combined_q8.data() + at(y0), frame_.flags.data() + at(y0), f0 + at(y0), f1 + at(y0),
+                             at(y1) - at(y0), (smooth ? unclean_.data() : labels) + at(y0));
     });
     if (!smooth) return;
     workers_.run([&](int b) {
@@ -128,8 +129,8 @@ class SegmentationProfile : public Profile {
   FixedThresholds thresholds_;
   BandWorkers workers_;
   FixedDecodedFrame frame_;
-  std::vector<BoxMeanFilter> box_;         // per band
-  std::vector<MajorityFilter> majority_;   // per band
+  std::vector<BoxMeanFilter> box_;                 // per band
+  std::vector<MajorityFilter> majority_;           // per band
   std::array<std::vector<std::int32_t>, 2> mean_;  // the smoothed features (Q16 mm)
   std::vector<std::uint8_t> unclean_;              // the labels before the majority filter
   std::vector<std::string> names_;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Server: the poll loop over sockets, the handshake, subscriptions, commands and each client's bounded queue.
 #include "tofmat/daemon/server.hpp"
 
 #include <netinet/in.h>
@@ -44,22 +46,24 @@ AccessOptions access_options(const ServerOptions& o) {
   return a;
 }
 
-Bytes encoded(const protocol::Message& m) { return std::make_shared<const std::vector<std::uint8_t>>(protocol::encode(m)); }
+Bytes encoded(const protocol::Message& m) {
+  return std::make_shared<const std::vector<std::uint8_t>>(protocol::encode(m));
+}
 
 }  // namespace
 
 bool valid_stream(const std::string& s) {
-  return s == "labels" || s == "label_map" || s == "device" || s == "depth:80" || s == "depth:16" ||
-         s == "depth:120" || s == "depth:combined" || s == "sort" || s == "line" || s == "reset";
+  return s == "labels" || s == "label_map" || s == "device" || s == "depth:80" || s == "depth:16" || s == "depth:120" ||
+         s == "depth:combined" || s == "sort" || s == "line" || s == "reset";
 }
 
 struct Server::Connection {
   std::uint64_t id = 0;
   protocol::Fd fd;
-  Peer peer;  // (peer.tcp: which socket it came in on)
+  Peer peer;                // (peer.tcp: which socket it came in on)
   Role role = Role::kRead;  // Unix: from the peer at accept; TCP: from the token at hello
-  bool ready = false;    // hello done
-  bool closing = false;  // close once the queue is written (a refused hello's reply)
+  bool ready = false;       // hello done
+  bool closing = false;     // close once the queue is written (a refused hello's reply)
   std::uint64_t accepted_ns = 0;
   std::uint64_t last_request_ns = 0;   // the last request handled (hello included)
   std::uint64_t last_progress_ns = 0;  // the last time its queue was empty or a send took bytes
@@ -74,7 +78,7 @@ struct Server::Connection {
   std::set<std::string> streams;
   std::uint64_t dropped = 0;
   bool dead = false;
-  bool more = false;  // requests may be left to handle from an earlier read
+  bool more = false;            // requests may be left to handle from an earlier read
   std::uint64_t resume_ns = 0;  // with more: its peer's request rate holds them until then
 };
 
@@ -100,9 +104,10 @@ Server::Server(ServerOptions options, Handler handler)
     tcp_ = protocol::listen_tcp(a.host, any_port ? 0 : a.port);
     tcp_port_ = protocol::local_port(tcp_.get());
     if (a.host != "localhost" && a.host.rfind("127.", 0) != 0)
-      spdlog::warn("TCP listens on {}: reachable from the network, where the token is all that stands between the "
-                   "box and anyone (use 127.0.0.1 and a tunnel unless you mean it)",
-                   options_.tcp);
+      spdlog::warn(
+          "TCP listens on {}: reachable from the network, where the token is all that stands between the "
+          "box and anyone (use 127.0.0.1 and a tunnel unless you mean it)",
+          options_.tcp);
   }
   if (!unix_ && !tcp_) throw std::invalid_argument("no socket to listen on (give a socket path or tcp)");
 }
@@ -115,9 +120,7 @@ Server::~Server() {
     ::unlink(options_.socket_path.c_str());
 }
 
-void Server::wake() {
-  wake_fd_.wake();
-}
+void Server::wake() { wake_fd_.wake(); }
 
 void Server::publish(const std::string& stream, const protocol::Message& message) {
   if (!has_subscribers(stream)) return;
@@ -223,7 +226,8 @@ void Server::enqueue(Connection& c, Bytes bytes, bool event) {
   // Over budget: drop the oldest events (never the message half written, never
   // a hello or reply: a client waits for those). A client whose queue is full
   // of replies does not read what it asked for: it is closed.
-  while (!c.out.empty() && (c.out_bytes + bytes->size() > options_.max_queue_bytes || c.out.size() >= kMaxQueuedMessages)) {
+  while (!c.out.empty() &&
+         (c.out_bytes + bytes->size() > options_.max_queue_bytes || c.out.size() >= kMaxQueuedMessages)) {
     std::size_t victim = c.out_offset > 0 ? 1 : 0;
     while (victim < c.out.size() && !c.out[victim].event) ++victim;
     if (victim >= c.out.size()) {
@@ -287,7 +291,8 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       return refuse(protocol::codes::kVersion,
                     "this daemon speaks protocol version " + std::to_string(protocol::kProtocolVersion), true);
     if (c.peer.tcp) {
-      const std::string token = args.contains("token") && args["token"].is_string() ? args["token"].get<std::string>() : "";
+      const std::string token =
+          args.contains("token") && args["token"].is_string() ? args["token"].get<std::string>() : "";
       std::uint64_t wait_ms = 0;
       switch (access_.check_token(c.peer.address, token, protocol::monotonic_ns(), wait_ms)) {
         case ClientAccess::Verdict::kThrottled:
@@ -298,7 +303,8 @@ void Server::handle(Connection& c, const protocol::Message& m) {
                         true);
         case ClientAccess::Verdict::kWrong:
           ++auth_failures_;
-          note("auth", spdlog::level::warn, "client " + std::to_string(c.id) + " (" + c.peer.key() + "): wrong or missing token");
+          note("auth", spdlog::level::warn,
+               "client " + std::to_string(c.id) + " (" + c.peer.key() + "): wrong or missing token");
           return refuse(protocol::codes::kAuth, "a TCP client must send the daemon's token", true);
         case ClientAccess::Verdict::kControl: c.role = Role::kControl; break;
         case ClientAccess::Verdict::kRead: c.role = Role::kRead; break;
@@ -325,9 +331,9 @@ void Server::handle(Connection& c, const protocol::Message& m) {
   if (req.cmd == "subscribe" || req.cmd == "unsubscribe") {
     std::vector<std::string> streams;
     try {
-      streams = req.args.contains("streams") ? protocol::get_string_list(req.args, "streams", kMaxSubscriptions,
-                                                                         protocol::kMaxNameBytes)
-                                             : std::vector<std::string>{};
+      streams = req.args.contains("streams")
+                    ? protocol::get_string_list(req.args, "streams", kMaxSubscriptions, protocol::kMaxNameBytes)
+                    : std::vector<std::string>{};
     } catch (const protocol::ProtocolError& e) {
       return refuse(protocol::codes::kInvalidArgument, e.what(), false);
     }
@@ -529,8 +535,9 @@ void Server::run(const std::atomic<bool>& stop) {
         ++it;
         continue;
       }
-      note("disconnect", spdlog::level::info,
-           "client " + std::to_string(c.id) + " disconnected (" + std::to_string(c.dropped) + " events dropped for it)");
+      note(
+          "disconnect", spdlog::level::info,
+          "client " + std::to_string(c.id) + " disconnected (" + std::to_string(c.dropped) + " events dropped for it)");
       access_.release(c.peer);
       it = connections_.erase(it);
       changed = true;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The `sim` source: parsing its scene spec, the scripted scenes, and the simulated Kinect v2 or belt behind the driver.
 #include "tofmat/daemon/sim_source.hpp"
 
 #include <pthread.h>
@@ -119,7 +121,8 @@ SimSpec parse_sim_spec(const std::string& text) {
     } else if (key == "replug_ms") {
       s.replug_ms = to_int(key, value, 0, 3600000);
     } else if (key == "presses") {
-      for (const auto& f : split(value, '+')) s.presses.push_back(static_cast<std::uint64_t>(to_int(key, f, 0, 1 << 30)));
+      for (const auto& f : split(value, '+'))
+        s.presses.push_back(static_cast<std::uint64_t>(to_int(key, f, 0, 1 << 30)));
       if (s.presses.empty() || s.presses.size() > 64)
         throw std::invalid_argument("sim: presses= needs 1 to 64 frame numbers joined by +");
     } else if (key == "speed") {
@@ -147,7 +150,8 @@ SimSpec parse_sim_spec(const std::string& text) {
 }
 
 sim::Scene sim_scene_at(const SimSpec& spec, std::uint64_t frame) {
-  if (spec.scene == "static") return sim::Scene::centred_target(spec.materials[0], spec.depth_mm, spec.yaw_deg, spec.size);
+  if (spec.scene == "static")
+    return sim::Scene::centred_target(spec.materials[0], spec.depth_mm, spec.yaw_deg, spec.size);
   if (spec.scene == "regions") {
     // A 3 x 2 grid of rectangles with a margin, depths spread near..far.
     sim::Scene scene;
@@ -160,8 +164,9 @@ sim::Scene sim_scene_at(const SimSpec& spec, std::uint64_t frame) {
       t.x1 = t.x0 + 152;
       t.y0 = 32 + row * 188;
       t.y1 = t.y0 + 172;
-      t.depth_mm = n > 1 ? spec.near_mm + (spec.far_mm - spec.near_mm) * static_cast<double>(i) / static_cast<double>(n - 1)
-                         : spec.depth_mm;
+      t.depth_mm =
+          n > 1 ? spec.near_mm + (spec.far_mm - spec.near_mm) * static_cast<double>(i) / static_cast<double>(n - 1)
+                : spec.depth_mm;
       t.yaw_deg = spec.yaw_deg;
       scene.targets.push_back(t);
     }

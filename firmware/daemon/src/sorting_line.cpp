@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// SortingLine: outlet specs, the GPIO backend, and the line's thread running the Sorter on barrier edges and labels.
 #include "tofmat/daemon/sorting_line.hpp"
 
 #include <poll.h>
@@ -32,8 +34,8 @@ std::shared_ptr<gpio::Backend> make_gpio_backend(const std::string& name) {
 OutletOptions parse_outlet(const std::string& text) {
   const auto colon = text.find(':');
   if (colon == std::string::npos || colon == 0)
-    throw std::invalid_argument("outlet \"" + text +
-                                "\": expected NAME:position=MM,line=CHIP:LINE[,materials=a+b][,pulse=MS][,active_low=1]");
+    throw std::invalid_argument(
+        "outlet \"" + text + "\": expected NAME:position=MM,line=CHIP:LINE[,materials=a+b][,pulse=MS][,active_low=1]");
   OutletOptions o;
   o.outlet.name = text.substr(0, colon);
   bool has_position = false, has_line = false;
@@ -96,7 +98,8 @@ SortingLine::SortingLine(const LineOptions& options, std::shared_ptr<gpio::Backe
   const std::set<std::string> known(materials.begin(), materials.end());
   for (std::size_t k = 0; k < outlets.size(); ++k) {
     for (const auto& m : outlets[k].outlet.materials)
-      if (!known.count(m)) bad("outlet \"" + outlets[k].outlet.name + "\" takes \"" + m + "\", which the table does not hold");
+      if (!known.count(m))
+        bad("outlet \"" + outlets[k].outlet.name + "\" takes \"" + m + "\", which the table does not hold");
     if (outlets[k].outlet.name == options.reject) config.reject = k;
     config.outlets.push_back(outlets[k].outlet);
   }
@@ -150,9 +153,7 @@ SortingLine::SortingLine(const LineOptions& options, std::shared_ptr<gpio::Backe
 
 SortingLine::~SortingLine() = default;
 
-void SortingLine::wake() {
-  wake_fd_.wake();
-}
+void SortingLine::wake() { wake_fd_.wake(); }
 
 void SortingLine::label(const protocol::LabelEvent& e) {
   if (!e.trigger || e.state == "tracking") return;
@@ -192,10 +193,16 @@ void SortingLine::handle_inbox(std::uint64_t now_ns) {
 
 void SortingLine::publish_sort(const line::SortEvent& e) {
   protocol::Message m;
-  m.meta = {{"event", "sort"},          {"state", e.state},           {"item", e.item},
-            {"trigger_ns", e.trigger_ns}, {"material", e.material},     {"distance", e.distance},
-            {"outlet", e.outlet},         {"reason", line::reason_name(e.reason)},
-            {"decided_ns", e.decided_ns}, {"margin_ms", e.margin_ms}};
+  m.meta = {{"event", "sort"},
+            {"state", e.state},
+            {"item", e.item},
+            {"trigger_ns", e.trigger_ns},
+            {"material", e.material},
+            {"distance", e.distance},
+            {"outlet", e.outlet},
+            {"reason", line::reason_name(e.reason)},
+            {"decided_ns", e.decided_ns},
+            {"margin_ms", e.margin_ms}};
   if (e.fire_ns) m.meta["fire_ns"] = *e.fire_ns;  // (absent: no pusher, or the belt stands)
   if (e.truth) m.meta["truth"] = *e.truth;        // (simulated items only)
   if (hooks_.publish) hooks_.publish(m, "sort");
@@ -261,24 +268,24 @@ void SortingLine::run(const std::atomic<bool>& stop) {
     sorter_->poll(now);
     // (What status() reports, copied here; the JSON is built when asked for.)
     std::lock_guard<std::mutex> lock(status_mutex_);
-    snapshot_ = {sorter_->counts(), sorter_->on_belt(), sorter_->alarm_on(), motion_->speed_mm_s(now),
-                 filter_.glitches(), filter_.bounces(), encoder_ ? encoder_->quadrature().errors() : 0};
+    snapshot_ = {sorter_->counts(),
+                 sorter_->on_belt(),
+                 sorter_->alarm_on(),
+                 motion_->speed_mm_s(now),
+                 filter_.glitches(),
+                 filter_.bounces(),
+                 encoder_ ? encoder_->quadrature().errors() : 0};
   }
 }
 
 nlohmann::json SortingLine::status() const {
   std::lock_guard<std::mutex> lock(status_mutex_);
   const Snapshot& n = snapshot_;
-  nlohmann::json s = {{"gpio", backend_->name()},
-                      {"items", n.counts.items},
-                      {"sorted", n.counts.sorted},
-                      {"rejected", n.counts.rejected},
-                      {"late", n.counts.late},
-                      {"faults", n.counts.faults},
-                      {"on_belt", n.on_belt},
-                      {"alarm", n.alarm},
-                      {"speed_mm_s", n.speed_mm_s},
-                      {"barrier_glitches", n.glitches},
+  nlohmann::json s = {{"gpio", backend_->name()},    {"items", n.counts.items},
+                      {"sorted", n.counts.sorted},   {"rejected", n.counts.rejected},
+                      {"late", n.counts.late},       {"faults", n.counts.faults},
+                      {"on_belt", n.on_belt},        {"alarm", n.alarm},
+                      {"speed_mm_s", n.speed_mm_s},  {"barrier_glitches", n.glitches},
                       {"barrier_bounces", n.bounces}};
   if (encoder_) s["encoder_errors"] = n.encoder_errors;
   return s;

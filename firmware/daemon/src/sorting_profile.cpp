@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The sorting profile: an item on the belt passes the ROI; a trigger (the
 // light barrier's GPIO line, or a socket command) starts a burst of frames
 // that are classified once. Between bursts the frames are left alone:
@@ -21,7 +22,7 @@ namespace {
 
 class SortingProfile : public Profile {
  public:
-  SortingProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
+  SortingProfile(const ProfileConfig& c, const std::shared_ptr<const ExemplarTable>& table)
       : config_(c),
         matcher_(table, candidate_indices(*table, c.candidates), c.backend),
         frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend) {}
@@ -102,8 +103,8 @@ class SortingProfile : public Profile {
 
 }  // namespace
 
-std::unique_ptr<Profile> make_sorting(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table) {
-  return std::make_unique<SortingProfile>(c, std::move(table));
+std::unique_ptr<Profile> make_sorting(const ProfileConfig& c, const std::shared_ptr<const ExemplarTable>& table) {
+  return std::make_unique<SortingProfile>(c, table);
 }
 
 }  // namespace tofmat::daemon

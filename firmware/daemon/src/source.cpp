@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// make_source: the frame source named by a `--source` spec (kinect, sim or replay).
 #include "tofmat/daemon/source.hpp"
 
 #include <stdexcept>
@@ -26,7 +28,7 @@ std::unique_ptr<Source> make_source(const std::string& spec, const SourceOptions
   }
   if (kind == "kinect") {
 #ifdef TOFMAT_DAEMON_WITH_LIBUSB
-    const std::string serial = rest;
+    const std::string& serial = rest;
     return std::make_unique<DeviceSource>(
         serial.empty() ? "Kinect v2 (libusb)" : "Kinect v2 " + serial + " (libusb)",
         [serial] { return kinect::open_libusb_kinect(serial); }, nullptr, options.retry_ms,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Internal: the small text parsers of tofmatd's source and outlet specs, and ms to ns
 // ("sim:belt,speed=500,...", "wood:position=600,materials=a+b,...").
 #pragma once

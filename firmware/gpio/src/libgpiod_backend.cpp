@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The libgpiod v1 backend (libgpiod 1.6: Debian 12, Raspberry Pi OS
 // bookworm). Each requested line keeps its own chip handle open, so lines
 // are independent objects. v1 has no debounce and reports edges in the
@@ -6,8 +7,8 @@
 #include <gpiod.h>
 
 #include <cerrno>
-#include <cstring>
 #include <filesystem>
+#include <system_error>
 
 #include "tofmat/gpio/gpio.hpp"
 
@@ -27,7 +28,7 @@ bool any_chip() {
     hint = " (no permission: add the daemon's user to the gpio group, or see the udev rules of your board)";
   else if (err == EBUSY)
     hint = " (another program holds the line: gpioinfo shows which)";
-  throw GpioError("GPIO line " + spec.describe() + ": " + what + ": " + std::strerror(err) + hint);
+  throw GpioError("GPIO line " + spec.describe() + ": " + what + ": " + std::generic_category().message(err) + hint);
 }
 
 struct Handle {
@@ -93,7 +94,8 @@ class LibgpiodInput : public InputLine {
     const timespec zero{0, 0};
     while (n < max && gpiod_line_event_wait(h_.line, &zero) == 1) {  // (read only what waits: it blocks otherwise)
       gpiod_line_event events[16];
-      const int got = gpiod_line_event_read_multiple(h_.line, events, static_cast<unsigned>(std::min<std::size_t>(16, max - n)));
+      const int got =
+          gpiod_line_event_read_multiple(h_.line, events, static_cast<unsigned>(std::min<std::size_t>(16, max - n)));
       if (got < 0) fail(spec_, "reading edge events", errno);
       for (int k = 0; k < got; ++k)
         out.push_back({static_cast<std::uint64_t>(events[k].ts.tv_sec) * 1'000'000'000ull +

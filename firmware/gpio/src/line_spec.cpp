@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Parsing of CHIP:LINE specs and of line bias names.
 #include <algorithm>
 #include <cctype>
 

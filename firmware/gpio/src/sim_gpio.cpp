@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// SimGpio: the simulated chip's input and output lines, driven and recorded with their timestamps.
 #include "tofmat/gpio/sim_gpio.hpp"
 
 #include <sys/eventfd.h>
@@ -5,7 +7,7 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <cstring>
+#include <system_error>
 
 namespace tofmat::gpio {
 namespace {
@@ -83,7 +85,7 @@ std::unique_ptr<InputLine> SimGpio::request_input(const LineSpec& spec, const In
   std::lock_guard<std::mutex> lock(mutex_);
   Line& l = line_of(spec);
   const int fd = ::eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-  if (fd < 0) throw GpioError(std::string("eventfd: ") + std::strerror(errno));
+  if (fd < 0) throw GpioError(std::string("eventfd: ") + std::generic_category().message(errno));
   if (config.bias == Bias::kPullUp) l.high = true;  // (an undriven pin follows its bias)
   if (config.bias == Bias::kPullDown) l.high = false;
   l.consumer = consumer.empty() ? "?" : consumer;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The Kinect v2 command codec: command and completion records, and the parsers of the responses the driver uses.
 #include "tofmat/kinect/command.hpp"
 
 #include <algorithm>

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// DepthStreamParser: isochronous packets reassembled into sub-packets and depth packets, with every fault counted.
 #include "tofmat/kinect/depth_stream_parser.hpp"
 
 #include <cstring>
@@ -21,7 +23,8 @@ std::vector<std::uint8_t> encode_sub_packet(const std::uint8_t* payload, std::ui
   std::memcpy(out.data(), payload, kSubImageBytes);
   const std::uint32_t words[6] = {0, 0, timestamp, sequence, subsequence, static_cast<std::uint32_t>(kSubImageBytes)};
   for (std::size_t k = 0; k < 6; ++k) {
-    for (std::size_t b = 0; b < 4; ++b) out[kSubImageBytes + 4 * k + b] = static_cast<std::uint8_t>(words[k] >> (8 * b));
+    for (std::size_t b = 0; b < 4; ++b)
+      out[kSubImageBytes + 4 * k + b] = static_cast<std::uint8_t>(words[k] >> (8 * b));
   }
   return out;
 }

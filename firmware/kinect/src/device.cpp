@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Kinect2Device: the open, start, stop and close sequences and the command transactions over a UsbTransport.
 #include "tofmat/kinect/device.hpp"
 
 #include <algorithm>
@@ -69,7 +71,8 @@ std::vector<std::uint8_t> Kinect2Device::transact(const Command& command) {
     try {
       const auto out = encode_command(command, seq);
       if (t.bulk_write(kCommandOutEndpoint, out.data(), out.size(), options_.timeout_ms) != out.size()) {
-        throw UsbError(UsbErrorKind::kProtocol, "short write of command " + hex_id(static_cast<std::uint32_t>(command.id)));
+        throw UsbError(UsbErrorKind::kProtocol,
+                       "short write of command " + hex_id(static_cast<std::uint32_t>(command.id)));
       }
       std::vector<std::uint8_t> response;
       if (command.max_response > 0) {
@@ -134,8 +137,8 @@ void Kinect2Device::wait_until_ready() {
           std::chrono::milliseconds(20), until - std::chrono::steady_clock::now()));
     }
   }
-  throw UsbError(UsbErrorKind::kTimeout, "device not ready to stream after " + std::to_string(options_.status_polls) +
-                                             " status polls");
+  throw UsbError(UsbErrorKind::kTimeout,
+                 "device not ready to stream after " + std::to_string(options_.status_polls) + " status polls");
 }
 
 const DeviceIdentity& Kinect2Device::start(FrameHandler on_frame) {
@@ -177,7 +180,9 @@ const DeviceIdentity& Kinect2Device::start(FrameHandler on_frame) {
 
 void Kinect2Device::pump(unsigned timeout_ms) { transport_->handle_events(timeout_ms); }
 
-DepthStreamCounters Kinect2Device::stream_counters() const { return parser_ ? parser_->counters() : DepthStreamCounters{}; }
+DepthStreamCounters Kinect2Device::stream_counters() const {
+  return parser_ ? parser_->counters() : DepthStreamCounters{};
+}
 
 void Kinect2Device::stop() {
   if (!streaming_) return;

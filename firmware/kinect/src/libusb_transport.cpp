@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The libusb-1.0 UsbTransport: finding and claiming the device, control and bulk transfers, the isochronous pool.
 #include "tofmat/kinect/libusb_transport.hpp"
 
 #include <libusb.h>
@@ -96,7 +98,7 @@ std::size_t iso_size_of(libusb_context* ctx, libusb_device* d) {
   return size;
 }
 
-class LibusbTransport : public UsbTransport {
+class LibusbTransport final : public UsbTransport {
  public:
   LibusbTransport(std::unique_ptr<Context> ctx, libusb_device_handle* h, std::string description)
       : ctx_(std::move(ctx)), h_(h), description_(std::move(description)) {}
@@ -275,7 +277,8 @@ libusb_device_handle* find_and_open(libusb_context* ctx, const std::string& seri
                    "no Kinect v2 found (USB 045e:02d8 or 045e:02c4); is it plugged into a USB 3 port and powered?");
   }
   if (last_error) fail(last_error, "cannot open the " + where);
-  throw UsbError(UsbErrorKind::kNoDevice, "no Kinect v2 with serial " + serial + " (" + std::to_string(seen) + " other(s) found)");
+  throw UsbError(UsbErrorKind::kNoDevice,
+                 "no Kinect v2 with serial " + serial + " (" + std::to_string(seen) + " other(s) found)");
 }
 
 }  // namespace
@@ -298,7 +301,8 @@ std::vector<UsbDeviceInfo> list_kinect_devices() {
       info.accessible = true;
       libusb_close(h);
     } else {
-      info.problem = std::string(libusb_error_name(rc)) + (rc == LIBUSB_ERROR_ACCESS ? std::string("; ") + kUdevRuleHint : "");
+      info.problem =
+          std::string(libusb_error_name(rc)) + (rc == LIBUSB_ERROR_ACCESS ? std::string("; ") + kUdevRuleHint : "");
     }
     out.push_back(std::move(info));
   }

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The 11-bit unpack of the depth sub-images (kinect2-protocol.md 2.3, 2.4):
 // the definition (code by code, as the protocol states the layout), the
 // scalar kernel, the dispatch to the NEON / AVX2 kernels

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The AVX2 kernel of the 11-bit unpack (x86-64 hosts whose CPU has AVX2; the
 // scalar kernel and the definition in raw_unpack.cpp are what it must equal,
 // bit for bit). Compiled with a target attribute, not -mavx2, so the rest of
@@ -83,7 +84,8 @@ TOFMAT_AVX2 __m256i load_step(const std::uint8_t* p) {
 // column 4 i + r. The in-lane unpacks give, per lane, 2 slots x 4 runs per
 // vector; the cross-lane permutes put the slots in column order.
 TOFMAT_AVX2 void store_columns(std::int16_t* out, __m256i r0, __m256i r1, __m256i r2, __m256i r3) {
-  const __m256i ab_lo = _mm256_unpacklo_epi16(r0, r1), ab_hi = _mm256_unpackhi_epi16(r0, r1);  // slots 0-3|8-11, 4-7|12-15
+  const __m256i ab_lo = _mm256_unpacklo_epi16(r0, r1),
+                ab_hi = _mm256_unpackhi_epi16(r0, r1);  // slots 0-3|8-11, 4-7|12-15
   const __m256i cd_lo = _mm256_unpacklo_epi16(r2, r3), cd_hi = _mm256_unpackhi_epi16(r2, r3);
   const __m256i q0 = _mm256_unpacklo_epi32(ab_lo, cd_lo);  // slots 0, 1 | 8, 9
   const __m256i q1 = _mm256_unpackhi_epi32(ab_lo, cd_lo);  // 2, 3 | 10, 11

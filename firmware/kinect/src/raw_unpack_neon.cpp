@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The NEON kernel of the 11-bit unpack (aarch64 only; the scalar kernel and
 // the definition in raw_unpack.cpp are what it must equal, bit for bit).
 //
@@ -87,8 +88,8 @@ inline void unpack_block_neon(const std::uint8_t* row, std::size_t b, std::int16
   r.val[0] = group_values(p, k);
   r.val[1] = group_values(p + kRunBytes, k);
   r.val[2] = group_values(p + 2 * kRunBytes, k);
-  r.val[3] = Last ? values8(codes8(vld1q_u8(row + kRowBytes - 16), k.control_last, k), k)
-                  : group_values(p + 3 * kRunBytes, k);
+  r.val[3] =
+      Last ? values8(codes8(vld1q_u8(row + kRowBytes - 16), k.control_last, k), k) : group_values(p + 3 * kRunBytes, k);
   vst4q_s16(dst, r);
 }
 

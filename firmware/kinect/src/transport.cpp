@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The names of the USB error kinds.
 #include "tofmat/kinect/transport.hpp"
 
 namespace tofmat::kinect {

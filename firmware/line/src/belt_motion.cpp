@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// FixedSpeed and EncoderMotion: where the belt is at a time, and when it reaches a position.
 #include "tofmat/line/belt_motion.hpp"
 
 #include <algorithm>

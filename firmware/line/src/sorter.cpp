@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Sorter: the FIFO of items on the belt, their decisions from burst labels, the outlets' pulses, faults and the alarm.
 #include "tofmat/line/sorter.hpp"
 
 #include <algorithm>
@@ -154,8 +156,9 @@ void Sorter::label(const BurstLabel& l, std::uint64_t now_ns) {
   if (!outlet) return decide(*it, config_.reject, Reason::kNoOutlet, &l, now_ns);
   const auto fire = motion_.time_at(it->start_mm + config_.outlets[*outlet].position_mm, now_ns);
   if (fire && *fire < now_ns + config_.decision_margin_ns)
-    return late(*it, "its label came " + std::to_string((now_ns + config_.decision_margin_ns - *fire) / 1'000'000) +
-                         " ms too late for outlet \"" + config_.outlets[*outlet].name + "\"",
+    return late(*it,
+                "its label came " + std::to_string((now_ns + config_.decision_margin_ns - *fire) / 1'000'000) +
+                    " ms too late for outlet \"" + config_.outlets[*outlet].name + "\"",
                 &l, now_ns);
   decide(*it, outlet, Reason::kSorted, &l, now_ns);
 }
@@ -179,7 +182,8 @@ void Sorter::poll(std::uint64_t now_ns) {
       outlet_until_[k].reset();
       if (hooks_.drive) hooks_.drive(k, false);
     }
-  const bool measuring = std::any_of(items_.begin(), items_.end(), [](const Item& i) { return i.stage == Stage::kMeasuring; });
+  const bool measuring =
+      std::any_of(items_.begin(), items_.end(), [](const Item& i) { return i.stage == Stage::kMeasuring; });
   bool burst_started = false;
   for (auto& it : items_) {
     if (it.stage == Stage::kToCamera && here >= it.start_mm + config_.camera_mm) {
@@ -187,14 +191,12 @@ void Sorter::poll(std::uint64_t now_ns) {
         fault("camera_busy", "item " + std::to_string(it.number) +
                                  " reached the camera while the one before was still measured: rejected");
         reject(it, Reason::kCameraBusy, now_ns);
-      } else if (!camera_ok_) {
-        reject(it, Reason::kCameraLost, now_ns);
-      } else if (const auto burst = hooks_.start_burst ? hooks_.start_burst(it.number) : std::nullopt) {
+      } else if (const auto burst = (camera_ok_ && hooks_.start_burst) ? hooks_.start_burst(it.number) : std::nullopt) {
         it.burst = burst;
         it.stage = Stage::kMeasuring;
         burst_started = true;
       } else {
-        reject(it, Reason::kCameraLost, now_ns);
+        reject(it, Reason::kCameraLost, now_ns);  // the camera is lost, or no burst could start
       }
     }
     if (it.stage == Stage::kMeasuring) {

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// TriggerFilter: debounce of the light barrier's edges into item starts.
 #include "tofmat/line/trigger_filter.hpp"
 
 namespace tofmat::line {

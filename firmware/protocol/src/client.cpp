@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Client: connecting, the hello handshake, requests with their replies, and the queue of subscribed events.
 #include "tofmat/protocol/client.hpp"
 
 #include <sys/socket.h>
@@ -42,9 +44,8 @@ Client::Client(const std::string& address, ClientOptions options) : options_(std
     if (e.os_error() == ETIMEDOUT)
       throw ClientError(ClientErrorKind::kTimeout, std::string("tofmatd at ") + address_.describe() +
                                                        " did not accept the connection in time: " + e.what());
-    throw ClientError(ClientErrorKind::kRefused,
-                      std::string("cannot connect to tofmatd at ") + address_.describe() + " (is it running?): " +
-                          e.what());
+    throw ClientError(ClientErrorKind::kRefused, std::string("cannot connect to tofmatd at ") + address_.describe() +
+                                                     " (is it running?): " + e.what());
   }
   const auto first = read_message(options_.timeout_ms);
   if (!first) throw ClientError(ClientErrorKind::kTimeout, "tofmatd at " + address_.describe() + " sent no hello");
@@ -54,9 +55,8 @@ Client::Client(const std::string& address, ClientOptions options) : options_(std
     throw ClientError(ClientErrorKind::kProtocol, std::string("bad hello from tofmatd: ") + e.what());
   }
   if (hello_.protocol != kProtocolVersion)
-    throw ClientError(ClientErrorKind::kVersion, "tofmatd speaks protocol version " +
-                                                     std::to_string(hello_.protocol) + ", this client " +
-                                                     std::to_string(kProtocolVersion));
+    throw ClientError(ClientErrorKind::kVersion, "tofmatd speaks protocol version " + std::to_string(hello_.protocol) +
+                                                     ", this client " + std::to_string(kProtocolVersion));
   Json args = {{"protocol", kProtocolVersion}, {"client", "tofmat-client"}};
   if (!options_.token.empty()) args["token"] = options_.token;
   try {
@@ -84,7 +84,8 @@ void Client::send(const Message& m) {
 }
 
 std::optional<Message> Client::read_message(int timeout_ms) {
-  const auto deadline = timeout_ms < 0 ? Clock::time_point::max() : Clock::now() + std::chrono::milliseconds(timeout_ms);
+  const auto deadline =
+      timeout_ms < 0 ? Clock::time_point::max() : Clock::now() + std::chrono::milliseconds(timeout_ms);
   for (;;) {
     try {
       if (auto m = reader_.next()) return m;
@@ -141,7 +142,8 @@ std::optional<Message> Client::next_event(int timeout_ms) {
     events_.pop_front();
     return m;
   }
-  const auto deadline = timeout_ms < 0 ? Clock::time_point::max() : Clock::now() + std::chrono::milliseconds(timeout_ms);
+  const auto deadline =
+      timeout_ms < 0 ? Clock::time_point::max() : Clock::now() + std::chrono::milliseconds(timeout_ms);
   for (;;) {
     auto m = read_message(timeout_ms < 0 ? -1 : ms_left(deadline));
     if (!m) return std::nullopt;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Encoding and bounded decoding of the protocol's typed messages (hello, requests, replies and events).
 #include "tofmat/protocol/messages.hpp"
 
 #include <cmath>
@@ -29,9 +31,7 @@ Json encode_ranking(const std::vector<RankEntry>& ranking) {
   return out;
 }
 
-int get_side(const Json& obj, const char* key) {
-  return static_cast<int>(get_int(obj, key, 0, kMaxImageSide));
-}
+int get_side(const Json& obj, const char* key) { return static_cast<int>(get_int(obj, key, 0, kMaxImageSide)); }
 
 }  // namespace
 
@@ -108,7 +108,10 @@ bool valid_depth_kind(const std::string& kind) {
 Message encode_hello(const Hello& h) {
   Message m;
   m.type = MessageType::kHello;
-  m.meta = {{"protocol", h.protocol}, {"minor", h.minor}, {"server", h.server}, {"capabilities", h.capabilities},
+  m.meta = {{"protocol", h.protocol},
+            {"minor", h.minor},
+            {"server", h.server},
+            {"capabilities", h.capabilities},
             {"auth_required", h.auth_required}};
   return m;
 }
@@ -175,10 +178,17 @@ Reply decode_reply(const Message& m) {
 
 Message encode_label(const LabelEvent& e) {
   Message m;
-  m.meta = {{"event", "label"},       {"frame", e.frame},       {"timestamp_ns", e.timestamp_ns},
-            {"profile", e.profile},   {"state", e.state},       {"material", e.material},
-            {"index", e.index},       {"distance", e.distance}, {"valid", e.valid},
-            {"bins_covered", e.bins_covered}, {"ranking", encode_ranking(e.ranking)}};
+  m.meta = {{"event", "label"},
+            {"frame", e.frame},
+            {"timestamp_ns", e.timestamp_ns},
+            {"profile", e.profile},
+            {"state", e.state},
+            {"material", e.material},
+            {"index", e.index},
+            {"distance", e.distance},
+            {"valid", e.valid},
+            {"bins_covered", e.bins_covered},
+            {"ranking", encode_ranking(e.ranking)}};
   if (e.trigger) m.meta["trigger"] = *e.trigger;
   if (e.truth) m.meta["truth"] = {{"material", e.truth->material}, {"depth_mm", e.truth->depth_mm}};
   if (e.simulated) m.meta["simulated"] = true;
@@ -233,8 +243,8 @@ LabelMapEvent decode_label_map(const Message& m) {
   e.height = get_side(m.meta, "height");
   e.materials = get_string_list(m.meta, "materials", kMaxMaterials, kMaxNameBytes);
   if (m.blob.size() != static_cast<std::size_t>(e.width) * static_cast<std::size_t>(e.height))
-    throw ProtocolError("label map carries " + std::to_string(m.blob.size()) + " bytes for " +
-                        std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels");
+    throw ProtocolError("label map carries " + std::to_string(m.blob.size()) + " bytes for " + std::to_string(e.width) +
+                        " x " + std::to_string(e.height) + " pixels");
   for (std::uint8_t v : m.blob)
     if (v != kNoLabel && v >= e.materials.size())
       throw ProtocolError("label map holds an index beyond its material list");
@@ -248,9 +258,9 @@ Message encode_depth(const DepthEvent& e) {
   if (e.depth_mm.size() != static_cast<std::size_t>(e.width) * static_cast<std::size_t>(e.height))
     throw ProtocolError("depth image size does not match width x height");
   Message m;
-  m.meta = {{"event", "depth"}, {"frame", e.frame}, {"timestamp_ns", e.timestamp_ns}, {"kind", e.kind},
-            {"x0", e.x0},       {"y0", e.y0},       {"width", e.width},               {"height", e.height},
-            {"dtype", "float32"}};
+  m.meta = {{"event", "depth"}, {"frame", e.frame},   {"timestamp_ns", e.timestamp_ns},
+            {"kind", e.kind},   {"x0", e.x0},         {"y0", e.y0},
+            {"width", e.width}, {"height", e.height}, {"dtype", "float32"}};
   m.blob.resize(e.depth_mm.size() * sizeof(float));
   if (!m.blob.empty()) std::memcpy(m.blob.data(), e.depth_mm.data(), m.blob.size());  // little-endian hosts
   return m;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Socket helpers: addresses, listening and connecting on Unix and TCP sockets, timed writes, and the wake-up eventfd.
 #include "tofmat/protocol/socket.hpp"
 
 #include <arpa/inet.h>
@@ -6,8 +8,8 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
-#include <sys/socket.h>
 #include <sys/eventfd.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
@@ -17,22 +19,23 @@
 #include <chrono>
 #include <cstring>
 #include <ctime>
+#include <system_error>
 
 namespace tofmat::protocol {
 namespace {
 
 [[noreturn]] void fail(const std::string& what) {
   const int e = errno;
-  throw SocketError(what + ": " + std::strerror(e), e);
+  throw SocketError(what + ": " + std::generic_category().message(e), e);
 }
 
 sockaddr_un unix_address(const std::string& path) {
   sockaddr_un sa{};
   sa.sun_family = AF_UNIX;
   if (path.empty() || path.size() >= sizeof(sa.sun_path))
-    throw SocketError("socket path \"" + path + "\" is empty or longer than " +
-                          std::to_string(sizeof(sa.sun_path) - 1) + " bytes",
-                      ENAMETOOLONG);
+    throw SocketError(
+        "socket path \"" + path + "\" is empty or longer than " + std::to_string(sizeof(sa.sun_path) - 1) + " bytes",
+        ENAMETOOLONG);
   std::memcpy(sa.sun_path, path.c_str(), path.size() + 1);
   return sa;
 }
@@ -88,9 +91,7 @@ void Fd::reset() {
   fd_ = -1;
 }
 
-std::string Address::describe() const {
-  return tcp ? host + ":" + std::to_string(port) : path;
-}
+std::string Address::describe() const { return tcp ? host + ":" + std::to_string(port) : path; }
 
 Address parse_address(const std::string& text) {
   Address a;
@@ -131,9 +132,9 @@ Fd listen_unix(const std::string& path, unsigned mode) {
     // it (ECONNREFUSED). Any other answer (a connection, a full backlog, no
     // permission) may be a live daemon, perhaps another user's: left alone.
     if (st.st_uid != ::geteuid())
-      throw SocketError("\"" + path + "\" is a socket of another user (uid " + std::to_string(st.st_uid) +
-                            "); not replacing it",
-                        EEXIST);
+      throw SocketError(
+          "\"" + path + "\" is a socket of another user (uid " + std::to_string(st.st_uid) + "); not replacing it",
+          EEXIST);
     // (Non-blocking: a live daemon's full backlog answers EAGAIN at once instead of holding us.)
     Fd probe(::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0));
     if (!probe) fail("socket(AF_UNIX)");
@@ -241,7 +242,8 @@ void write_all(int fd, const std::uint8_t* data, std::size_t size, int timeout_m
       continue;
     }
     if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR) fail("send");
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
     if (left.count() <= 0 || !wait_writable(fd, static_cast<int>(left.count())))
       throw SocketError("send: timed out", ETIMEDOUT);
   }
@@ -257,7 +259,7 @@ void poll_until(::pollfd* fds, std::size_t count, std::uint64_t until_ns) {
   const std::uint64_t now = monotonic_ns(), wait = until_ns > now ? until_ns - now : 0;
   timespec ts{static_cast<time_t>(wait / 1'000'000'000ull), static_cast<long>(wait % 1'000'000'000ull)};
   if (::ppoll(fds, static_cast<nfds_t>(count), &ts, nullptr) < 0 && errno != EINTR)
-    throw SocketError(std::string("poll failed: ") + std::strerror(errno), errno);
+    throw SocketError(std::string("poll failed: ") + std::generic_category().message(errno), errno);
 }
 
 }  // namespace tofmat::protocol

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The wire framing: encoding a message, and MessageReader, which cuts a byte stream into bounded messages.
 #include "tofmat/protocol/wire.hpp"
 
 #include <cstring>
@@ -108,7 +110,7 @@ std::optional<Message> MessageReader::next() {
   const std::uint16_t version = static_cast<std::uint16_t>(h[4] | h[5] << 8);
   if (version != kProtocolVersion)
     throw VersionError("protocol version " + std::to_string(version) + " is not supported (this side speaks " +
-                        std::to_string(kProtocolVersion) + ")");
+                       std::to_string(kProtocolVersion) + ")");
   if (!known_type(h[6])) throw ProtocolError("unknown message type " + std::to_string(h[6]));
   if (h[7] != 0) throw ProtocolError("reserved header flags must be 0");
   const std::uint32_t payload = get_u32(h + 8);

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The noise-free relative-distortion curve of a material over the bins, as the real database records it.
 #include "tofmat/sim/curve.hpp"
 
 #include <cmath>

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// DeviceProfile: the ideal Kinect v2's parameters, their validation, and a profile for one session's state.
 #include "tofmat/sim/device.hpp"
 
 #include <cmath>
@@ -41,17 +43,20 @@ void DeviceProfile::validate() const {
     }
     for (int h = 2; h <= kMaxHarmonic; ++h) {
       const auto k = static_cast<std::size_t>(h);
-      if (!(f.harmonic_amplitude[k] >= 0.0 && f.harmonic_amplitude[k] <= 1.0)) bad(tag + "harmonic amplitudes must be in [0, 1]");
+      if (!(f.harmonic_amplitude[k] >= 0.0 && f.harmonic_amplitude[k] <= 1.0))
+        bad(tag + "harmonic amplitudes must be in [0, 1]");
       if (!std::isfinite(f.harmonic_phase_rad[k])) bad(tag + "harmonic phases must be finite");
     }
     for (int h = 0; h <= kMaxHarmonic; ++h) {
       const auto k = static_cast<std::size_t>(h);
       if (h < 2 && f.drift_amplitude[k] != 0.0) bad(tag + "session drift starts at h = 2");
-      if (!(f.drift_amplitude[k] >= 0.0 && f.drift_amplitude[k] <= 1.0)) bad(tag + "session drift amplitudes must be in [0, 1]");
+      if (!(f.drift_amplitude[k] >= 0.0 && f.drift_amplitude[k] <= 1.0))
+        bad(tag + "session drift amplitudes must be in [0, 1]");
       if (!std::isfinite(f.drift_phase_rad[k])) bad(tag + "session drift phases must be finite");
     }
     for (int j = 0; j < 3; ++j) {
-      if (!(f.step_gain[static_cast<std::size_t>(j)] > 0.5 && f.step_gain[static_cast<std::size_t>(j)] < 2.0)) bad(tag + "step gains must be in (0.5, 2)");
+      if (!(f.step_gain[static_cast<std::size_t>(j)] > 0.5 && f.step_gain[static_cast<std::size_t>(j)] < 2.0))
+        bad(tag + "step gains must be in (0.5, 2)");
       if (!(std::fabs(f.step_offset[static_cast<std::size_t>(j)]) < 1.0)) bad(tag + "step offsets must be in (-1, 1)");
     }
   }

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// FastNormal: the ziggurat tables, seeding, and the tail and wedge samples of the standard normal.
 #include "tofmat/sim/gaussian.hpp"
 
 #include <cmath>
@@ -5,7 +7,7 @@
 namespace tofmat::sim {
 namespace {
 
-constexpr double kR = 3.442619855899;  // start of the tail
+constexpr double kR = 3.442619855899;       // start of the tail
 constexpr double kV = 9.91256303526217e-3;  // area of each layer
 constexpr double kM1 = 2147483648.0;
 
@@ -41,7 +43,9 @@ std::uint64_t splitmix(std::uint64_t& x) {
   return z ^ (z >> 31);
 }
 
-std::uint32_t abs32(std::int32_t v) { return v < 0 ? 0u - static_cast<std::uint32_t>(v) : static_cast<std::uint32_t>(v); }
+std::uint32_t abs32(std::int32_t v) {
+  return v < 0 ? 0u - static_cast<std::uint32_t>(v) : static_cast<std::uint32_t>(v);
+}
 
 }  // namespace
 

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// SimulatedKinect: the command responses, faults, unplugging, and frames emitted as packed isochronous packets.
 #include "tofmat/sim/kinect_device.hpp"
 
 #include <chrono>
@@ -56,8 +58,8 @@ class SimulatedKinectTransport : public kinect::UsbTransport {
   void set_interface_alt(int interface, int alt) override {
     check();
     if (interface != kinect::kDepthInterface || (alt != 0 && alt != 1)) {
-      throw UsbError(UsbErrorKind::kIo, "simulated device: no interface " + std::to_string(interface) + " alt " +
-                                            std::to_string(alt));
+      throw UsbError(UsbErrorKind::kIo,
+                     "simulated device: no interface " + std::to_string(interface) + " alt " + std::to_string(alt));
     }
     std::lock_guard<std::mutex> lock(dev_->mutex_);
     dev_->alt_ = alt;

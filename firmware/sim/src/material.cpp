@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Material responses: the kernels of each response kind, Schlick reflectance, and the response at a frequency.
 #include "tofmat/sim/material.hpp"
 
 #include <algorithm>
@@ -61,7 +63,8 @@ void Material::validate() const {
   if (kind == ResponseKind::kGamma && !(gamma_k >= 1e-2 && gamma_k <= 1e3)) bad("gamma_k must be in [0.01, 1000]");
   if (!(refractive_index >= 1.0 && refractive_index <= 4.0)) bad("refractive_index must be in [1, 4]");
   if (kind == ResponseKind::kDouble) {
-    if (!(subsurface2 >= 0.0 && subsurface + subsurface2 <= 1.0)) bad("subsurface2 must be >= 0 with subsurface + subsurface2 <= 1");
+    if (!(subsurface2 >= 0.0 && subsurface + subsurface2 <= 1.0))
+      bad("subsurface2 must be >= 0 with subsurface + subsurface2 <= 1");
     if (!(tau2_ps > 0.0 && tau2_ps <= 1e6)) bad("tau2_ps must be in (0, 1e6]");
   }
   if (!(noise_mm >= 0.0 && noise_mm <= 1e3)) bad("noise_mm must be in [0, 1000]");
@@ -123,7 +126,8 @@ std::complex<double> material_response(const Material& m, double freq_hz, double
     }
     case ResponseKind::kDouble: {
       const double b2 = std::min(1.0, m.subsurface2 * transmitted);
-      return m.albedo * ((1.0 - b - b2) + b * exponential_kernel(omega, tau) + b2 * exponential_kernel(omega, m.tau2_ps * 1e-12));
+      return m.albedo *
+             ((1.0 - b - b2) + b * exponential_kernel(omega, tau) + b2 * exponential_kernel(omega, m.tau2_ps * 1e-12));
     }
     case ResponseKind::kOpaque: k = 1.0; break;
   }

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Harmonic weights of a material, the AC samples per unit amplitude, and the noise-free depths at a range.
 #include "tofmat/sim/measurement.hpp"
 
 #include <cmath>
@@ -48,8 +50,8 @@ std::array<double, 3> samples_from_taps(const FrequencyModel& f, const std::arra
                                         double full_well, double sharpness) {
   std::array<double, 3> m{};
   for (std::size_t j = 0; j < 3; ++j) {
-    const double diff = saturate_tap(0.5 * (dc + ac[j]), full_well, sharpness) -
-                        saturate_tap(0.5 * (dc - ac[j]), full_well, sharpness);
+    const double diff =
+        saturate_tap(0.5 * (dc + ac[j]), full_well, sharpness) - saturate_tap(0.5 * (dc - ac[j]), full_well, sharpness);
     m[j] = f.step_gain[j] * diff + f.step_offset[j] * dc;
   }
   return m;

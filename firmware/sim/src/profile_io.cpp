@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Reading and writing device profiles and material libraries as JSON, with unknown keys and bad versions refused.
 #include "tofmat/sim/profile_io.hpp"
 
 #include <nlohmann/json.hpp>
@@ -15,11 +17,9 @@ namespace {
 
 using json = nlohmann::json;
 
-[[noreturn]] void fail(const std::string& where, const std::string& msg) {
-  throw FormatError(where + ": " + msg);
-}
+[[noreturn]] void fail(const std::string& where, const std::string& msg) { throw FormatError(where + ": " + msg); }
 
-void only_keys(const json& j, const std::string& where, std::set<std::string> allowed) {
+void only_keys(const json& j, const std::string& where, const std::set<std::string>& allowed) {
   if (!j.is_object()) fail(where, "expected an object");
   for (const auto& [k, v] : j.items()) {
     if (!allowed.count(k)) fail(where, "unknown key '" + k + "'");
@@ -269,26 +269,26 @@ std::string device_to_json(const DeviceProfile& d) {
                      {"step_offset", f.step_offset}});
     if (!drift.empty()) freqs.back()["session_drift"] = drift;
   }
-  const json j{{"name", d.name},
-               {"version", kProfileFormatVersion},
-               {"range_ref_mm", d.range_ref_mm},
-               {"saturation", {{"sharpness", d.saturation_sharpness}}},
-               {"frequencies", freqs},
-               {"pixel_phase",
-                {{"mean_rad", d.pixel_phase.mean_rad},
-                 {"radial_rad", d.pixel_phase.radial_rad},
-                 {"scatter_rad", d.pixel_phase.scatter_rad},
-                 {"seed", d.pixel_phase.seed}}},
-               {"noise",
-                {{"read_noise", d.noise.read_noise}, {"shot_gain", d.noise.shot_gain}, {"ambient", d.noise.ambient}}},
-               {"signal", {{"counts_at_1m", d.signal.counts_at_1m}, {"saturation", d.signal.saturation}}},
-               {"camera",
-                {{"width", d.camera.width},
-                 {"height", d.camera.height},
-                 {"fx", d.camera.fx},
-                 {"fy", d.camera.fy},
-                 {"cx", d.camera.cx},
-                 {"cy", d.camera.cy}}}};
+  const json j{
+      {"name", d.name},
+      {"version", kProfileFormatVersion},
+      {"range_ref_mm", d.range_ref_mm},
+      {"saturation", {{"sharpness", d.saturation_sharpness}}},
+      {"frequencies", freqs},
+      {"pixel_phase",
+       {{"mean_rad", d.pixel_phase.mean_rad},
+        {"radial_rad", d.pixel_phase.radial_rad},
+        {"scatter_rad", d.pixel_phase.scatter_rad},
+        {"seed", d.pixel_phase.seed}}},
+      {"noise", {{"read_noise", d.noise.read_noise}, {"shot_gain", d.noise.shot_gain}, {"ambient", d.noise.ambient}}},
+      {"signal", {{"counts_at_1m", d.signal.counts_at_1m}, {"saturation", d.signal.saturation}}},
+      {"camera",
+       {{"width", d.camera.width},
+        {"height", d.camera.height},
+        {"fx", d.camera.fx},
+        {"fy", d.camera.fy},
+        {"cx", d.camera.cx},
+        {"cy", d.camera.cy}}}};
   return j.dump(2);
 }
 

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Renderer: ray casting of the scene's planes, per-pixel waveforms, saturation, noise and the P0 tables.
 #include "tofmat/sim/renderer.hpp"
 
 #include <algorithm>
@@ -191,7 +193,8 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
     }
     if (!(t.depth_mm > 0.0) || !(std::fabs(t.yaw_deg) <= 89.0) || !(std::fabs(t.pitch_deg) <= 89.0) ||
         !(std::fabs(t.fold_deg) <= 178.0)) {
-      throw std::invalid_argument("target '" + t.material + "': depth must be > 0, |yaw|, |pitch| <= 89, |fold| <= 178");
+      throw std::invalid_argument("target '" + t.material +
+                                  "': depth must be > 0, |yaw|, |pitch| <= 89, |fold| <= 178");
     }
     const Material* m = &library_.find(t.material);
     const double cxp = 0.5 * (t.x0 + t.x1 - 1), cyp = 0.5 * (t.y0 + t.y1 - 1);
@@ -205,8 +208,8 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
   Plane wall{};
   if (has_wall) {
     if (!(scene.background_depth_mm > 0.0)) throw std::invalid_argument("background depth must be > 0");
-    wall = Plane{{0.0, 0.0, scene.background_depth_mm}, {0.0, 0.0, -1.0}, &library_.find(scene.background_material),
-                 n_planes++};
+    wall = Plane{
+        {0.0, 0.0, scene.background_depth_mm}, {0.0, 0.0, -1.0}, &library_.find(scene.background_material), n_planes++};
   }
 
   Frame f;
@@ -225,7 +228,8 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
   const double points_per_rad = kWaveformPoints / kTwoPi;
   // Full well in counts: full_well = 1 is the 16 MHz tap signal of an albedo-1
   // target at range_ref_mm (spec 2.1), i.e. counts_at_1m * (1000 / range_ref)^2.
-  const double well_unit = device_.signal.counts_at_1m * (1000.0 / device_.range_ref_mm) * (1000.0 / device_.range_ref_mm);
+  const double well_unit =
+      device_.signal.counts_at_1m * (1000.0 / device_.range_ref_mm) * (1000.0 / device_.range_ref_mm);
   std::array<double, 3> omega_per_mm{}, inv_well{};  // phase per mm of range; 1 / full well (0: none)
   std::array<bool, 3> linear{};
   for (std::size_t g = 0; g < 3; ++g) {
@@ -244,7 +248,8 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
     for (int y = by0; y < by1; ++y) {
       // i0: the row's first index in the output region; gi0: in the camera's full grid.
       const std::size_t i0 = static_cast<std::size_t>(y - region.y0) * static_cast<std::size_t>(rw);
-      const std::size_t gi0 = static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(region.x0);
+      const std::size_t gi0 =
+          static_cast<std::size_t>(y) * static_cast<std::size_t>(w) + static_cast<std::size_t>(region.x0);
       for (int x = region.x0; x < region.x1; ++x) {
         const auto c = static_cast<std::size_t>(x - region.x0);
         const std::size_t i = i0 + c;
@@ -280,7 +285,7 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
         f.depth_mm[i] = static_cast<float>(range * d.z);
         f.target[i] = static_cast<std::int16_t>(target);
         f.incidence_deg[i] = static_cast<float>(inc_deg);
-        const auto step = static_cast<std::size_t>(inc_deg / kIncidenceStepDeg + 0.5);
+        const auto step = static_cast<std::size_t>(std::lround(inc_deg / kIncidenceStepDeg));  // inc_deg >= 0
         auto& slot = slots[static_cast<std::size_t>(s->id)][step];
         if (!slot) slot = &waveform(*s->material, static_cast<int>(step));
         row.wf[c] = slot;

@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Scene::centred_target: a scene of one square target at the centre of the image.
 #include "tofmat/sim/scene.hpp"
 
 namespace tofmat::sim {

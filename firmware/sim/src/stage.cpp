@@ -1,3 +1,5 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// stage_sweep: a translation-stage capture rendered and decoded over a list of depths.
 #include "tofmat/sim/stage.hpp"
 
 #include <cmath>

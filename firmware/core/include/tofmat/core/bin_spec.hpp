@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A depth-bin specification: `count` bins of `width_mm`, the first starting at
 // `start_mm`. Bin j covers [start + j*width, start + (j+1)*width). It travels
 // with every table as data; nothing assumes the real database's 600 mm / 200.

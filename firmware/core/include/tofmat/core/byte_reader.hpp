@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Bounds-checked little-endian reading of untrusted bytes. Every read checks
 // the remaining length first, so a parser built on it cannot read past the end
 // whatever the input says about its own lengths.
@@ -24,9 +25,8 @@ class ByteReader {
   // Throws FormatError naming `field` when fewer than n bytes remain.
   const std::uint8_t* take(std::size_t n, std::string_view field) {
     if (n > remaining()) {
-      throw FormatError(what_ + ": truncated while reading " + std::string(field) + " at byte " +
-                        std::to_string(pos_) + " (need " + std::to_string(n) + ", have " +
-                        std::to_string(remaining()) + ")");
+      throw FormatError(what_ + ": truncated while reading " + std::string(field) + " at byte " + std::to_string(pos_) +
+                        " (need " + std::to_string(n) + ", have " + std::to_string(remaining()) + ")");
     }
     const std::uint8_t* p = data_ + pos_;
     pos_ += n;

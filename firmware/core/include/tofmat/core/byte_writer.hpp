@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Little-endian serialisation into a growing buffer (the writing twin of
 // ByteReader), so file formats are byte-identical on every host.
 #pragma once

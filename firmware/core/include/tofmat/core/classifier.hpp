@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Nearest-neighbour classification with partial matching, Eq. (12):
 //   xi_p = (1/N) * sum over elements valid in both the query and exemplar p of (v_k - v_k^p)^2,
 // N the number of such elements, and the label is argmin_p xi_p.

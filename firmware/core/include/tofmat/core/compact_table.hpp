@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The exemplar table as the fixed-point classifier holds it in memory
 // (docs/numerics.md): int16 multiples of the table's power-of-two step, each
 // row padded to a multiple of kCompactBlock elements for SIMD, a validity

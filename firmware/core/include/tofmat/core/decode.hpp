@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Float reference decode of the Kinect v2's three-phase measurements into
 // per-frequency phase and depth (Eq. (1)), and the combined unwrapped depth.
 // (The per-frame image decode with P0 tables, flags and ROI builds on these.)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Accumulation of per-frame feature observations into depth bins. A hand-held
 // sweep adds one observation per frame; the current query (mean per bin, NaN
 // where a bin has too few observations) is a partial feature vector that the
@@ -34,7 +35,9 @@ class DepthBinAccumulator {
   std::uint32_t n_rows() const { return n_rows_; }
 
  private:
-  std::size_t index(std::uint32_t row, std::uint32_t bin) const { return static_cast<std::size_t>(row) * bins_.count + bin; }
+  std::size_t index(std::uint32_t row, std::uint32_t bin) const {
+    return static_cast<std::size_t>(row) * bins_.count + bin;
+  }
 
   BinSpec bins_;
   std::uint32_t n_rows_;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The exemplar table: for each material, a curve of relative distortions
 // (n_rows frequency pairs x n_bins depth bins), NaN where it was not observed.
 // This is the database the nearest-neighbour classifier of Eq. (12) searches.
@@ -39,8 +40,8 @@ class ExemplarTable {
  public:
   // values: n_materials x n_rows x n_bins, C order, NaN = missing, everything
   // else finite. Throws std::invalid_argument on any inconsistency.
-  ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins,
-                std::vector<float> values, double quant_step_mm = 0.0);
+  ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins, std::vector<float> values,
+                double quant_step_mm = 0.0);
 
   // A folder of <material>.npy files, each (n_rows, n_bins) float64 in mm,
   // all the same shape; a bin where every row is exactly 0.0 is missing (the

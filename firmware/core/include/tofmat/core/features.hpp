@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The paper's depth-distortion features (Tanaka et al., CVPR 2017, Sec. 4).
 #pragma once
 

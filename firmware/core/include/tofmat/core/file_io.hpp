@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Whole-file reading with a size bound, and atomic replacement of a file.
 #pragma once
 

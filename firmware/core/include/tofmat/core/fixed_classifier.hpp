@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Eq. (12) in fixed point: the query quantised to the table's step, the
 // table held as a CompactTable, squared differences summed in integers by the
 // build's kernel (NEON on aarch64: over an element-major copy of the table,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Fixed-point decode of raw frames (docs/numerics.md): the same outputs as
 // decode_frame (frame_decode.hpp), in integers. Per pixel and group the phase
 // comes from a CORDIC in Q32 turns (wrapping arithmetic does the mod 2 pi)
@@ -18,10 +19,10 @@
 
 namespace tofmat {
 
-inline constexpr int kPhaseFracBits = 32;  // phase: uint32 turns
-inline constexpr int kDepthFracBits = 16;  // per-frequency depths and features: int32 Q16 mm
-inline constexpr int kCombinedFracBits = 8;  // combined depth: int32 Q8 mm
-inline constexpr int kAmplitudeFracBits = 8;  // amplitude: uint32 Q8 counts
+inline constexpr int kPhaseFracBits = 32;                 // phase: uint32 turns
+inline constexpr int kDepthFracBits = 16;                 // per-frequency depths and features: int32 Q16 mm
+inline constexpr int kCombinedFracBits = 8;               // combined depth: int32 Q8 mm
+inline constexpr int kAmplitudeFracBits = 8;              // amplitude: uint32 Q8 counts
 inline constexpr std::int32_t kFixedInvalid = INT32_MIN;  // depth, combined, feature of an invalid pixel
 // The phase estimator (docs/numerics.md): kCordicSteps CORDIC steps rotate
 // the phasor to within atan(2^-5) = 1.8 degrees of the x axis, in integers;

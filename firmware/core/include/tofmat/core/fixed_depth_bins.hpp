@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Depth-bin accumulation in fixed point (docs/numerics.md): the valid pixels
 // of a fixed-point decoded frame (or region) add their Eq. (10) features, Q16
 // mm, to the bin of their combined depth, Q8 mm, in integer sums. The bin

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Eq. (12) in integers: the kernel that sums squared differences between a
 // query and an exemplar over the elements valid in both, in table steps
 // (docs/numerics.md). Scalar C++ everywhere; NEON on aarch64, selected at

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Which implementation of a fixed-point kernel runs: the best one for this
 // build and CPU (NEON on aarch64, AVX2 on an x86-64 CPU that has it, scalar
 // otherwise), or the scalar one (the definition the vector kernels are

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Float reference decode of a raw frame (nine phase-step images) into
 // per-frequency phase, amplitude and depth, the combined depth, and validity.
 #pragma once
@@ -55,7 +56,7 @@ struct DecodedFrame {
   // Eq. (10) per pixel in the database's sign: d16 - d120 and d80 - d120 of
   // the wrapped depths (mm); NaN where invalid.
   std::array<std::vector<float>, 2> features;
-  std::vector<std::uint8_t> flags;              // kDecodeSaturated | kDecodeDark | kDecodeUnwrap, 0 = valid
+  std::vector<std::uint8_t> flags;  // kDecodeSaturated | kDecodeDark | kDecodeUnwrap, 0 = valid
 };
 
 // A pixel rectangle [x0, x1) x [y0, y1) of a width x height frame.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Spatial smoothing of the segmentation's per-pixel data, in integers (no
 // float conversion of a full frame): the features' mean over a window of
 // valid pixels before classification, and a majority filter of the label map
@@ -36,7 +37,7 @@ class BoxMeanFilter {
 
  private:
   int width_, height_, radius_;
-  std::vector<std::int32_t> col0_, col1_, coln_;  // per column: the window's rows summed
+  std::vector<std::int32_t> col0_, col1_, coln_;   // per column: the window's rows summed
   std::vector<std::uint32_t> pre0_, pre1_, pren_;  // their prefix sums along the row, padded
 };
 

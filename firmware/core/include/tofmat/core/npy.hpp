@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Reader for NumPy .npy arrays of floating-point values: the format of the
 // real Kinect v2 database (Python 2 headers with `L` suffixes included).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Per-pixel classification (the segmentation's feature, m = 1): every pixel's
 // two Eq. (10) features at the bin of its own combined depth, against every
 // candidate's two table values at that bin, by Eq. (12) in integers. The
@@ -65,15 +66,15 @@ class PixelClassifier {
 
   // The rearranged table, for the kernels: per bin, `slots` entries.
   struct Layout {
-    std::size_t slots = 0;          // candidates rounded up to kSlotBlock
+    std::size_t slots = 0;  // candidates rounded up to kSlotBlock
     std::uint32_t bins = 0;
-    int shift = 0;                  // Q16 mm -> table steps
-    bool one_valid = false;         // some slot has exactly one valid element
-    std::vector<std::uint8_t> slot_of;    // candidate (rank) -> slot within a bin (a permutation)
-    std::vector<std::int32_t> pairs;      // e0 | e1 << 16 (int16 each)
-    std::vector<std::int32_t> elem_mask;  // 0xFFFF per valid element (low: row 0, high: row 1)
-    std::vector<std::int32_t> doubled;    // 1 where exactly one element is valid (s = 2 d^2)
-    std::vector<std::int32_t> absent;     // 0x7FFFFFFF where no element is valid (or padding), else 0
+    int shift = 0;                           // Q16 mm -> table steps
+    bool one_valid = false;                  // some slot has exactly one valid element
+    std::vector<std::uint8_t> slot_of;       // candidate (rank) -> slot within a bin (a permutation)
+    std::vector<std::int32_t> pairs;         // e0 | e1 << 16 (int16 each)
+    std::vector<std::int32_t> elem_mask;     // 0xFFFF per valid element (low: row 0, high: row 1)
+    std::vector<std::int32_t> doubled;       // 1 where exactly one element is valid (s = 2 d^2)
+    std::vector<std::int32_t> absent;        // 0x7FFFFFFF where no element is valid (or padding), else 0
     std::vector<std::uint8_t> needs_absent;  // per bin: 1 if some slot is absent (else every slot holds
                                              // values: padding copies a lower candidate, which wins a tie)
   };

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The Kinect v2's 11-bit sample code and its 16-bit value: bit 10 is the
 // sign, the low 10 bits a companded magnitude (steps of 1 up to 256, then 2,
 // 4, ..., 64 per 128-code block, reaching 16320); code 1024 ("minus zero") is

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The compact exemplar table file (.tmx), format version 1.0; the layout is
 // documented in docs/table-format.md. Values are int16 multiples of a
 // power-of-two quantisation step, INT16_MIN marks a missing element, and a

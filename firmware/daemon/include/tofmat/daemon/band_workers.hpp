@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Threads that share one frame's work: run(fn) calls fn(band) for every band
 // in [0, bands()) at once, band 0 on the calling thread and each other band on
 // a worker of its own, and returns when all have finished. The segmentation

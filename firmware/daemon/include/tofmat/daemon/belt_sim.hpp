@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The simulated sorting line (issue 17): a conveyor belt carrying items of
 // the scene's materials past a light barrier and under the simulated
 // camera. `--source sim:belt,...` renders the items where they are on the
@@ -46,7 +47,7 @@ struct BeltSpec {
 class BeltSim {
  public:
   struct Item {
-    std::uint64_t number = 0;  // from 1, in the order they reach the barrier
+    std::uint64_t number = 0;      // from 1, in the order they reach the barrier
     std::uint64_t arrival_ns = 0;  // its leading edge at the barrier, since the belt started
     std::string material;
   };
@@ -74,7 +75,7 @@ class BeltSim {
   std::atomic<std::uint64_t> t0_ns_{0};
   mutable std::mutex mutex_;
   std::mt19937_64 rng_;
-  std::deque<Item> items_;        // generated so far (the oldest dropped past the view)
+  std::deque<Item> items_;  // generated so far (the oldest dropped past the view)
   std::uint64_t next_arrival_ns_ = 0;
   std::map<std::uint64_t, std::vector<std::string>> truth_;  // recent frames
 };

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A bounded queue between two threads. push() never blocks the producer:
 // when the queue is full it drops the oldest item (a camera frame that waited
 // too long is worth less than the new one) and counts it. push_wait() is for

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Who a client of tofmatd is and what it may do (issue 16): its peer (the
 // uid behind a Unix connection, from SO_PEERCRED; the address of a TCP one),
 // its role, the connection slots it may hold, and how often a TCP address
@@ -41,21 +42,21 @@ struct Peer {
   bool tcp = false;
   uid_t uid = 0;  // Unix
   gid_t gid = 0;
-  std::string address;                 // TCP: the remote IPv4 address
-  std::string key() const;             // what per-peer limits count by: "uid 1000", "tcp 10.0.0.5"
+  std::string address;      // TCP: the remote IPv4 address
+  std::string key() const;  // what per-peer limits count by: "uid 1000", "tcp 10.0.0.5"
 };
 // The peer of a connected socket (SO_PEERCRED or getpeername). Throws
 // std::runtime_error if the kernel does not say.
 Peer peer_of(int fd, bool tcp);
 
 struct AccessOptions {
-  std::size_t max_unix = 64;      // Unix connections at once
-  std::size_t max_tcp = 16;       // TCP connections at once
-  std::size_t max_per_peer = 16;  // per uid (Unix) or address (TCP)
-  std::string read_token;         // TCP: reads
-  std::string control_token;      // TCP: controls ("" = no TCP client controls)
-  long control_gid = -1;          // Unix: this group's members control too (-1 = none)
-  uid_t owner_uid = 0;            // the daemon's own user (controls)
+  std::size_t max_unix = 64;         // Unix connections at once
+  std::size_t max_tcp = 16;          // TCP connections at once
+  std::size_t max_per_peer = 16;     // per uid (Unix) or address (TCP)
+  std::string read_token;            // TCP: reads
+  std::string control_token;         // TCP: controls ("" = no TCP client controls)
+  long control_gid = -1;             // Unix: this group's members control too (-1 = none)
+  uid_t owner_uid = 0;               // the daemon's own user (controls)
   double requests_per_second = 200;  // per peer (and as many at once)
   double connects_per_second = 20;   // per peer (and twice as many at once)
 };

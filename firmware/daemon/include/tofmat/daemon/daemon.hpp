@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd put together: the source on the USB/event thread, the pipeline on
 // the processing thread, the server on its own thread, and the command
 // handler that joins clients to the pipeline. The caller's thread handles
@@ -60,7 +61,7 @@ class Daemon {
   std::unique_ptr<Pipeline> pipeline_;
   std::unique_ptr<Server> server_;
   std::unique_ptr<Source> source_;
-  std::unique_ptr<SortingLine> line_;  // null without a sorting line
+  std::unique_ptr<SortingLine> line_;    // null without a sorting line
   std::unique_ptr<ResetButton> button_;  // null without a reset button
   std::atomic<bool> stop_{false};
   std::atomic<bool> failed_{false};

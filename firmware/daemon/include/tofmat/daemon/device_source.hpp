@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A Kinect v2 behind any USB transport, through the driver: the real camera
 // (libusb) and the simulated one share this code, so the daemon's path from
 // USB bytes to labels is the same for both.

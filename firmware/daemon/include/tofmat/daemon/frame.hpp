@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // What travels from a source (USB/event thread) to the processing thread: one
 // depth frame as the nine raw phase-step images, the device's P0 corrections
 // it must be decoded with, and, for the simulated camera, the ground truth.
@@ -43,7 +44,7 @@ struct FrameTruth {
 
 struct RawFrame {
   std::uint64_t sequence = 0;
-  std::uint64_t arrival_ns = 0;  // CLOCK_MONOTONIC when the last packet arrived
+  std::uint64_t arrival_ns = 0;   // CLOCK_MONOTONIC when the last packet arrived
   std::vector<std::int16_t> raw;  // 9 x kPixels, sub-image-major (or empty: nothing unpacked)
   // The pixels of `raw` that hold this frame's samples: a camera source
   // unpacks only what the profile reads (Pipeline::wanted_region); the rest

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Rate-limited logging for what clients can cause (connections, refusals,
 // protocol errors): per kind, at most `burst` lines per interval; the rest
 // are counted and reported in one summary line when the kind may log again.
@@ -12,7 +13,8 @@ namespace tofmat::daemon {
 
 class LogLimiter {
  public:
-  LogLimiter(int burst = 10, std::uint64_t interval_ns = 10'000'000'000ull) : burst_(burst), interval_ns_(interval_ns) {}
+  LogLimiter(int burst = 10, std::uint64_t interval_ns = 10'000'000'000ull)
+      : burst_(burst), interval_ns_(interval_ns) {}
   // Whether a line of this kind may be logged now. When it may after some
   // were held back, `suppressed` says how many (log it with the line).
   bool allow(const std::string& kind, std::uint64_t now_ns, std::uint64_t& suppressed);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's command line and configuration file (CLI11: the file is TOML or
 // INI with the same keys as the long flags, e.g. `profile = "handheld"`).
 // Flags given on the command line win over the file.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The processing stage: frames from the source's bounded queue (the oldest is
 // dropped when processing falls behind, so the camera is never blocked) go
 // through the active profile; commands from clients change the profile, ROI,
@@ -21,7 +22,7 @@ namespace tofmat::daemon {
 
 class Pipeline {
  public:
-  Pipeline(std::shared_ptr<const ExemplarTable> table, std::string table_path, ProfileConfig config,
+  Pipeline(std::shared_ptr<const ExemplarTable> table, const std::string& table_path, const ProfileConfig& config,
            std::size_t queue_frames = 2);
 
   void set_emitter(Emitter emit) { emit_ = std::move(emit); }  // before run()

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Scene profiles (DESIGN.md section 5): what the daemon computes for a scene,
 // and nothing else. A profile decodes only its pixels, holds only its
 // candidate materials (the compact table's subset at load) and emits events.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Recordings of the raw stream (`tofmat record`, `--source replay:FILE`):
 // what the camera delivered, so a session can be replayed through the same
 // pipeline. Little-endian, fixed sizes (docs/protocol.md, "Recordings"):

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Decode of a pixel region, depth-bin accumulation of its Eq. (10) features
 // and Eq. (12) partial matching, on the fixed-point path (the default) or the
 // float reference: what the handheld and sorting profiles share.

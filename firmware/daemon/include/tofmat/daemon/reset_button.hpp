@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The box's front-panel button (issue 17): a press on its GPIO line resets
 // the accumulation, as the `reset` command does. tofmatd owns the GPIO (one
 // libgpiod layer for the line and the panel); `tofmat panel` shows the

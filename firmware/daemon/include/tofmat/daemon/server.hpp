@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // tofmatd's socket server: one thread polling the listening sockets (Unix,
 // and TCP when configured), every client connection and a wake-up eventfd.
 // It does the hello handshake (protocol version; the token on TCP), keeps
@@ -25,8 +26,8 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
 #include <spdlog/common.h>
+#include <nlohmann/json.hpp>
 
 #include "tofmat/daemon/client_access.hpp"
 #include "tofmat/daemon/log_limiter.hpp"
@@ -36,17 +37,17 @@
 namespace tofmat::daemon {
 
 struct ServerOptions {
-  std::string socket_path;      // "" = no Unix socket
+  std::string socket_path;  // "" = no Unix socket
   unsigned socket_mode = 0660;
-  std::string tcp;              // "host:port" ("" = no TCP); needs a token
+  std::string tcp;               // "host:port" ("" = no TCP); needs a token
   std::string token;             // TCP: reads
   std::string control_token;     // TCP: controls ("" = no TCP client controls)
   long control_gid = -1;         // Unix: members of this group control too (the daemon's user and root always do)
   std::size_t max_clients = 64;  // Unix connections at once
   std::size_t max_tcp_clients = 16;
-  std::size_t max_clients_per_peer = 16;  // per uid (Unix) or address (TCP)
-  double peer_request_rate = 200;  // requests a second per peer (and as many at once)
-  double peer_connect_rate = 20;   // new connections a second per peer (and twice as many at once)
+  std::size_t max_clients_per_peer = 16;    // per uid (Unix) or address (TCP)
+  double peer_request_rate = 200;           // requests a second per peer (and as many at once)
+  double peer_connect_rate = 20;            // new connections a second per peer (and twice as many at once)
   std::size_t max_queue_bytes = 16u << 20;  // per client
   int hello_timeout_ms = 5000;
   // After hello: no request and no subscription for this long, or queued
@@ -112,8 +113,8 @@ class Server {
   std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, auth_throttled_{0},
       not_permitted_{0}, idle_closed_{0}, dropped_events_{0}, inbox_dropped_{0};
   std::atomic<std::size_t> clients_{0}, unix_clients_{0}, tcp_clients_{0};
-  ClientAccess access_;  // server thread only (after the constructor)
-  LogLimiter log_limiter_;  // server thread only
+  ClientAccess access_;                    // server thread only (after the constructor)
+  LogLimiter log_limiter_;                 // server thread only
   RateBucket unix_accepts_, tcp_accepts_;  // connections accepted, all peers (server thread only)
   std::atomic<std::uint64_t> log_suppressed_{0};
 };

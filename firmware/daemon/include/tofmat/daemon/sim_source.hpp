@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // `--source sim[:SCENE[,key=value...]]`: the simulated Kinect v2 (firmware/sim)
 // behind the driver, looking at a scripted scene, with its ground truth.
 //

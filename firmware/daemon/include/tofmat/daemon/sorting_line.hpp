@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The sorting line in tofmatd (issue 17): the light barrier, the belt's
 // encoder, the outlets' pushers and the alarm on GPIO, and the line's
 // schedule (firmware/line) on a thread of its own ("tofmatd-line").
@@ -40,7 +41,7 @@ struct OutletOptions {
 OutletOptions parse_outlet(const std::string& text);
 
 struct LineOptions {
-  std::string gpio;  // "" = no sorting line; "libgpiod" | "sim"
+  std::string gpio;     // "" = no sorting line; "libgpiod" | "sim"
   std::string barrier;  // CHIP:LINE
   bool barrier_active_low = false;
   std::string barrier_bias = "as-is";
@@ -53,7 +54,7 @@ struct LineOptions {
   std::string reject;                // an outlet's name ("" = rejects ride to the belt's end)
   std::string alarm;                 // CHIP:LINE ("" = none)
   double margin_ms = 20, alarm_hold_ms = 5000;
-  double max_distance = 0;           // a label is confident at most this far (Eq. 12, mm^2; 0 = any final label)
+  double max_distance = 0;  // a label is confident at most this far (Eq. 12, mm^2; 0 = any final label)
   bool enabled() const { return !gpio.empty() && !barrier.empty(); }  // (options check the rest)
 };
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Frame sources of tofmatd: `kinect` (the libusb driver), `sim[:SCENE]` (the
 // simulated Kinect v2 on the same USB transport and driver) and
 // `replay:FILE` (a recording made by `tofmat record`). A source runs on the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // GPIO lines of the sorting line (issue 17): the light barrier and the belt
 // encoder as inputs with the kernel's edge timestamps, the outlets' pushers
 // and the alarm as outputs. One interface, two backends registered by name:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The simulated GPIO backend ("sim"): one chip, labelled "sim", whose lines
 // exist as soon as they are named. Inputs are driven from outside (a test, or
 // the simulated belt's light barrier and encoder) with the time the edge

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The Kinect v2 command protocol (kinect2-protocol.md 1.4-1.7): command
 // encoding, the completion record, and parsers for the responses the driver
 // uses. Every parser bounds its reads by the response's length and throws
@@ -109,7 +110,7 @@ std::vector<std::uint8_t> encode_depth_params(const DepthParams& p);
 // uint16, pad) in output orientation. The per-pixel phase correction is
 // p0 = -P0 * 0.000031 * pi radians (table k serves group k).
 inline constexpr std::size_t kP0HeaderBytes = 32;
-inline constexpr std::size_t kP0BlockBytes = 2 + 512 * 424 * 2 + 2;  // 434,180
+inline constexpr std::size_t kP0BlockBytes = 2 + 512 * 424 * 2 + 2;                // 434,180
 inline constexpr std::size_t kP0TablesBytes = kP0HeaderBytes + 3 * kP0BlockBytes;  // 1,302,572
 inline constexpr double kP0RadPerUnit = 0.000031 * 3.14159265358979323846;
 struct P0Tables {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Reassembles the depth stream (kinect2-protocol.md 2.1): isochronous packets
 // -> sub-packets of 298,496 payload bytes ending with a 152-byte footer ->
 // depth packets of ten sub-images with a sequence number and timestamp.
@@ -23,21 +24,21 @@ namespace tofmat::kinect {
 
 struct DepthPacket {
   std::uint32_t sequence = 0;
-  std::uint32_t timestamp = 0;      // of sub-image 0's footer, units of ~0.1 ms
+  std::uint32_t timestamp = 0;         // of sub-image 0's footer, units of ~0.1 ms
   const std::uint8_t* data = nullptr;  // kDepthPacketBytes, valid during the callback only
 };
 
 struct DepthStreamCounters {
-  std::uint64_t packets = 0;             // iso packets fed
+  std::uint64_t packets = 0;  // iso packets fed
   std::uint64_t bytes = 0;
-  std::uint64_t sub_images = 0;          // accepted sub-packets
-  std::uint64_t frames = 0;              // emitted depth packets
-  std::uint64_t resyncs = 0;             // empty iso packets that discarded partial data
-  std::uint64_t broken_sub_images = 0;   // overflowed or cut short: data lost or corrupt
-  std::uint64_t bad_footers = 0;         // footer inconsistent with the payload
-  std::uint64_t incomplete_frames = 0;   // frames dropped with sub-images missing
+  std::uint64_t sub_images = 0;         // accepted sub-packets
+  std::uint64_t frames = 0;             // emitted depth packets
+  std::uint64_t resyncs = 0;            // empty iso packets that discarded partial data
+  std::uint64_t broken_sub_images = 0;  // overflowed or cut short: data lost or corrupt
+  std::uint64_t bad_footers = 0;        // footer inconsistent with the payload
+  std::uint64_t incomplete_frames = 0;  // frames dropped with sub-images missing
   std::uint64_t duplicate_sub_images = 0;
-  std::uint64_t stray_sub_images = 0;    // for a frame already emitted
+  std::uint64_t stray_sub_images = 0;  // for a frame already emitted
   // Frames the device numbered but of which not one sub-image arrived (a
   // stalled endpoint, a burst of lost packets): the gaps between the sequence
   // numbers seen, for forward gaps below kMaxSequenceGap.
@@ -72,11 +73,11 @@ class DepthStreamParser {
 
   std::size_t max_packet_;
   Callback on_frame_;
-  std::vector<std::uint8_t> sub_;    // the sub-packet being collected
+  std::vector<std::uint8_t> sub_;  // the sub-packet being collected
   std::size_t collected_ = 0;
   std::vector<std::uint8_t> frame_;  // kDepthPacketBytes
   bool have_frame_ = false;
-  bool emitted_ = false;             // current sequence already passed on
+  bool emitted_ = false;  // current sequence already passed on
   std::uint32_t sequence_ = 0;
   std::uint32_t timestamp_ = 0;
   std::uint32_t mask_ = 0;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The Kinect v2 driver: the open/start/stop/close sequences and command
 // transactions of kinect2-protocol.md 1.3-1.7 over any UsbTransport, and the
 // depth stream reassembled by DepthStreamParser. The caller's thread runs the

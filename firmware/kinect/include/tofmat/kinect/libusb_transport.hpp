@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The UsbTransport on libusb-1.0: finds a Kinect v2 (either product ID),
 // resets, configures and claims it, and keeps a pool of isochronous transfers
 // in flight on the depth endpoint (kinect2-protocol.md 1.1-1.3). Each failure
@@ -14,11 +15,11 @@ namespace tofmat::kinect {
 
 struct UsbDeviceInfo {
   int bus = 0;
-  std::string port;      // "2-1.3"
+  std::string port;  // "2-1.3"
   std::uint16_t product_id = 0;
-  std::string serial;    // empty when the device could not be opened to read it
+  std::string serial;  // empty when the device could not be opened to read it
   bool accessible = false;
-  std::string problem;   // why not accessible (permission, busy, ...)
+  std::string problem;  // why not accessible (permission, busy, ...)
 };
 
 // Every Kinect v2 on the bus. Throws UsbError(kNoDevice) if libusb cannot

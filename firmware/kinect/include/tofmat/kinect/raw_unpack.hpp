@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The depth sub-image's packed 11-bit layout (kinect2-protocol.md 2.3) and its
 // inverse. Rows: stored rows 0..211 are output rows 0..211, stored rows
 // 212..423 are output rows 423 down to 212. Columns: output column x is slot
@@ -111,10 +112,10 @@ void pack_codes(const std::uint16_t* codes, std::uint8_t* sub_image);
 // The layout's numbers and the row walk the kernels share (2.3: 704-byte rows
 // of 512 slots).
 namespace unpack_detail {
-inline constexpr std::size_t kRunBytes = 176;        // 128 slots (one column residue x mod 4) x 11 bits
-inline constexpr std::size_t kGroupBytes = 11;       // 8 slots x 11 bits
+inline constexpr std::size_t kRunBytes = 176;   // 128 slots (one column residue x mod 4) x 11 bits
+inline constexpr std::size_t kGroupBytes = 11;  // 8 slots x 11 bits
 inline constexpr std::size_t kGroupsPerRun = 16;
-inline constexpr int kBlockColumns = 32;             // group k of the four runs: columns 32 k ..
+inline constexpr int kBlockColumns = 32;  // group k of the four runs: columns 32 k ..
 
 // Columns [x0, x1) of one output row, `Width` columns (a multiple of 32) at a
 // time: block(b, dst) writes columns Width b .. Width b + Width - 1 to dst.

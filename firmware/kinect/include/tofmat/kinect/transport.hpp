@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The USB transport the driver talks to: the few operations the Kinect v2
 // needs (control, bulk, isochronous, alternate settings) behind one small
 // interface, so the same driver runs on libusb (libusb_transport.hpp) and on

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Where the belt is (issue 17): a position along the belt, in mm, as a
 // function of time, and when it will reach a position. Schedules are kept in
 // belt positions, not in times, so that they follow the belt when it slows
@@ -45,7 +46,10 @@ class Quadrature {
  public:
   // An edge on channel A (`b` false) or B, to `level`. Returns -1, 0 or +1.
   int edge(bool channel_b, bool level);
-  void set_levels(bool a, bool b) { a_ = a; b_ = b; }
+  void set_levels(bool a, bool b) {
+    a_ = a;
+    b_ = b;
+  }
   std::int64_t count() const { return count_; }
   std::uint64_t errors() const { return errors_; }
 
@@ -61,7 +65,8 @@ class EncoderMotion : public BeltMotion {
   // window: how far back the speed is estimated from. stopped_after: no
   // count for this long and the belt is taken as stopped.
   // Throws std::invalid_argument for non-positive values.
-  EncoderMotion(double counts_per_mm, std::uint64_t window_ns = 50'000'000, std::uint64_t stopped_after_ns = 100'000'000);
+  EncoderMotion(double counts_per_mm, std::uint64_t window_ns = 50'000'000,
+                std::uint64_t stopped_after_ns = 100'000'000);
   // An edge of channel A or B at t_ns (in order).
   void edge(bool channel_b, bool level, std::uint64_t t_ns);
   void set_levels(bool a, bool b) { quad_.set_levels(a, b); }

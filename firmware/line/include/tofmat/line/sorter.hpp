@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The sorting line's schedule (issue 17): a FIFO of the items on the belt,
 // from the light barrier past the camera to the outlets. Everything is kept
 // in belt positions (BeltMotion turns them into times), so a belt that slows
@@ -70,7 +71,7 @@ struct BurstLabel {
   bool confident = false;
   double distance = 0;
   std::optional<std::string> truth;  // a simulated item's real material (passed on, never used)
-  bool mixed = false;  // the burst's frames disagreed (another item in the ROI): never sorted
+  bool mixed = false;                // the burst's frames disagreed (another item in the ROI): never sorted
 };
 
 struct SortEvent {
@@ -79,12 +80,12 @@ struct SortEvent {
   std::uint64_t trigger_ns = 0;  // the barrier's edge
   std::string material;          // "" if none
   double distance = 0;
-  std::string outlet;            // "" when rejects ride to the belt's end
+  std::string outlet;  // "" when rejects ride to the belt's end
   Reason reason = Reason::kSorted;
   std::uint64_t decided_ns = 0;
   std::optional<std::uint64_t> fire_ns;  // planned ("decided") or done ("fired"); none: no pusher / belt stopped
-  double margin_ms = 0;          // fire time minus decision time (how early the label came)
-  std::optional<std::string> truth;  // a simulated item's real material, when its burst knew it
+  double margin_ms = 0;                  // fire time minus decision time (how early the label came)
+  std::optional<std::string> truth;      // a simulated item's real material, when its burst knew it
 };
 
 struct Hooks {
@@ -132,7 +133,8 @@ class Sorter {
     std::optional<std::size_t> outlet;  // where it goes (none: the belt's end)
     SortEvent event;
   };
-  void decide(Item& it, std::optional<std::size_t> outlet, Reason reason, const BurstLabel* label, std::uint64_t now_ns);
+  void decide(Item& it, std::optional<std::size_t> outlet, Reason reason, const BurstLabel* label,
+              std::uint64_t now_ns);
   void reject(Item& it, Reason reason, std::uint64_t now_ns) { decide(it, config_.reject, reason, nullptr, now_ns); }
   // Too late to be sorted (no label in time, or one too late for its
   // outlet): reject, counted, reported, and the alarm held on.
@@ -146,7 +148,7 @@ class Sorter {
   SorterConfig config_;
   const BeltMotion& motion_;
   Hooks hooks_;
-  std::deque<Item> items_;  // in the order they are on the belt
+  std::deque<Item> items_;                                  // in the order they are on the belt
   std::vector<std::optional<std::uint64_t>> outlet_until_;  // a pusher on: until when
   std::uint64_t next_item_ = 1;
   bool camera_ok_ = true;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The light barrier's edges -> items (issue 17). libgpiod's v1 API has no
 // debounce, so it is done here, on the kernel's timestamps:
 //  - an item starts at an edge to "blocked" that is held for at least
@@ -47,10 +48,10 @@ class TriggerFilter {
   std::optional<ItemStart> confirm();
   TriggerConfig config_;
   bool blocked_ = false;
-  bool started_ = false;             // an edge seen (the first level is unknown before it)
-  std::uint64_t last_edge_ns_ = 0;   // the last edge of either kind
+  bool started_ = false;                  // an edge seen (the first level is unknown before it)
+  std::uint64_t last_edge_ns_ = 0;        // the last edge of either kind
   std::optional<std::uint64_t> pending_;  // a leading edge not yet confirmed
-  bool in_item_ = false;             // a confirmed item holds the beam (its bounces are no items)
+  bool in_item_ = false;                  // a confirmed item holds the beam (its bounces are no items)
   std::optional<std::uint64_t> last_item_ns_;
   std::uint64_t glitches_ = 0, bounces_ = 0;
 };

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The C++ client of tofmatd (what the Python tofmat.Client is built on):
 // connects by Unix socket path or host:port, does the hello handshake (with
 // the token over TCP), sends commands and waits for their replies, and hands

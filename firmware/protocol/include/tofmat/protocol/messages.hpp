@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The typed messages of tofmatd's protocol (docs/protocol.md) on top of the
 // framing in wire.hpp: what the daemon builds and what the client reads back,
 // with every count and string bounded on the way in. One codec, shared by the
@@ -12,22 +13,22 @@
 
 namespace tofmat::protocol {
 
-inline constexpr std::size_t kMaxNameBytes = 64;       // material, profile, command names
-inline constexpr std::size_t kMaxTextBytes = 1024;     // error messages, paths, descriptions
-inline constexpr std::size_t kMaxMaterials = 255;      // label maps hold uint8 indices, 255 = none
-inline constexpr std::size_t kMaxRanking = 64;         // ranking entries in a label event
-inline constexpr std::uint8_t kNoLabel = 255;          // label map: no valid pixel / no decision
+inline constexpr std::size_t kMaxNameBytes = 64;    // material, profile, command names
+inline constexpr std::size_t kMaxTextBytes = 1024;  // error messages, paths, descriptions
+inline constexpr std::size_t kMaxMaterials = 255;   // label maps hold uint8 indices, 255 = none
+inline constexpr std::size_t kMaxRanking = 64;      // ranking entries in a label event
+inline constexpr std::uint8_t kNoLabel = 255;       // label map: no valid pixel / no decision
 inline constexpr int kMaxImageSide = 4096;
 
 // Error codes of a reply (the "code" field), stable strings clients test.
 namespace codes {
-inline constexpr const char* kAuth = "auth";                  // TCP without the right token
-inline constexpr const char* kVersion = "version";            // hello with another protocol version
-inline constexpr const char* kHelloFirst = "hello_first";     // a request before hello
+inline constexpr const char* kAuth = "auth";               // TCP without the right token
+inline constexpr const char* kVersion = "version";         // hello with another protocol version
+inline constexpr const char* kHelloFirst = "hello_first";  // a request before hello
 inline constexpr const char* kUnknownCommand = "unknown_command";
 inline constexpr const char* kInvalidArgument = "invalid_argument";
-inline constexpr const char* kFailed = "failed";              // a valid command that did not work (bad table file)
-inline constexpr const char* kPermission = "permission";      // a control command from a client that may only read
+inline constexpr const char* kFailed = "failed";          // a valid command that did not work (bad table file)
+inline constexpr const char* kPermission = "permission";  // a control command from a client that may only read
 }  // namespace codes
 
 struct Hello {
@@ -73,13 +74,13 @@ struct LabelEvent {
   std::uint64_t frame = 0;         // the source's frame sequence number
   std::uint64_t timestamp_ns = 0;  // CLOCK_MONOTONIC when the frame was complete in the daemon
   std::string profile;
-  std::string state;               // "tracking", "no_target", "final" or "mixed" (sorting burst)
-  std::string material;            // "" when state is no_target
-  std::int32_t index = -1;         // into the daemon's table materials
-  double distance = 0.0;           // Eq. (12), mm^2
-  std::uint32_t valid = 0;         // elements compared
-  std::uint32_t bins_covered = 0;  // depth bins observed so far
-  std::vector<RankEntry> ranking;  // best first, at most kMaxRanking
+  std::string state;                     // "tracking", "no_target", "final" or "mixed" (sorting burst)
+  std::string material;                  // "" when state is no_target
+  std::int32_t index = -1;               // into the daemon's table materials
+  double distance = 0.0;                 // Eq. (12), mm^2
+  std::uint32_t valid = 0;               // elements compared
+  std::uint32_t bins_covered = 0;        // depth bins observed so far
+  std::vector<RankEntry> ranking;        // best first, at most kMaxRanking
   std::optional<std::uint64_t> trigger;  // sorting: the trigger this answers
   std::optional<Truth> truth;
   bool simulated = false;  // the frame came from a simulated camera (sent only when true)
@@ -90,8 +91,8 @@ LabelEvent decode_label(const Message& m);
 struct LabelMapEvent {
   std::uint64_t frame = 0, timestamp_ns = 0;
   int width = 0, height = 0;
-  std::vector<std::string> materials;  // index -> name; kNoLabel = none
-  std::vector<std::uint8_t> labels;    // width x height, row-major
+  std::vector<std::string> materials;    // index -> name; kNoLabel = none
+  std::vector<std::uint8_t> labels;      // width x height, row-major
   std::optional<double> truth_accuracy;  // simulated source: fraction of target pixels labelled right
   bool simulated = false;                // the frame came from a simulated camera (sent only when true)
 };

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Sockets for tofmatd and its clients: a Unix stream socket by default
 // (permissions 0660: the group decides who may connect), TCP only when asked.
 // Thin RAII over the POSIX calls; errors are SocketError with the OS reason.

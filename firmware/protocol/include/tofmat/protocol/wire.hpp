@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // The framing of tofmatd's socket protocol (docs/protocol.md): every message
 // is a 12-byte header (magic "TMAT", version, type, payload length) and a
 // payload of a JSON object (the metadata) followed by an optional binary blob

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A material's noise-free relative-distortion curve as the real database
 // records it: a sweep of true range, decoded per frequency, binned by the
 // combined depth (docs/simulator-model.md, section 4).

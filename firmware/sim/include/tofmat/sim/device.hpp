@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A ToF camera's parameters (docs/simulator-model.md, section 2), loaded from
 // a versioned device profile (data/devices/*.json).
 #pragma once
@@ -25,7 +26,7 @@ struct FrequencyModel {
   double freq_mhz = 0.0;          // nominal (what the decode assumes)
   double scale_error = 0.0;       // true frequency = nominal * (1 + scale_error)
   double phase_offset_rad = 0.0;  // delay of the reference
-  double signal_scale = 1.0;       // r_f: this group's raw signal relative to the others
+  double signal_scale = 1.0;      // r_f: this group's raw signal relative to the others
   // W_f: a tap's soft full well in units of counts_at_1m * (1000 / range_ref_mm)^2
   // (the 16 MHz tap signal of an albedo-1 target at range_ref_mm); +inf: none.
   double full_well = std::numeric_limits<double>::infinity();
@@ -69,8 +70,8 @@ struct NoiseModel {
 };
 
 struct SignalModel {
-  double counts_at_1m = 3000.0;        // fundamental amplitude, albedo 1, normal incidence, 1 m
-  double saturation = 16320.0;         // |raw| beyond this reads as saturated (32767)
+  double counts_at_1m = 3000.0;  // fundamental amplitude, albedo 1, normal incidence, 1 m
+  double saturation = 16320.0;   // |raw| beyond this reads as saturated (32767)
 };
 
 // Pinhole intrinsics of the depth camera (nominal Kinect v2 IR values).
@@ -87,8 +88,8 @@ double saturate_tap(double t, double full_well, double sharpness);
 struct DeviceProfile {
   std::string name;
   int version = 2;
-  double range_ref_mm = 1000.0;         // the range at which curves' fall-off A is 1
-  double saturation_sharpness = 8.0;    // p of the taps' soft full well
+  double range_ref_mm = 1000.0;          // the range at which curves' fall-off A is 1
+  double saturation_sharpness = 8.0;     // p of the taps' soft full well
   std::array<FrequencyModel, 3> groups;  // raw sub-image groups: 80, 16, 120 MHz
   PixelPhasePattern pixel_phase;
   NoiseModel noise;

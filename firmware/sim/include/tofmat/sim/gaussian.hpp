@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Fast standard-normal samples for sensor noise: xoshiro256+ uniform bits and
 // the ziggurat method (Marsaglia and Tsang, 2000, 128 layers), with the layer
 // index and the magnitude taken from separate bits (Doornik, 2005). A full

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // A simulated Kinect v2 on the USB transport the driver talks to: it answers
 // the command protocol (firmware versions, serial, depth intrinsics from the
 // device profile's camera, P0 tables of the renderer's per-pixel phase) and,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Material temporal responses in closed form (docs/simulator-model.md, section 1).
 // The Fourier coefficient r^(nu) of a material's impulse response shifts the
 // phase of every modulation frequency and harmonic: Eq. (5) of the paper.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Raw samples of one pixel and one frequency from the model, and the
 // noise-free decode of a material at a range (docs/simulator-model.md, 3).
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Device profiles and material libraries as versioned JSON files
 // (firmware/sim/data/devices/*.json, firmware/sim/data/materials/*.json).
 // Unknown keys are errors (a typo must not silently fall back to a default).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Renders raw Kinect v2 frames: for every pixel and frequency group the three
 // phase-step samples, as the camera delivers them (the 11-bit code's 16-bit
 // values; 32767 where saturated), with shot and read noise, plus ground truth.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // What the simulated camera looks at: planar (or folded) targets of library
 // materials in front of a background, in the camera's pixel grid.
 #pragma once
