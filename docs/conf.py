@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # Sphinx configuration of tofmat's documentation site: `make docs` (mk/docs.mk) builds it into
 # build/docs with warnings as errors. The pages are the Markdown files of docs/ (MyST), the user
 # guide in docs/guide/, the API reference in docs/api/ (autodoc) and the `tofmat` command's
