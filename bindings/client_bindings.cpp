@@ -7,6 +7,7 @@
 
 #include "bindings.hpp"
 #include "tofmat/protocol/client.hpp"
+#include "tofmat/protocol/schema.hpp"
 
 namespace tofmat::py {
 namespace {
@@ -64,15 +65,60 @@ auto guarded(F&& f) -> decltype(f()) {
   }
 }
 
-pyb::object loads(const protocol::Json& j) { return pyb::module_::import("json").attr("loads")(j.dump()); }
+// A JSON value as the Python object json.loads would make of it, built directly (no text between).
+pyb::object to_python(const protocol::Json& j) {
+  switch (j.type()) {
+    case protocol::Json::value_t::object: {
+      pyb::dict d;
+      for (const auto& [key, value] : j.items()) d[pyb::str(key)] = to_python(value);
+      return std::move(d);
+    }
+    case protocol::Json::value_t::array: {
+      pyb::list l;
+      for (const auto& value : j) l.append(to_python(value));
+      return std::move(l);
+    }
+    case protocol::Json::value_t::string: return pyb::str(j.get_ref<const std::string&>());
+    case protocol::Json::value_t::boolean: return pyb::bool_(j.get<bool>());
+    case protocol::Json::value_t::number_integer: return pyb::int_(j.get<std::int64_t>());
+    case protocol::Json::value_t::number_unsigned: return pyb::int_(j.get<std::uint64_t>());
+    case protocol::Json::value_t::number_float: return pyb::float_(j.get<double>());
+    default: return pyb::none();
+  }
+}
 
-// An event as (meta dict, blob bytes) after the typed decoder checked it.
+// An event as (meta dict, blob bytes) after the schema (and, for the image events, their blob's
+// decoder) checked it. An event this version does not know passes to Python, which skips it.
 pyb::object event_tuple(const protocol::Message& m) {
+  protocol::check_event(m, false);
   const std::string name = protocol::event_name(m);
-  if (name == "label") protocol::decode_label(m);
+  if (name == "label") protocol::decode_label(m);  // (its ranking's entries and the index's range)
   if (name == "label_map") protocol::decode_label_map(m);
   if (name == "depth") protocol::decode_depth(m);
-  return pyb::make_tuple(loads(m.meta), pyb::bytes(reinterpret_cast<const char*>(m.blob.data()), m.blob.size()));
+  return pyb::make_tuple(to_python(m.meta), pyb::bytes(reinterpret_cast<const char*>(m.blob.data()), m.blob.size()));
+}
+
+// The schema as Python data: [{"event", "streams", "blob", "fields": [{"name", "type", "always"}]}].
+pyb::list schema_for_python() {
+  pyb::list out;
+  for (const auto& e : protocol::event_schema()) {
+    pyb::list streams, fields;
+    for (const auto s : e.streams) streams.append(pyb::str(std::string(s)));
+    for (const auto& f : e.fields) {
+      pyb::dict d;
+      d["name"] = std::string(f.name);
+      d["type"] = protocol::field_type_name(f.type);
+      d["always"] = f.always;
+      fields.append(d);
+    }
+    pyb::dict d;
+    d["event"] = std::string(e.event);
+    d["streams"] = streams;
+    d["blob"] = e.blob;
+    d["fields"] = fields;
+    out.append(d);
+  }
+  return out;
 }
 
 class PyConnection {
@@ -91,7 +137,7 @@ class PyConnection {
       throw pyb::value_error(std::string("command arguments are not JSON: ") + e.what());
     }
     const auto result = guarded([&] { return client_->request(cmd, args); });
-    return loads(result);
+    return to_python(result);
   }
   pyb::object next_event(double timeout_s) {
     const int ms = timeout_s < 0 ? -1 : static_cast<int>(timeout_s * 1000.0);
@@ -160,6 +206,8 @@ void register_client(pyb::module_& m) {
       .def("close", &PyConnection::close);
   m.attr("PROTOCOL_VERSION") = protocol::kProtocolVersion;
   m.attr("PROTOCOL_MINOR") = protocol::kProtocolMinor;
+  m.def("protocol_schema", &schema_for_python,
+        "The protocol's events (firmware/protocol/schema.hpp): each one's name, streams, blob and fields.");
 }
 
 }  // namespace tofmat::py

@@ -304,6 +304,8 @@ class sim:
 PROTOCOL_VERSION: int
 PROTOCOL_MINOR: int
 
+def protocol_schema() -> list[dict[str, Any]]: ...
+
 class ClientError(Exception):
     kind: str  # refused, timeout, version, auth, protocol, closed, command
     code: str  # a refused command's code (invalid_argument, unknown_command, failed, auth, version)

@@ -229,7 +229,7 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
             received_ns=now,
             profile=meta["profile"],
             state=meta["state"],
-            material=meta["material"] or None,
+            material=meta.get("material") or None,
             index=meta["index"],
             distance=meta["distance"],
             valid=meta["valid"],
@@ -260,9 +260,9 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
             state=meta["state"],
             item=meta["item"],
             trigger_ns=meta["trigger_ns"],
-            material=meta["material"] or None,
+            material=meta.get("material") or None,
             distance=meta["distance"],
-            outlet=meta["outlet"] or None,
+            outlet=meta.get("outlet") or None,
             reason=meta["reason"],
             decided_ns=meta["decided_ns"],
             fire_ns=meta.get("fire_ns"),
@@ -387,6 +387,19 @@ class Client:
         (`--table-dir`, by default the folder of its `--table`), or an absolute path inside it."""
         materials: list[str] = self._call("load_table", {"path": os.fspath(path)})["materials"]
         return materials
+
+    def latest(self, stream: Stream | str = "labels") -> Event | None:
+        """The last event of a stream without images (labels, device, sort, line, reset), whether or
+        not this client subscribed to it: the poll beside the watch. None when there was none yet.
+        Needs a daemon of protocol 1.5 or later (older ones refuse the command: CommandError)."""
+        reply = self._call("latest", {"stream": stream})
+        meta = reply.get("event")
+        return _event(meta, b"") if meta is not None else None
+
+    def latest_label(self) -> Label | None:
+        """The daemon's last label (``latest("labels")``): a client that connects has one at once."""
+        event = self.latest("labels")
+        return event if isinstance(event, Label) else None
 
     def trigger(self, burst: int | None = None) -> int:
         """Sorting profile: start a burst now; returns the trigger number its label will carry."""

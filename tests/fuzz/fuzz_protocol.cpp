@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "tofmat/protocol/messages.hpp"
+#include "tofmat/protocol/schema.hpp"
 #include "tofmat/protocol/wire.hpp"
 
 namespace {
@@ -109,6 +110,21 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     try {
       event_name(m);
     } catch (const ProtocolError&) {
+    }
+    // The schema's check (what both clients run on every event) refuses or passes, never crashes;
+    // what it passes strictly, it passes leniently too.
+    if (m.type == MessageType::kEvent) {
+      bool strict_ok = false;
+      try {
+        check_event(m, true);
+        strict_ok = true;
+      } catch (const ProtocolError&) {
+      }
+      try {
+        check_event(m, false);
+      } catch (const ProtocolError&) {
+        if (strict_ok) __builtin_trap();
+      }
     }
   }
   return 0;

@@ -44,7 +44,8 @@ void make_room(Map& map, std::size_t max, Stale stale, Earlier earlier) {
 const char* role_name(Role role) { return role == Role::kControl ? "control" : "read"; }
 
 bool is_reading_command(const std::string& cmd) {
-  return cmd == "hello" || cmd == "subscribe" || cmd == "unsubscribe" || cmd == "status" || cmd == "server_status";
+  return cmd == "hello" || cmd == "subscribe" || cmd == "unsubscribe" || cmd == "status" || cmd == "server_status" ||
+         cmd == "latest";
 }
 
 std::string Peer::key() const { return tcp ? "tcp " + address : "uid " + std::to_string(uid); }

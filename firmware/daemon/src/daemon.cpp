@@ -58,8 +58,8 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
     options_.table_dir = std::filesystem::absolute(options_.table).lexically_normal().parent_path().string();
   options_.table_dir = std::filesystem::weakly_canonical(options_.table_dir).string();
   options_.server.server_name = kVersion;
-  options_.server.capabilities = {"labels",      "label_map", "depth",          "device",     "status", "reset",
-                                  "set_profile", "set_roi",   "set_candidates", "load_table", "trigger"};
+  options_.server.capabilities = {"labels",      "label_map", "depth",          "device",     "status",  "reset",
+                                  "set_profile", "set_roi",   "set_candidates", "load_table", "trigger", "latest"};
   if (options_.line.enabled())
     options_.server.capabilities.insert(options_.server.capabilities.end(), {"sort", "line"});
   // The sockets first: a second daemon started on a live one's socket is
@@ -179,7 +179,7 @@ void Daemon::start() {
       protocol::Message m;
       m.meta = {{"event", "device"},
                 {"state", device_state_name(s)},
-                {"message", message},
+                {"message", message.substr(0, protocol::kMaxTextBytes)},  // (a driver's text is not bounded)
                 {"timestamp_ns", protocol::monotonic_ns()}};
       server_->publish("device", m);
     };

@@ -14,6 +14,8 @@
 #include <cerrno>
 #include <deque>
 
+#include "tofmat/protocol/schema.hpp"
+
 namespace tofmat::daemon {
 namespace {
 
@@ -50,12 +52,15 @@ Bytes encoded(const protocol::Message& m) {
   return std::make_shared<const std::vector<std::uint8_t>>(protocol::encode(m));
 }
 
+std::string unknown_stream(const std::string& s) {
+  std::string names;
+  for (const auto& n : protocol::stream_names()) names += (names.empty() ? "" : ", ") + n;
+  return "unknown stream \"" + s + "\" (" + names + ")";
+}
+
 }  // namespace
 
-bool valid_stream(const std::string& s) {
-  return s == "labels" || s == "label_map" || s == "device" || s == "depth:80" || s == "depth:16" || s == "depth:120" ||
-         s == "depth:combined" || s == "sort" || s == "line" || s == "reset";
-}
+bool valid_stream(const std::string& s) { return protocol::valid_stream(s); }
 
 struct Server::Connection {
   std::uint64_t id = 0;
@@ -123,6 +128,14 @@ Server::~Server() {
 void Server::wake() { wake_fd_.wake(); }
 
 void Server::publish(const std::string& stream, const protocol::Message& message) {
+#ifndef NDEBUG
+  // What this build publishes follows the schema to the letter (debug builds and the tests).
+  protocol::check_event(message, true);
+#endif
+  if (protocol::pollable_stream(stream)) {  // kept for `latest`, subscribers or not
+    std::lock_guard<std::mutex> lock(inbox_mutex_);
+    latest_[stream] = message.meta;
+  }
   if (!has_subscribers(stream)) return;
   auto bytes = encoded(message);
   {
@@ -338,10 +351,7 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       return refuse(protocol::codes::kInvalidArgument, e.what(), false);
     }
     for (const auto& s : streams)
-      if (!valid_stream(s))
-        return refuse(protocol::codes::kInvalidArgument,
-                      "unknown stream \"" + s + "\" (labels, label_map, device, depth:80|16|120|combined, sort, line)",
-                      false);
+      if (!valid_stream(s)) return refuse(protocol::codes::kInvalidArgument, unknown_stream(s), false);
     if (req.cmd == "subscribe") {
       c.streams.insert(streams.begin(), streams.end());
     } else if (streams.empty()) {
@@ -355,6 +365,25 @@ void Server::handle(Connection& c, const protocol::Message& m) {
   }
   if (req.cmd == "server_status") {
     r.result = status();
+    return reply(c, r);
+  }
+  if (req.cmd == "latest") {  // the poll beside the watch: the stream's last event, if there was one
+    std::string stream = "labels";
+    try {
+      if (req.args.contains("stream")) stream = protocol::get_string(req.args, "stream", protocol::kMaxNameBytes);
+    } catch (const protocol::ProtocolError& e) {
+      return refuse(protocol::codes::kInvalidArgument, e.what(), false);
+    }
+    if (!valid_stream(stream)) return refuse(protocol::codes::kInvalidArgument, unknown_stream(stream), false);
+    if (!protocol::pollable_stream(stream))
+      return refuse(protocol::codes::kInvalidArgument,
+                    "\"" + stream + "\" carries images: subscribe to it; `latest` serves the streams without", false);
+    r.result = protocol::Json::object();
+    {
+      std::lock_guard<std::mutex> lock(inbox_mutex_);
+      const auto it = latest_.find(stream);
+      if (it != latest_.end()) r.result["event"] = it->second;  // (none yet: left out)
+    }
     return reply(c, r);
   }
   // (The daemon's handler reports its own errors as replies; anything that

@@ -216,7 +216,7 @@ void SortingLine::publish_line(const std::string& kind, const std::string& messa
   protocol::Message m;
   m.meta = {{"event", "line"},
             {"kind", kind},
-            {"message", message},
+            {"message", message.substr(0, protocol::kMaxTextBytes)},
             {"alarm", sorter_ ? sorter_->alarm_on() : false},
             {"timestamp_ns", protocol::monotonic_ns()}};
   if (hooks_.publish) hooks_.publish(m, "line");

@@ -108,7 +108,8 @@ class Server {
   // Published messages waiting for the server thread (bounded, oldest dropped).
   mutable std::mutex inbox_mutex_;
   std::vector<std::pair<std::string, std::shared_ptr<const std::vector<std::uint8_t>>>> inbox_;
-  std::set<std::string> subscribed_;  // union of all clients' streams (under inbox_mutex_)
+  std::set<std::string> subscribed_;              // union of all clients' streams (under inbox_mutex_)
+  std::map<std::string, protocol::Json> latest_;  // the last event of each pollable stream (under inbox_mutex_)
   // Counters.
   std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, auth_throttled_{0},
       not_permitted_{0}, idle_closed_{0}, dropped_events_{0}, inbox_dropped_{0};
