@@ -232,3 +232,6 @@ include tests/soak/attacks.mk
 # The documentation site: `make docs` (Sphinx, warnings as errors; part of `make test`).
 include mk/docs.mk
 include mk/lint-cpp.mk
+
+# The error-against-run-time report: `make report` (docs/report.md).
+include mk/report.mk

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # The documentation site (docs/: Sphinx with MyST Markdown, autodoc and sphinx-click) in
 # build/docs, warnings as errors. The Makefile includes this file; `make docs`.
 # conf.py imports the SDK's Python sources from sdk/ with the installed extension

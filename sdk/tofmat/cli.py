@@ -538,9 +538,11 @@ def devices(as_json: bool) -> None:
 
 
 def _register_sim() -> None:
+    from .report.cli import report
     from .sim.cli import sim_cli
 
     main.add_command(sim_cli)
+    main.add_command(report)
 
 
 _register_sim()

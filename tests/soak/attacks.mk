@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 # Attacks on tofmatd (issue 16), run by hand: neither is part of `make test` or CI.
 # Included from the Makefile (PYTHON and build-python are its own). tests/soak/README.md says what
 # each attack does and what is measured.
