@@ -145,7 +145,7 @@ class LabelMap:
     frame: int
     timestamp_ns: int
     received_ns: int
-    labels: npt.NDArray[np.uint8]  # (height, width); 255 = no label
+    labels: npt.NDArray[np.uint8]  # (height, width); 255 = no label; the caller's own (writable) copy
     materials: list[str]
     truth_accuracy: float | None  # simulated source: fraction of target pixels labelled right
     simulated: bool  # the frame came from the simulated camera (or a recording of it), not a camera
@@ -164,7 +164,7 @@ class DepthImage:
     kind: DepthKind  # "80", "16", "120" (wrapped) or "combined"
     x0: int
     y0: int
-    depth_mm: npt.NDArray[np.float32]  # (height, width), NaN where invalid
+    depth_mm: npt.NDArray[np.float32]  # (height, width), NaN where invalid; the caller's own (writable) copy
 
 
 @dataclass(frozen=True)
@@ -240,7 +240,8 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
             simulated=bool(meta.get("simulated", False)),
         )
     if name == "label_map":
-        labels = np.frombuffer(blob, np.uint8).reshape(meta["height"], meta["width"])
+        # (a copy: the user's to change; a frame's 217 KB is nothing next to the frame's own work)
+        labels = np.frombuffer(blob, np.uint8).reshape(meta["height"], meta["width"]).copy()
         return LabelMap(
             meta["frame"],
             meta["timestamp_ns"],
@@ -251,7 +252,7 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
             bool(meta.get("simulated", False)),
         )
     if name == "depth":
-        depth = np.frombuffer(blob, "<f4").reshape(meta["height"], meta["width"])
+        depth = np.frombuffer(blob, "<f4").reshape(meta["height"], meta["width"]).astype(np.float32)  # writable
         return DepthImage(meta["frame"], meta["timestamp_ns"], meta["kind"], meta["x0"], meta["y0"], depth)
     if name == "device":
         return DeviceEvent(meta["state"], meta["message"], meta["timestamp_ns"])

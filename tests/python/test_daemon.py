@@ -89,6 +89,7 @@ def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:
     d = start("sim:static,material=cork,depth=900,realtime=0")
     with d.client() as c:
         img = c.depth("combined", timeout=30)
+        assert img.depth_mm.flags.writeable and img.depth_mm.dtype == np.float32
         assert img.depth_mm.shape == (48, 48) and (img.x0, img.y0) == (232, 188)
         # The camera's depth of cork is distorted by its subsurface scattering, by tens of mm at most.
         assert abs(float(np.nanmedian(img.depth_mm)) - 900.0) < 60.0
@@ -340,6 +341,7 @@ def test_segmentation_label_map(start: Callable[..., Daemon]) -> None:
     with d.client() as c:
         m = c.label_map(timeout=60)
         assert isinstance(m, LabelMap) and m.labels.shape == (424, 512) and m.labels.dtype == np.uint8
+        assert m.labels.flags.writeable  # the caller's own copy
         assert sorted(m.materials) == ["acryl", "cork", "paper"]  # the candidates, in table order
         assert set(np.unique(m.labels)) <= {0, 1, 2, LabelMap.NO_LABEL}
         # One position per pixel (m = 1) is the weakest feature (the paper's 57 %): most pixels, not all.
