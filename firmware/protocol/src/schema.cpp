@@ -192,7 +192,12 @@ void check_event(const Message& m, bool strict) {
       if (key == "event") continue;
       const bool known = std::any_of(spec->fields.begin(), spec->fields.end(),
                                      [&, k = std::string_view(key)](const FieldSpec& f) { return f.name == k; });
-      if (!known) throw ProtocolError("event \"" + name + "\" has a field the schema lacks: \"" + key + "\"");
+      if (!known) {
+        std::string what = "event \"" + name + "\" has a field the schema lacks: \"";
+        what += key;
+        what += '"';
+        throw ProtocolError(what);
+      }
     }
   }
   if (!spec->blob && !m.blob.empty()) throw ProtocolError("event \"" + name + "\" carries no blob");
