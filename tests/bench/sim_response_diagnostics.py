@@ -67,10 +67,10 @@ def install(family: str, knots: int) -> None:
         k = np.exp(np.interp(lg, grid_lf, material["kr"]) + 1j * np.interp(lg, grid_lf, material["ki"]))
         return rho * np.where(omega != 0, k, 1.0)
 
-    def state_to_material(st: cal.State, i: int, name: str, kind: str) -> dict[str, Any]:
+    def state_to_material(st: cal.State, i: int, name: str, kind: str, config: cal.CalibrationConfig) -> dict[str, Any]:
         if kind not in ("diffusion", "mixture", "free"):
-            return _state_to_material(st, i, name, kind)
-        mat = _state_to_material(st, i, name, "exponential")
+            return _state_to_material(st, i, name, kind, config)
+        mat = _state_to_material(st, i, name, "exponential", config)
         mat["kind"] = kind
         if kind == "diffusion":
             mat["beta"] = 10.0 ** st[("ld", i)]
@@ -163,16 +163,16 @@ def main() -> None:
         dev = json.load(fh)
     with open(a.library) as fh:
         lib = json.load(fh)
-    cal.SESSION_DRIFT = any(g.get("session_drift") for g in dev["frequencies"])
+    config = cal.CalibrationConfig(session_drift=any(g.get("session_drift") for g in dev["frequencies"]))
     st, kinds = fitted_state(names, dev, lib)
     idx = list(range(len(names)))
-    prob = cal.Problem(y, names, bins, grid=cal.FIT_GRID)
+    prob = cal.Problem(y, names, bins, config)
     noisy = {i for i in idx if cal._wants_noise(y[i], bins)}
     base = prob.rms(st, kinds, idx)
     got = []
     for i in idx:
         best = math.inf
-        for s in globals()["_starts"](st, i, _state_to_material(st, i, names[i], kinds[i])):
+        for s in globals()["_starts"](st, i, _state_to_material(st, i, names[i], kinds[i], config)):
             ks = list(kinds)
             ks[i] = a.family
             free = FAMILY_PARAMS[a.family] + ("o0", "o1", "lr") + (("noise",) if i in noisy else ())

@@ -1,47 +1,52 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Fit the forward model (docs/simulator-model.md, model_np.py) to the real Kinect v2 database.
 
-Shared device parameters (per-frequency harmonics up to GROUP_HMAX, tap saturation, step gains
-and offsets, scale errors; sections 2.1 and 3.1 of the spec) and
+Shared device parameters (per-frequency harmonics up to ``CalibrationConfig.group_hmax``, tap
+saturation, step gains and offsets, scale errors; sections 2.1 and 3.1 of the spec) and
 per-material response parameters are fitted so that the simulated relative distortions (rows
-d16 - d120 and d80 - d120 against the combined depth) match the 29 real curves, with one nuisance
-offset per material and row and one session state per material and group (each material was
-captured in its own session; the state moves the waveform's harmonics along a fitted drift
-direction, spec section 2.2; SESSION_DRIFT = False fits the offsets only).
+d16 - d120 and d80 - d120 against the combined depth) match the database's curves, with one
+nuisance offset per material and row and one session state per material and group (each material
+was captured in its own session; the state moves the waveform's harmonics along a fitted drift
+direction, spec section 2.2; ``session_drift=False`` fits the offsets only).
+
+Every setting of a run is a field of ``CalibrationConfig`` (defaults: the shipped fit's), passed
+to ``calibrate(table, config=..., progress=...)`` and recorded in the result and in the written
+device profile. The command line is ``tofmat sim calibrate``.
 
 Staged fit (scipy.optimize.least_squares, finite differences with a block-sparse Jacobian):
 
-1. device: random restarts of the low harmonics h <= 7 (fitted in Cartesian form
-   ``a e^{i psi}``, with a small ridge that picks the least-amplitude solution among
-   near-degenerate harmonic pairs) on two pseudo-curves, the median of the typical (near-opaque)
-   materials and the median of the translucent group; the best restart goes on to all harmonics
-   (GROUP_HMAX) with the tap saturation;
+1. device: ``restarts`` random restarts of the low harmonics (``harmonics_low``, fitted in
+   Cartesian form ``a e^{i psi}``, with a small ridge that picks the least-amplitude solution
+   among near-degenerate harmonic pairs) on two pseudo-curves, the median of the typical
+   (near-opaque) materials and the median of the translucent group; the best restart goes on to
+   all harmonics (``group_hmax``) with the tap saturation;
 2. per material, device fixed: kind selection among exponential / gamma / double / slab (a
    nominal 1 mm layer with a fitted path factor unless the thickness is known), several starting
    points each; the per-sample noise of section 4.1 for curves that show the 120 MHz wrap
    inside the averaging (fakeleather);
 3. joint refinement of the device (harmonics, session drift direction, saturation sharpness,
    full wells W_80 and W_120, step gains, step offsets, scale errors), all materials and their
-   session states (started at random, N(0, SESSION_PRIOR)), in passes that reweight each
-   material by 1 / rms^WEIGHT_EXP (rms clipped to [WEIGHT_FLOOR_MM, WEIGHT_CAP_MM]) so that the
+   session states (started at random, N(0, session_prior)), in passes that reweight each
+   material by 1 / rms^weight_exp (rms clipped to [weight_floor_mm, weight_cap_mm]) so that the
    fit aims at the median of the per-material rms rather than at the worst curves; the pass with
    the lowest median is kept;
 4. gauge: the median per-capture offsets are moved into the device's decode offsets and the
-   median session state into the harmonics (``regauge``, exact); then KIND_CYCLES times (2) (every kind again, warm starts), (3) and (4),
-   and a report in ``bin`` mode (the database's averaging, 0.25 mm sweep).
+   median session state into the harmonics (``regauge``, exact); then, for every round after the
+   first, ``kind_cycles`` times (2) (every kind again, warm starts), (3) and (4), and a report in
+   ``bin`` mode (the database's averaging, 0.25 mm sweep).
 
-Re-run: ``python -m tofmat.sim.calibrate --db shared/data/tanaka2017_kinect2_db --out <dir>``
-writes ``<dir>/data/devices/kinect2_tanaka2017.json``, ``<dir>/data/materials/tanaka2017.json``
-and ``<dir>/data/materials/tanaka2017_fit.png``.
+``tofmat sim calibrate --db shared/data/tanaka2017_kinect2_db --out <dir>`` writes
+``<dir>/data/devices/kinect2_tanaka2017.json``, ``<dir>/data/materials/tanaka2017.json``,
+``<dir>/data/materials/tanaka2017_fit_log.txt`` and ``<dir>/data/materials/tanaka2017_fit.png``.
 """
 
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import json
+import logging
 import math
 import os
-import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -50,71 +55,31 @@ from typing import Any, TypeAlias, TypedDict, cast
 import numpy as np
 
 from .._extras import require, require_pyplot
+from .._progress import Progress
 from . import model_np as M
 from .model_np import ComplexArray, FloatArray
 
 # What needs the ``sim`` extra here: the fit (scipy, imported where it is used) and its figure (matplotlib).
 FEATURE = "the simulator's calibration (tofmat.sim.calibrate)"
 
+_LOG = logging.getLogger(__name__)
+
 # A state key: the parameter's name, then its indices (group, harmonic / step, or material).
 StateKey: TypeAlias = tuple[str, *tuple[int, ...]]
 State: TypeAlias = dict[StateKey, float]
 
 # ---------------------------------------------------------------------------------------------
-# Configuration
+# Constants of the model and of the database (not settings of a run)
 # ---------------------------------------------------------------------------------------------
-THIN_ACRYLICS = {"acryl1mm": 1.0, "acryl2mm": 2.0, "acryl3mm": 3.0}
+THIN_ACRYLICS = {"acryl1mm": 1.0, "acryl2mm": 2.0, "acryl3mm": 3.0}  # the database's known thicknesses
 ACRYLIC_N = 1.49
-# Every kind is a candidate for every material: a slab (a scattering layer on a backing) for a
-# material whose thickness is not known gets this nominal thickness, and the fitted path factor
-# sets its round-trip time (T = path_factor * 2 * thickness * n / c, 10 ps .. 3 ns)
-SLAB_ALL = True
-SLAB_NOMINAL_MM = 1.0
 HMAX = 32  # highest harmonic of the device model (spec section 2.1; the C++ simulator's limit)
-# highest fitted harmonic per group (80, 16, 120 MHz): the 16 MHz correlation waveform has the
-# sharpest features (its fitted amplitudes still grow at h = 25, and acryl / silicone /
-# whiteglass show 300-400 mm bumps = 9375 / 3k mm, k ~ 8-10); above these the harmonics stay 0
-# (listed in the profile with amplitude 0)
-GROUP_HMAX = (19, 32, 19)
-HARMONICS_LOW = (2, 4, 5, 7)
-HARMONICS_FIT = tuple(h for h in range(2, HMAX + 1) if h % 3)  # h = 3k cancel (ideal gains)
 GROUPS = (80, 16, 120)
-RIDGE = 10.0  # ridge on the harmonics' Cartesian coordinates, times sqrt(number of curves)
-OFFSET_PRIOR_MM = 10.0  # prior on the per-capture offsets: levels must come from the model
-# sweeps of the fit (interp mode): the rows are smooth on the 3 mm bins (a 3 mm sweep changes
-# the per-material rms by < 0.001 mm against 1.5 mm) and the saturation dominates the cost
-FIT_GRID = (450.0, 1400.0, 3.0)
-COARSE_GRID = (450.0, 1400.0, 3.0)
-REPORT_GRID = (450.0, 1400.0, 0.25)
-SATURATION = True  # spec section 3.1 (tap full well); False: the linear model
-# device terms beyond the harmonics freed in the joint stage (section 2: step gains g_j, step
-# offsets o_j, scale errors s_f)
-# and full wells W_80, W_120 (W_16 = 1 is the albedo's unit)
-JOINT_DEVICE_EXTRAS = {"gain": True, "off": True, "scale": True, "full_well": True, "drift": True}
-# Session drift (spec section 2.2): each capture session's waveform is G_h + t_f dG_h, dG a
-# shared direction per group (device, fitted in the joint stage with DRIFT_RIDGE), t_f per
-# capture and group (nuisance, prior N(0, SESSION_PRIOR^2), like the offsets). False: no drift.
-SESSION_DRIFT = True
+# fitted harmonics: h = 3k cancel with ideal step gains; each group up to its CalibrationConfig.group_hmax
+HARMONICS_FIT = tuple(h for h in range(2, HMAX + 1) if h % 3)
+# Sweep of the database's own averaging (the 'bin' mode of the curves): 0.25 mm steps
+DATABASE_GRID = (450.0, 1400.0, 0.25)
 SESSION_KEYS = ("t0", "t1", "t2")  # t_80, t_16, t_120 of a capture
-SESSION_PRIOR = 1.0
-DRIFT_RIDGE = 10.0  # times sqrt(number of curves), as RIDGE
-# Joint fit: material weight 1 / clip(rms, floor, cap)^WEIGHT_EXP, recomputed before every pass
-# (iteratively reweighted). 1/sqrt(rms) (~ sum of rms) let the few curves a kernel cannot
-# represent (fakeleather's noise, copper) steer the shared device; a steeper weight aims at the
-# median; the floor stops curves already at the bin noise (~0.4 mm) from taking over, the cap
-# keeps the worst curves in play (the 2 mm bound).
-WEIGHT_FLOOR_MM = 0.45
-WEIGHT_CAP_MM = 1.5
-WEIGHT_EXP = 1.5
-# Joint passes per round (each max JOINT_NFEV function evaluations, then reweighted): the joint
-# fit is far from converged after one pass; the state with the lowest median rms is kept.
-JOINT_PASSES = (2, 5)
-# rounds after the first: choose each material's kind again against the refined device, then
-# the joint passes, KIND_CYCLES times (the joint fit plateaus after a few passes; a new kind
-# choice moves it on)
-KIND_RESELECT = True
-KIND_CYCLES = 2
-JOINT_NFEV = 30
 
 DEV_BOUNDS = {
     "hx": (-0.5, 0.5), "hy": (-0.5, 0.5), "delta": (-math.pi, math.pi), "s": (-0.02, 0.02),
@@ -136,8 +101,120 @@ KIND_PARAMS = {
 KIND_ORDER = ("exponential", "gamma", "slab", "double")  # simplest first
 
 
-def _log(msg: str) -> None:
-    print(msg, flush=True)
+# ---------------------------------------------------------------------------------------------
+# Configuration of a run
+# ---------------------------------------------------------------------------------------------
+Grid: TypeAlias = tuple[float, float, float]  # sweep start, stop and step (mm)
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """Every setting of a calibration run; the defaults are the shipped fit's (docs/simulator.md).
+
+    ``calibrate`` takes one, the result carries it (``CalibrationResult.config``) and
+    ``write_outputs`` records it in the device profile's ``fit`` block (``to_dict``).
+    """
+
+    restarts: int = 3
+    """Stage 1: random restarts of the low harmonics' fit (multimodal in their phases)."""
+    rounds: int = 2
+    """Rounds of per-material kind selection and joint refinement (round 1, then ``kind_cycles`` cycles per further round)."""
+    seed: int = 0
+    """Seed of the random restarts and of the session states' random start."""
+    # The 16 MHz correlation waveform has the sharpest features (its fitted amplitudes still grow
+    # at h = 25, and acryl / silicone / whiteglass show 300-400 mm bumps = 9375 / 3k mm, k ~ 8-10).
+    group_hmax: tuple[int, int, int] = (19, 32, 19)
+    """Highest fitted harmonic per group (80, 16, 120 MHz); above it a group's harmonics stay 0 (at most HMAX = 32)."""
+    harmonics_low: tuple[int, ...] = (2, 4, 5, 7)
+    """Stage 1: the low harmonics fitted from random starts before all harmonics are freed."""
+    saturation: bool = True
+    """Tap full-well saturation (spec section 3.1) with fitted full wells and albedos; False: the linear model."""
+    session_drift: bool = True
+    """A drift direction of the waveform per group and a session state per capture and group (spec 2.2); False: offsets only."""
+    session_prior: float = 1.0
+    """Standard deviation of the session states' prior N(0, s^2) and of their random start."""
+    drift_ridge: float = 10.0
+    """Ridge on the drift direction's coordinates, times sqrt(number of curves)."""
+    ridge: float = 10.0
+    """Ridge on the harmonics' Cartesian coordinates, times sqrt(number of curves)."""
+    offset_prior_mm: float = 10.0
+    """Standard deviation (mm) of the prior on the per-capture row offsets: levels must come from the model."""
+    # The rows are smooth on the 3 mm bins: a 3 mm sweep changes the per-material rms by < 0.001 mm
+    # against 1.5 mm, and the saturation dominates the cost of an evaluation.
+    fit_grid: Grid = (450.0, 1400.0, 3.0)
+    """Range sweep (start, stop, step mm) of the per-material and joint fits ('interp' mode)."""
+    device_grid: Grid = (450.0, 1400.0, 3.0)
+    """Range sweep of the stage-1 device fit on the two median curves."""
+    report_grid: Grid = DATABASE_GRID
+    """Range sweep of the reported rms and the figure ('bin' mode: the database's averaging)."""
+    device_nfev: tuple[int, int] = (80, 150)
+    """Stage 1: function evaluations of each low-harmonic restart and of the best restart on all harmonics."""
+    material_nfev: int = 40
+    """Stage 2: function evaluations per material, kind and starting point."""
+    slab_all: bool = True
+    """Every material may be a slab (a nominal-thickness layer with a fitted path factor); False: only known thicknesses."""
+    slab_nominal_mm: float = 1.0
+    """Thickness (mm) of a slab whose thickness is not known (its path factor sets the round trip)."""
+    joint_step_gains: bool = True
+    """Joint stage: free step gains g_1, g_2 per group (g_0 = 1 is a gauge)."""
+    joint_step_offsets: bool = True
+    """Joint stage: free step offsets o_1, o_2 per group (o_0 = 0 is a gauge)."""
+    joint_scale_errors: bool = True
+    """Joint stage: free scale errors s_80, s_16 (s_120 = 0 is a gauge)."""
+    joint_full_wells: bool = True
+    """Joint stage: free full wells W_80, W_120 (W_16 = 1 is the albedo's unit; with ``saturation`` only)."""
+    joint_drift: bool = True
+    """Joint stage: free drift direction of the waveform (with ``session_drift`` only)."""
+    # The joint fit is far from converged after one pass; it plateaus after a few passes, and a new
+    # kind choice (the next cycle) moves it on.
+    joint_passes: tuple[int, ...] = (2, 5)
+    """Joint passes per round (round k uses entry min(k, last)); the pass with the lowest median rms is kept."""
+    joint_nfev: int = 30
+    """Function evaluations per joint pass (then the materials are reweighted)."""
+    # 1/sqrt(rms) (~ the sum of the rms) let the few curves a kernel cannot represent (fakeleather's
+    # noise, copper) steer the shared device; a steeper weight aims at the median. The floor stops
+    # curves already at the bin noise (~0.4 mm) from taking over, the cap keeps the worst in play.
+    weight_exp: float = 1.5
+    """Joint stage: material weight 1 / clip(rms, floor, cap)^weight_exp (aims at the median rms)."""
+    weight_floor_mm: float = 0.45
+    """Floor of the weights' rms (mm): curves at the bin noise do not take over."""
+    weight_cap_mm: float = 1.5
+    """Cap of the weights' rms (mm): the worst curves stay in play."""
+    kind_reselect: bool = True
+    """Rounds after the first choose every material's kind again (warm starts); False: refit the chosen kind."""
+    kind_cycles: int = 2
+    """Cycles of (kind selection, joint passes, gauge) per round after the first."""
+
+    def __post_init__(self) -> None:
+        def bad(msg: str) -> ValueError:
+            return ValueError(f"CalibrationConfig: {msg}")
+
+        for name in ("restarts", "rounds", "material_nfev", "joint_nfev", "kind_cycles"):
+            if int(getattr(self, name)) < 1:
+                raise bad(f"{name} must be >= 1")
+        if self.seed < 0:
+            raise bad("seed must be >= 0")
+        if len(self.group_hmax) != 3 or not all(2 <= h <= HMAX for h in self.group_hmax):
+            raise bad(f"group_hmax must be three harmonics in 2..{HMAX}")
+        if not self.harmonics_low or not all(2 <= h <= HMAX for h in self.harmonics_low):
+            raise bad(f"harmonics_low must be harmonics in 2..{HMAX}")
+        if len(self.device_nfev) != 2 or min(self.device_nfev) < 1:
+            raise bad("device_nfev must be two counts >= 1")
+        if not self.joint_passes or min(self.joint_passes) < 0:
+            raise bad("joint_passes must be counts >= 0")
+        for name in ("fit_grid", "device_grid", "report_grid"):
+            g = getattr(self, name)
+            if len(g) != 3 or not (g[0] < g[1] and g[2] > 0):
+                raise bad(f"{name} must be (start, stop, step) with start < stop and step > 0")
+        for name in ("session_prior", "drift_ridge", "offset_prior_mm", "slab_nominal_mm", "weight_floor_mm"):
+            if not float(getattr(self, name)) > 0.0:
+                raise bad(f"{name} must be > 0")
+        if self.ridge < 0.0 or self.weight_exp < 0.0 or self.weight_cap_mm < self.weight_floor_mm:
+            raise bad("ridge and weight_exp must be >= 0 and weight_cap_mm >= weight_floor_mm")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as JSON values (tuples as lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -168,7 +245,7 @@ def _default_state(names: Sequence[str]) -> State:
     return st
 
 
-def state_to_device(st: State, name: str = "kinect2_tanaka2017") -> dict[str, Any]:
+def state_to_device(st: State, config: CalibrationConfig, name: str = "kinect2_tanaka2017") -> dict[str, Any]:
     freqs = []
     for g, f in enumerate(GROUPS):
         harm = []
@@ -181,7 +258,7 @@ def state_to_device(st: State, name: str = "kinect2_tanaka2017") -> dict[str, An
         freqs.append({
             "freq_mhz": f,
             "signal_scale": float(M.SIGNAL_SCALE_DEFAULT[g]),
-            "full_well": float(10.0 ** st[("lw", g)]) if SATURATION else None,
+            "full_well": float(10.0 ** st[("lw", g)]) if config.saturation else None,
             "scale_error": float(st[("s", g)]),
             "phase_offset_rad": float(st[("delta", g)]),
             "decode_offset_rad": float(st[("eps", g)]),
@@ -232,7 +309,7 @@ class _DeviceArrays(TypedDict):
     sat_p: float
 
 
-def _device_arrays(st: State) -> _DeviceArrays:
+def _device_arrays(st: State, config: CalibrationConfig) -> _DeviceArrays:
     G = np.zeros((3, HMAX + 1), complex)
     G[:, 1] = 1.0
     dG = np.zeros((3, HMAX + 1), complex)
@@ -250,16 +327,16 @@ def _device_arrays(st: State) -> _DeviceArrays:
         "gain": np.array([[st[("gain", g, j)] for j in range(3)] for g in range(3)]),
         "offset": np.array([[st[("off", g, j)] for j in range(3)] for g in range(3)]),
         "scale": np.array(M.SIGNAL_SCALE_DEFAULT),
-        "full_well": np.array([10.0 ** st[("lw", g)] if SATURATION else np.inf for g in range(3)]),
+        "full_well": np.array([10.0 ** st[("lw", g)] if config.saturation else np.inf for g in range(3)]),
         "sat_p": st[("satp",)],
     }
 
 
-def state_to_material(st: State, i: int, name: str, kind: str) -> dict[str, Any]:
-    thick = THIN_ACRYLICS.get(name, SLAB_NOMINAL_MM if kind == "slab" else 0.0)
+def state_to_material(st: State, i: int, name: str, kind: str, config: CalibrationConfig) -> dict[str, Any]:
+    thick = THIN_ACRYLICS.get(name, config.slab_nominal_mm if kind == "slab" else 0.0)
     n = ACRYLIC_N if name.startswith("acryl") else 1.5
     mat: dict[str, Any] = {
-        "name": name, "kind": kind, "albedo": float(10.0 ** st[("lr", i)]) if SATURATION else 1.0, "subsurface": 0.0, "tau_ps": 100.0,
+        "name": name, "kind": kind, "albedo": float(10.0 ** st[("lr", i)]) if config.saturation else 1.0, "subsurface": 0.0, "tau_ps": 100.0,
         "gamma_k": 1.0, "refractive_index": n, "thickness_mm": thick, "path_factor": 1.0,
         "backing": 0.0, "subsurface2": 0.0, "tau2_ps": 1000.0,
         "noise_mm": float(st[("noise", i)]),
@@ -285,7 +362,7 @@ def state_to_material(st: State, i: int, name: str, kind: str) -> dict[str, Any]
 # ---------------------------------------------------------------------------------------------
 # Gauge: move the common row levels into the device (spec section 4.2)
 # ---------------------------------------------------------------------------------------------
-def regauge(st: State, idx: Sequence[int]) -> tuple[float, float]:
+def regauge(st: State, idx: Sequence[int], config: CalibrationConfig) -> tuple[float, float]:
     """Move the median per-capture offsets (row0, row1) into the device's decode offsets eps_f.
 
     Levels c_f with c16 - c120 = o0, c80 - c120 = o1 and 80 c80 + 16 c16 + 120 c120 = 0 (the
@@ -301,7 +378,7 @@ def regauge(st: State, idx: Sequence[int]) -> tuple[float, float]:
     for i in idx:
         st[("o0", i)] -= o0
         st[("o1", i)] -= o1
-    if SESSION_DRIFT:  # the nominal waveform is the median session's: G_h += t_med dG_h (exact)
+    if config.session_drift:  # the nominal waveform is the median session's: G_h += t_med dG_h (exact)
         for g, k in enumerate(SESSION_KEYS):
             t_med = float(np.median([st[(k, i)] for i in idx]))
             for h in range(2, HMAX + 1):
@@ -316,38 +393,41 @@ def regauge(st: State, idx: Sequence[int]) -> tuple[float, float]:
 # The least-squares problem
 # ---------------------------------------------------------------------------------------------
 class Problem:
-    """Vectorised residuals of a set of curves against the model (interp mode)."""
+    """Vectorised residuals of a set of curves against the model (interp mode), under ``config``
+    (its model switches, priors and ridges); the sweep is ``grid`` (default: ``config.fit_grid``)."""
 
     def __init__(
         self,
         Y: FloatArray,
         names: Sequence[str],
         bins: tuple[float, float, int],
-        grid: tuple[float, float, float] = FIT_GRID,
-        ridge: float = RIDGE,
+        config: CalibrationConfig,
+        grid: Grid | None = None,
     ) -> None:
+        self.config = config
         self.Y = np.asarray(Y, float)  # (M, 2, B), NaN missing
         self.names = list(names)
         self.bins = bins
         self.centres = bins[0] + bins[1] * (np.arange(bins[2]) + 0.5)
-        self.D = M.sweep_grid(*grid)
+        self.D = M.sweep_grid(*(config.fit_grid if grid is None else grid))
         self.A = (M.RANGE_REF_MM / self.D) ** 2
         self.valid = np.isfinite(self.Y)
-        self.ridge = ridge
+        self.ridge = config.ridge
         self.weights = np.ones(len(self.Y))
 
     # -- forward ---------------------------------------------------------------------------
     def curves(self, st: State, kinds: Sequence[str], idx: Sequence[int]) -> FloatArray:
-        dev = _device_arrays(st)
+        cfg = self.config
+        dev = _device_arrays(st, cfg)
         Rh = np.stack([
-            M.material_harmonic_responses(state_to_material(st, i, self.names[i], kinds[i]), dev)
+            M.material_harmonic_responses(state_to_material(st, i, self.names[i], kinds[i], cfg), dev)
             for i in idx
         ])  # fmt: skip
         G: ComplexArray = dev["G"]
-        if SESSION_DRIFT:  # every capture in its own session (section 2.2): G per material
+        if cfg.session_drift:  # every capture in its own session (section 2.2): G per material
             t = np.array([[st[(k, i)] for k in SESSION_KEYS] for i in idx])
             G = G[None] + t[:, :, None] * dev["dG"][None]
-        if SATURATION:
+        if cfg.saturation:
             m = M.raw_samples_core(
                 dev["f"], dev["s"], dev["delta"], G, dev["gain"], dev["offset"], Rh,
                 self.D, self.A, 0.0, dev["scale"], dev["full_well"], float(dev["sat_p"]),
@@ -452,13 +532,14 @@ class Problem:
             res.append(self.weights[i] * r)
         pen = []
         for i in self.idx:
-            pen += [st[("o0", i)] / OFFSET_PRIOR_MM, st[("o1", i)] / OFFSET_PRIOR_MM]
+            pen += [st[("o0", i)] / self.config.offset_prior_mm, st[("o1", i)] / self.config.offset_prior_mm]
         for k in self.harm_pairs:
             hx, hy = st[k], st[("hy", *k[1:])]
             pen += [self.ridge_w * hx, self.ridge_w * hy,
                     100.0 * max(0.0, math.hypot(hx, hy) - 0.5)]  # fmt: skip
-        drift_w = DRIFT_RIDGE * math.sqrt(len(self.idx))
-        pen += [st[k] / SESSION_PRIOR if k[0] in SESSION_KEYS else drift_w * st[k] for k in self.pen_keys]
+        drift_w = self.config.drift_ridge * math.sqrt(len(self.idx))
+        prior = self.config.session_prior
+        pen += [st[k] / prior if k[0] in SESSION_KEYS else drift_w * st[k] for k in self.pen_keys]
         return np.concatenate([*res, np.array(pen)])
 
     def solve(self, max_nfev: int = 200) -> Any:
@@ -483,16 +564,19 @@ class Problem:
         return np.array(out)
 
 
-def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: bool = False,
-              gain: bool = False, off: bool = False, sat: bool = SATURATION,
+def _dev_keys(config: CalibrationConfig, harm: Sequence[int] = HARMONICS_FIT, delta: bool = False,
+              scale: bool = False, gain: bool = False, off: bool = False, sat: bool | None = None,
               full_well: bool = False, drift: bool = False) -> list[StateKey]:  # fmt: skip
-    """Free device parameters. Gauges: delta_120 = 0 (a common range shift is unobservable),
-    s_120 = 0, g_0 = 1, o_0 = 0 (the common mode of o_j cancels in the decode). With free
-    per-capture offsets and free harmonic phases, the deltas are pure gauge too (see regauge)."""
+    """Free device parameters (harmonics up to ``config.group_hmax``; the saturation sharpness
+    with ``sat``, default ``config.saturation``). Gauges: delta_120 = 0 (a common range shift is
+    unobservable), s_120 = 0, g_0 = 1, o_0 = 0 (the common mode of o_j cancels in the decode).
+    With free per-capture offsets and free harmonic phases, the deltas are pure gauge too (see
+    regauge)."""
+    hmax = config.group_hmax
     keys: list[StateKey] = []
     for g in range(3):
         for h in harm:
-            if h <= GROUP_HMAX[g]:
+            if h <= hmax[g]:
                 keys += [("hx", g, h), ("hy", g, h)]
         if delta and GROUPS[g] != 120:
             keys.append(("delta", g))
@@ -502,13 +586,13 @@ def _dev_keys(harm: Sequence[int] = HARMONICS_FIT, delta: bool = False, scale: b
             keys += [("gain", g, 1), ("gain", g, 2)]
         if off:
             keys += [("off", g, 1), ("off", g, 2)]
-        if full_well and GROUPS[g] != 16:  # gauge: W_16 = 1 (the albedo's unit)
+        if full_well and config.saturation and GROUPS[g] != 16:  # gauge: W_16 = 1 (the albedo's unit)
             keys.append(("lw", g))
-        if drift and SESSION_DRIFT:
+        if drift and config.session_drift:
             for h in harm:
-                if h <= GROUP_HMAX[g]:
+                if h <= hmax[g]:
                     keys += [("dx", g, h), ("dy", g, h)]
-    if sat:
+    if config.saturation if sat is None else sat:
         keys.append(("satp",))
     return keys
 
@@ -548,25 +632,29 @@ def translucent_group(Y: FloatArray, typical: FloatArray) -> list[int]:
 
 
 def stage_device(
-    Y: FloatArray, bins: tuple[float, float, int], restarts: int, rng: np.random.Generator,
-    log: Callable[[str], None], keep: int = 1,
+    Y: FloatArray, bins: tuple[float, float, int], config: CalibrationConfig, rng: np.random.Generator,
+    log: Callable[[str], None], keep: int = 1, step: Callable[[str], None] | None = None,
 ) -> list[State]:  # fmt: skip
     """Device harmonics from two pseudo-materials: the median curve of the typical (near-opaque)
     materials and the median curve of the translucent group (started with a ~1.5 ns
     subsurface response). The second curve separates the harmonics h = 3k - 1 and 3k + 1,
-    which the opaque curves alone constrain only through their difference."""
+    which the opaque curves alone constrain only through their difference. ``config.restarts``
+    random starts of ``config.harmonics_low``, the best ``keep`` go on to all harmonics;
+    ``step`` is told after each of these fits."""
     ym, _ = typical_median(Y)
     tg = translucent_group(Y, ym)
     curves_ = [ym] + ([np.nanmedian(Y[tg], axis=0)] if len(tg) >= 2 else [])
     names = ["typical", "translucent"][: len(curves_)]
-    prob = Problem(np.stack(curves_), names, bins, grid=COARSE_GRID)
+    prob = Problem(np.stack(curves_), names, bins, config, grid=config.device_grid)
     kinds = ["exponential"] * len(names)
     idx = list(range(len(names)))
+    nfev_low, nfev_all = config.device_nfev
+    h_low = max(config.harmonics_low)
     low = []
-    for r in range(restarts):
+    for r in range(config.restarts):
         st = _default_state(names)
         for g in range(3):
-            for h in HARMONICS_LOW:
+            for h in config.harmonics_low:
                 a = rng.uniform(0.0, 0.1)
                 p = rng.uniform(0, 2 * math.pi)
                 st[("hx", g, h)], st[("hy", g, h)] = a * math.cos(p), a * math.sin(p)
@@ -579,23 +667,25 @@ def stage_device(
             st[("lr", i)] = -1.5  # start unsaturated
         _init_offsets(prob, st, kinds, idx)
         free: dict[int, tuple[str, ...]] = {i: ("b", "lt", "o0", "o1") for i in idx}
-        prob.setup(st, kinds, idx, _dev_keys(HARMONICS_LOW, sat=False), free)
-        res = prob.solve(max_nfev=80)
+        prob.setup(st, kinds, idx, _dev_keys(config, config.harmonics_low, sat=False), free)
+        res = prob.solve(max_nfev=nfev_low)
         rms = prob.rms(prob.st, kinds, idx)
         log(
-            f"  restart {r:2d} (h <= 7): rms "
+            f"  restart {r:2d} (h <= {h_low}): rms "
             + ", ".join(f"{n} {v:.3f}" for n, v in zip(names, rms, strict=True))
             + f" mm (cost {res.cost:.1f})"
         )
         low.append((float(res.cost), prob.st))
+        if step:
+            step(f"device restart {r + 1}/{config.restarts}")
     # the multimodal part is the low harmonics' phases: only the best restarts go on to all
     # harmonics with the tap saturation (the expensive fit)
     low.sort(key=lambda t: t[0])
     out = []
     for r, (_, st) in enumerate(low[:keep]):
-        free = {i: ("b", "lt", "o0", "o1") + (("lr",) if SATURATION else ()) for i in idx}
-        prob.setup(st, kinds, idx, _dev_keys(HARMONICS_FIT), free)
-        res = prob.solve(max_nfev=150)
+        free = {i: ("b", "lt", "o0", "o1") + (("lr",) if config.saturation else ()) for i in idx}
+        prob.setup(st, kinds, idx, _dev_keys(config), free)
+        res = prob.solve(max_nfev=nfev_all)
         rms = prob.rms(prob.st, kinds, idx)
         log(
             f"  best {r + 1}, all harmonics: rms "
@@ -603,24 +693,31 @@ def stage_device(
             + f" mm (cost {res.cost:.1f})"
         )
         out.append((float(res.cost), prob.st))
+        if step:
+            step("device, all harmonics")
     out.sort(key=lambda t: t[0])
     return [s for _, s in out]
 
 
 def joint_refine(
     prob: Problem, st: State, kinds: Sequence[str], idx: Sequence[int],
-    mat_free: Mapping[int, Sequence[str]], passes: int, nfev: int, log: Callable[[str], None],
+    mat_free: Mapping[int, Sequence[str]], passes: int, log: Callable[[str], None],
+    step: Callable[[str], None] | None = None,
 ) -> State:  # fmt: skip
-    """Stage 3: device and materials together, iteratively reweighted (WEIGHT_EXP); returns the
-    pass with the lowest median per-material rms (the weighted cost and the median need not
-    fall together)."""
+    """Stage 3: device and materials together, ``passes`` passes of ``prob.config.joint_nfev``
+    evaluations, iteratively reweighted (``weight_exp``); returns the pass with the lowest median
+    per-material rms (the weighted cost and the median need not fall together). ``step`` is told
+    after each pass."""
+    cfg = prob.config
+    dev_free = _dev_keys(cfg, HARMONICS_FIT, gain=cfg.joint_step_gains, off=cfg.joint_step_offsets,
+                         scale=cfg.joint_scale_errors, full_well=cfg.joint_full_wells, drift=cfg.joint_drift)  # fmt: skip
     rms = prob.rms(st, kinds, idx)
     best = (float(np.median(rms)), dict(st))
     for k in range(passes):
         prob.weights = np.ones(len(prob.Y))
-        prob.weights[list(idx)] = 1.0 / np.clip(rms, WEIGHT_FLOOR_MM, WEIGHT_CAP_MM) ** WEIGHT_EXP
-        prob.setup(st, kinds, idx, _dev_keys(HARMONICS_FIT, **JOINT_DEVICE_EXTRAS), mat_free)
-        res = prob.solve(max_nfev=nfev)
+        prob.weights[list(idx)] = 1.0 / np.clip(rms, cfg.weight_floor_mm, cfg.weight_cap_mm) ** cfg.weight_exp
+        prob.setup(st, kinds, idx, dev_free, mat_free)
+        res = prob.solve(max_nfev=cfg.joint_nfev)
         st = prob.st
         prob.weights = np.ones(len(prob.Y))
         rms = prob.rms(st, kinds, idx)
@@ -629,16 +726,19 @@ def joint_refine(
             f"max {rms.max():.3f} mm ({res.nfev} evaluations)")  # fmt: skip
         if med < best[0]:
             best = (med, dict(st))
+        if step:
+            step(f"joint pass {k + 1}/{passes}")
     return best[1]
 
 
 def fit_material(
     prob: Problem, st: State, kinds: list[str], i: int, candidates: Sequence[str],
-    with_noise: bool, nfev: int = 40,
+    with_noise: bool,
     starts: Sequence[tuple[float, float, float]] = (
         (1.0, 0.3, -1.0), (2.0, 0.6, -0.4), (3.2, 0.4, -0.2)),
 ) -> tuple[str, State, float, dict[str, float]]:  # fmt: skip
-    """Device fixed: the best kind and parameters of material i (several starting points)."""
+    """Device fixed: the best kind and parameters of material i (several starting points, each
+    ``prob.config.material_nfev`` evaluations)."""
     scores: dict[str, float] = {}
     fits: dict[str, State] = {}
     for kind in candidates:
@@ -658,9 +758,9 @@ def fit_material(
             ks = list(kinds)
             ks[i] = kind
             free = (KIND_PARAMS[kind] + ("o0", "o1") + (("noise",) if with_noise else ())
-                    + (("lr",) if SATURATION else ()))  # fmt: skip
+                    + (("lr",) if prob.config.saturation else ()))  # fmt: skip
             prob.setup(s, ks, [i], [], {i: free})
-            prob.solve(max_nfev=nfev)
+            prob.solve(max_nfev=prob.config.material_nfev)
             rms = float(prob.rms(prob.st, ks, [i])[0])
             if kb is None or rms < kb[0]:
                 kb = (rms, prob.st)
@@ -673,18 +773,21 @@ def fit_material(
 
 @dataclass
 class CalibrationResult:
+    """What ``calibrate`` fitted, with the configuration it ran under."""
+
     device: dict[str, Any]
     materials: list[dict[str, Any]]
     offsets_mm: dict[str, list[float]]
-    rms_mm: dict[str, float]  # 'bin' mode, 0.25 mm sweep (the database's averaging)
+    rms_mm: dict[str, float]  # 'bin' mode on config.report_grid (the database's averaging)
     rms_interp_mm: dict[str, float]  # 'interp' mode (the fit's objective)
     median_rms_mm: float
     runtime_s: float
+    config: CalibrationConfig  # the run's settings (recorded in the written device profile)
     kind_scores: dict[str, dict[str, float]] = field(default_factory=dict)
     log: list[str] = field(default_factory=list)
-    config: dict[str, Any] = field(default_factory=dict)
     # per-capture session states (t_80, t_16, t_120) of section 2.2; {}: fitted without drift
     sessions: dict[str, list[float]] = field(default_factory=dict)
+    bins: tuple[float, float, int] | None = None  # the database's bins (start mm, width mm, count)
 
 
 def _table_arrays(table: Any) -> tuple[FloatArray, list[str], tuple[float, float, int]]:
@@ -696,7 +799,7 @@ def _table_arrays(table: Any) -> tuple[FloatArray, list[str], tuple[float, float
 
 def simulated_curves(
     device: dict[str, Any], materials: Sequence[dict[str, Any]], offsets: dict[str, list[float]],
-    bins: tuple[float, float, int], mode: str = "bin", grid: tuple[float, float, float] = REPORT_GRID,
+    bins: tuple[float, float, int], mode: str = "bin", grid: Grid = DATABASE_GRID,
     sessions: Mapping[str, Sequence[float]] | None = None,
 ) -> FloatArray:  # fmt: skip
     """Every material's curve with its capture's offsets and session state (when given)."""
@@ -733,30 +836,54 @@ def _wants_noise(y: FloatArray, bins: tuple[float, float, int]) -> bool:
     return bool(rise1 > 20.0 and rise0 > 20.0 and abs(diff) < 0.5 * rise1)
 
 
+def calibration_steps(config: CalibrationConfig, n_materials: int, n_noisy: int = 0) -> int:
+    """The steps ``calibrate`` reports to its progress callback: the stage-1 restarts and the
+    best one's fit on all harmonics, every material's kind selection and every joint pass of each
+    cycle, the refit of the ``n_noisy`` noise-wrap materials, and the report."""
+    schedule = [0] + [r for r in range(1, config.rounds) for _ in range(config.kind_cycles)]
+    passes = sum(config.joint_passes[min(r, len(config.joint_passes) - 1)] for r in schedule)
+    return config.restarts + 1 + len(schedule) * n_materials + passes + n_noisy + 1
+
+
 def calibrate(
     table: Any,
-    restarts: int = 3,
-    seed: int = 0,
-    rounds: int = 2,
-    progress: Callable[[str], None] | None = None,
+    *,
+    config: CalibrationConfig | None = None,
+    progress: Progress | None = None,
 ) -> CalibrationResult:
-    """Staged fit of device + per-material parameters to ``table`` (a tofmat.ExemplarTable)."""
+    """Staged fit of device + per-material parameters to ``table`` (a tofmat.ExemplarTable, or
+    anything with its ``features``, ``materials`` and ``bins``) under ``config`` (default:
+    ``CalibrationConfig()``, the shipped fit's settings).
+
+    ``progress(done, total, what)`` is told after every step (``calibration_steps``); the log
+    lines go to the result's ``log`` and to the ``tofmat.sim.calibrate`` logger at INFO."""
+    config = CalibrationConfig() if config is None else config
     t0 = time.time()
     logs: list[str] = []
 
     def log(msg: str) -> None:
         line = f"[{time.time() - t0:7.1f}s] {msg}"
         logs.append(line)
-        (progress or _log)(line)
+        _LOG.info("%s", line)
 
     Y, names, bins = _table_arrays(table)
     nm = len(names)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(config.seed)
     allidx = list(range(nm))
+    noisy = {i for i in allidx if _wants_noise(Y[i], bins)}
+    done = 0
+    total = calibration_steps(config, nm, len(noisy))
 
+    def step(what: str) -> None:
+        nonlocal done
+        done += 1
+        if progress is not None:
+            progress(done, total, what)
+
+    log("config: " + json.dumps(config.to_dict()))
     # ---- stage 1: device from the typical median curve ------------------------------------
-    log(f"stage 1: device harmonics, {restarts} restarts on the typical median curve")
-    dev_st = stage_device(Y, bins, restarts, rng, log)[0]
+    log(f"stage 1: device harmonics, {config.restarts} restarts on the typical median curve")
+    dev_st = stage_device(Y, bins, config, rng, log, step=step)[0]
     st = _default_state(names)
     for k, v in dev_st.items():
         if k[0] in DEV_BOUNDS:
@@ -767,29 +894,29 @@ def calibrate(
         for p in ("b", "lt", "lr"):
             st[(p, i)] = dev_st[(p, src)]
     log("  translucent group: " + ", ".join(names[i] for i in sorted(tg)))
-    prob = Problem(Y, names, bins, grid=FIT_GRID)
+    prob = Problem(Y, names, bins, config)
     kinds = ["exponential"] * nm
     _init_offsets(prob, st, kinds, allidx)
-    if SESSION_DRIFT:  # random session states: with dG = 0 and t = 0 both gradients vanish
+    if config.session_drift:  # random session states: with dG = 0 and t = 0 both gradients vanish
         for i in allidx:
             for key in SESSION_KEYS:
-                st[(key, i)] = float(rng.normal(0.0, SESSION_PRIOR))
-    noisy = {i for i in allidx if _wants_noise(Y[i], bins)}
+                st[(key, i)] = float(rng.normal(0.0, config.session_prior))
     log("  materials with the 120 MHz wrap in the averaging: "
         + (", ".join(names[i] for i in sorted(noisy)) or "none"))  # fmt: skip
 
     kind_scores: dict[str, dict[str, float]] = {}
-    # rounds after the first run KIND_CYCLES cycles of (kind selection, joint passes, gauge)
-    schedule = [0] + [r for r in range(1, rounds) for _ in range(KIND_CYCLES)]
+    # rounds after the first run kind_cycles cycles of (kind selection, joint passes, gauge)
+    schedule = [0] + [r for r in range(1, config.rounds) for _ in range(config.kind_cycles)]
     for rnd in schedule:
         # ---- stage 2: per-material kinds, device fixed -----------------------------------
         log(f"round {rnd + 1}: stage 2, per-material kind selection (device fixed)")
         for i in allidx:
             name = names[i]
-            cand = ["exponential", "gamma", "double"] + (["slab"] if SLAB_ALL or name in THIN_ACRYLICS else [])
+            cand = ["exponential", "gamma", "double"] + (
+                ["slab"] if config.slab_all or name in THIN_ACRYLICS else [])  # fmt: skip
             if rnd == 0:
                 kind, st_i, rms_i, scores = fit_material(prob, st, kinds, i, cand, i in noisy)
-            elif KIND_RESELECT:  # every kind again against the refined device, warm starts
+            elif config.kind_reselect:  # every kind again against the refined device, warm starts
                 kind, st_i, rms_i, scores = fit_material(prob, st, kinds, i, cand, i in noisy,
                                                          starts=())  # fmt: skip
             else:  # warm start of the chosen kind only
@@ -801,16 +928,17 @@ def calibrate(
                 st[(p, i)] = st_i[(p, i)]
             log(f"  {name:12s} {kind:11s} rms {rms_i:6.3f}  "
                 + " ".join(f"{k[:3]}={v:.3f}" for k, v in scores.items()))  # fmt: skip
+            step(f"round {rnd + 1}: {name}")
         # ---- stage 3: joint ----------------------------------------------------------------
         log(f"round {rnd + 1}: stage 3, joint refinement")
         mat_free = {
             i: KIND_PARAMS[kinds[i]] + ("o0", "o1") + (("noise",) if i in noisy else ())
-            + (("lr",) if SATURATION else ()) + (SESSION_KEYS if SESSION_DRIFT else ())
+            + (("lr",) if config.saturation else ()) + (SESSION_KEYS if config.session_drift else ())
             for i in allidx
         }  # fmt: skip
-        passes = JOINT_PASSES[min(rnd, len(JOINT_PASSES) - 1)]
-        st = joint_refine(prob, st, kinds, allidx, mat_free, passes, JOINT_NFEV, log)
-        o0, o1 = regauge(st, allidx)
+        passes = config.joint_passes[min(rnd, len(config.joint_passes) - 1)]
+        st = joint_refine(prob, st, kinds, allidx, mat_free, passes, log, step=step)
+        o0, o1 = regauge(st, allidx, config)
         log(f"  gauge: moved median offsets ({o0:.2f}, {o1:.2f}) mm into the decode offsets")
 
     # the decode-offset gauge moves d_120 by a few mm: refit the noise-wrap materials' own terms
@@ -819,18 +947,20 @@ def calibrate(
         for p in MAT_BOUNDS:
             st[(p, i)] = st_i[(p, i)]
         log(f"  {names[i]}: refit after the gauge, rms {rms_i:.3f} mm")
+        step(f"refit {names[i]}")
 
     # ---- report -------------------------------------------------------------------------------
-    device = state_to_device(st)
-    materials = [state_to_material(st, i, names[i], kinds[i]) for i in allidx]
+    device = state_to_device(st, config)
+    materials = [state_to_material(st, i, names[i], kinds[i], config) for i in allidx]
     offsets = {names[i]: [float(st[("o0", i)]), float(st[("o1", i)])] for i in allidx}
     sessions = ({names[i]: [float(st[(k, i)]) for k in SESSION_KEYS] for i in allidx}
-                if SESSION_DRIFT else {})  # fmt: skip
-    sim_bin = simulated_curves(device, materials, offsets, bins, "bin", sessions=sessions)
+                if config.session_drift else {})  # fmt: skip
+    sim_bin = simulated_curves(device, materials, offsets, bins, "bin", config.report_grid, sessions=sessions)
     rms_bin = rms_per_material(sim_bin, Y)
     rms_int = prob.rms(st, kinds, allidx)
     runtime = time.time() - t0
     log(f"done: median rms (bin) {np.median(rms_bin):.3f} mm, max {rms_bin.max():.3f} mm")
+    step("report")
     return CalibrationResult(
         device=device,
         materials=materials,
@@ -842,23 +972,8 @@ def calibrate(
         runtime_s=runtime,
         kind_scores=kind_scores,
         log=logs,
-        config={
-            "restarts": restarts,
-            "seed": seed,
-            "rounds": rounds,
-            "bins": list(bins),
-            "h_max": HMAX,
-            "group_h_max": list(GROUP_HMAX),
-            "ridge": RIDGE,
-            "offset_prior_mm": OFFSET_PRIOR_MM,
-            "weight": {"exp": WEIGHT_EXP, "floor_mm": WEIGHT_FLOOR_MM, "cap_mm": WEIGHT_CAP_MM},
-            "joint_passes": list(JOINT_PASSES),
-            "joint_nfev": JOINT_NFEV,
-            "kind_cycles": KIND_CYCLES,
-            "session_drift": SESSION_DRIFT,
-            "session_prior": SESSION_PRIOR,
-            "drift_ridge": DRIFT_RIDGE,
-        },
+        config=config,
+        bins=bins,
     )
 
 
@@ -888,21 +1003,23 @@ def write_outputs(result: CalibrationResult, out_dir: str | os.PathLike[str], ta
         if k in tpl and k not in device:
             device[k] = tpl[k]
     device["notes"] = (
-        "Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the 29 "
+        f"Kinect v2 of the Tanaka et al. 2017 database, fitted by tofmat.sim.calibrate to the {len(result.materials)} "
         "real curves (docs/simulator-model.md with its extensions: harmonics to h = "
-        + "/".join(str(h) for h in GROUP_HMAX)
+        + "/".join(str(h) for h in result.config.group_hmax)
         + ", tap "
         "full-well saturation with full_well in units of the 16 MHz tap signal of an albedo-1 "
         "target at range_ref_mm, signal_scale per group, decode offsets carrying the common row "
         "levels). camera/noise/pixel_phase/signal are not fitted (copied from the ideal profile)."
     )
     device["fit"] = {
-        "source": "tofmat.sim.calibrate against shared/data/tanaka2017_kinect2_db (29 materials)",
+        "source": f"tofmat.sim.calibrate against shared/data/tanaka2017_kinect2_db ({len(result.materials)} materials)",
         "median_rms_mm": result.median_rms_mm,
         "runtime_s": result.runtime_s,
         "gauges": "delta_120 = 0, s_120 = 0, step_gain[0] = 1, step_offset[0] = 0, full_well_16 = 1; "
         "the median per-capture offsets are carried by decode_offset_rad",
-        **result.config,
+        **({"bins": list(result.bins)} if result.bins is not None else {}),
+        "h_max": HMAX,
+        "config": result.config.to_dict(),  # every setting of the run (tofmat.sim.calibrate.CalibrationConfig)
     }
     with open(dev_path, "w") as fh:
         json.dump(device, fh, indent=2)
@@ -959,7 +1076,7 @@ def plot_fit(result: CalibrationResult, table: Any, path: str) -> None:
     centres = bins[0] + bins[1] * (np.arange(bins[2]) + 0.5)
     mats = {m["name"]: m for m in result.materials}
     sim = simulated_curves(result.device, [mats[n] for n in names], result.offsets_mm, bins, "bin",
-                           sessions=result.sessions)  # fmt: skip
+                           result.config.report_grid, sessions=result.sessions)  # fmt: skip
     ncol = 5
     nrow = math.ceil(len(names) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.0 * ncol, 3.0 * nrow), sharex=True)
@@ -980,31 +1097,3 @@ def plot_fit(result: CalibrationResult, table: Any, path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--db", default="/work/shared/data/tanaka2017_kinect2_db")
-    ap.add_argument("--out", default=".")
-    ap.add_argument("--restarts", type=int, default=3)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--rounds", type=int, default=2)
-    a = ap.parse_args(argv)
-    import tofmat
-
-    try:  # the fit (scipy) and its figure (matplotlib): fail before the long run, in one line
-        require("scipy.optimize", extra="sim", feature="python -m tofmat.sim.calibrate")
-        require_pyplot(extra="sim", feature="python -m tofmat.sim.calibrate")
-    except tofmat.MissingExtraError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
-    table = tofmat.ExemplarTable.from_npy_dir(a.db)
-    res = calibrate(table, restarts=a.restarts, seed=a.seed, rounds=a.rounds)
-    paths = write_outputs(res, a.out, table)
-    for k, v in paths.items():
-        print(f"wrote {k}: {v}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -200,18 +200,20 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
               help="Fit a drift direction of the waveform and every capture's session state "
               "(docs/simulator-model.md 2.2); without it only the per-capture offsets.")  # fmt: skip
 def calibrate_cmd(db_dir: Path, out_dir: Path, restarts: int, rounds: int, seed: int, session_drift: bool) -> None:
-    """Fit the device profile and material library to the real database's curves (~43 min, one core)."""
+    """Fit the device profile and material library to the real database's curves (~43 min, one core).
+
+    The other settings are tofmat.sim.calibrate.CalibrationConfig's defaults; the fit's log goes to
+    the log file under --out (and with -v to stderr)."""
     import tofmat
 
     from . import calibrate as cal
 
     require("scipy.optimize", extra="sim", feature="tofmat sim calibrate")
     require_pyplot(extra="sim", feature="tofmat sim calibrate")  # the fit's figure, written after ~43 min
-    cal.SESSION_DRIFT = session_drift
+    config = cal.CalibrationConfig(restarts=restarts, rounds=rounds, seed=seed, session_drift=session_drift)
     table = tofmat.ExemplarTable.from_npy_dir(str(db_dir))
-    result = cal.calibrate(
-        table, restarts=restarts, seed=seed, rounds=rounds, progress=lambda m: click.echo(m, err=True)
-    )
+    with progress_bar("calibrating") as progress:
+        result = cal.calibrate(table, config=config, progress=progress)
     for kind, path in cal.write_outputs(result, out_dir, table).items():
         click.echo(f"wrote {kind}: {path}")
     click.echo(
