@@ -45,7 +45,8 @@ def test_materials_are_the_file_names(real_table: tofmat.ExemplarTable, db_files
     assert sorted(real_table.materials) == sorted(db_files)
     for i, name in enumerate(real_table.materials):
         assert real_table.index_of(name) == i
-    assert real_table.index_of("granite") < 0
+    with pytest.raises(KeyError, match="granite"):
+        real_table.index_of("granite")
 
 
 def test_missing_bins_only_in_paper_plaster_fakeapple(real_table: tofmat.ExemplarTable) -> None:
