@@ -17,7 +17,7 @@ import logging
 import math
 import sys
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -31,8 +31,6 @@ EXIT_FAILURE = 1
 EXIT_USAGE = 2
 
 EXIT_STATUS_HELP = "Exit status: 0 success, 1 failure (of the daemon, the camera, the system), 2 usage error."
-
-log = logging.getLogger("tofmat.cli")
 
 # OSErrors that say something about what the user named (a path), not about the system.
 _USER_ERRNOS = {errno.ENOENT, errno.EACCES, errno.EPERM, errno.EISDIR, errno.ENOTDIR, errno.EEXIST, errno.ENAMETOOLONG}
@@ -81,9 +79,8 @@ def classify_exception(e: BaseException) -> click.ClickException:
     if isinstance(e, OSError):
         # OSError(errno, message) prints as "[Errno 2] message": the message alone says it, with a path.
         what = _one_line(e.strerror if e.strerror and e.filename is None and "/" in e.strerror else str(e))
-        if isinstance(e, (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError, FileExistsError)):
-            return UserError(what)
-        # Our own OSErrors (no errno) are about what a named path holds; the system's carry an errno.
+        # Our own OSErrors (no errno) are about what a named path holds; the system's carry an errno,
+        # and those of a path (FileNotFoundError, PermissionError, ...) are the user's.
         return UserError(what) if e.errno is None or e.errno in _USER_ERRNOS else Failure(what)
     if isinstance(e, (ValueError, TypeError)):  # FormatError is a ValueError; TypeError: an array of no numbers
         return UserError(_one_line(str(e)))
@@ -115,18 +112,18 @@ class NumberList(click.ParamType):  # type: ignore[type-arg]
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
         if isinstance(value, list):
             return value
-        what = "whole numbers" if self.kind is int else "numbers"
         try:
             items = [self.kind(v.strip()) for v in str(value).split(",") if v.strip()]
         except ValueError:
-            self.fail(f"{value!r}: expected comma-separated {what} from {self.lo:g} to {self.hi:g}", param, ctx)
+            items = []
         if not items or not all(math.isfinite(v) and self.lo <= v <= self.hi for v in items):
+            what = "whole numbers" if self.kind is int else "numbers"
             self.fail(f"{value!r}: expected comma-separated {what} from {self.lo:g} to {self.hi:g}", param, ctx)
         return items
 
 
 class TofmatCommand(click.Command):
-    """A command whose help ends with the exit statuses."""
+    """A command whose help ends with the exit statuses (groups too: click.Group is a Command)."""
 
     def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         super().format_epilog(ctx, formatter)
@@ -134,16 +131,11 @@ class TofmatCommand(click.Command):
         formatter.write_text(EXIT_STATUS_HELP)
 
 
-class TofmatGroup(click.Group):
+class TofmatGroup(TofmatCommand, click.Group):
     """A group whose commands (and sub-groups) run inside the error boundary."""
 
     command_class = TofmatCommand
     group_class = type  # sub-groups are TofmatGroups too
-
-    def format_epilog(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
-        super().format_epilog(ctx, formatter)
-        formatter.write_paragraph()
-        formatter.write_text(EXIT_STATUS_HELP)
 
     def main(
         self,
@@ -217,12 +209,6 @@ def progress_bar(label: str) -> Iterator[Progress]:
             bar.__exit__(None, None, None)
 
 
-def echo_err(message: str) -> None:
-    """A line for the user on stderr (progress notes), silenced by -q."""
-    if not state().quiet:
-        click.echo(message, err=True)
-
-
 def setup_logging(verbose: bool) -> None:
     """Warnings by default; -v shows debug logs of the SDK and of the C++ core (both through logging)."""
     logging.basicConfig(
@@ -236,15 +222,12 @@ def setup_logging(verbose: bool) -> None:
     _tofmat.forward_core_logs()  # the core takes the level now
 
 
-EchoFn = Callable[[str], None]
-
 __all__ = [
     "EXIT_FAILURE",
     "EXIT_OK",
     "EXIT_STATUS_HELP",
     "EXIT_USAGE",
     "CliState",
-    "EchoFn",
     "Failure",
     "FiniteFloat",
     "NumberList",
@@ -253,7 +236,6 @@ __all__ = [
     "TofmatGroup",
     "UserError",
     "classify_exception",
-    "echo_err",
     "progress_bar",
     "setup_logging",
     "state",

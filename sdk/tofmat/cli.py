@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-import logging
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -20,7 +19,6 @@ from .client import Backend
 from .tools.tables import open_table
 
 F = TypeVar("F", bound=Callable[..., Any])
-log = logging.getLogger("tofmat")
 
 
 def csv_list(value: str | None) -> list[str] | None:
@@ -36,6 +34,23 @@ def main(ctx: click.Context, verbose: bool, quiet: bool) -> None:
     """Material classification from Time-of-Flight depth distortion."""
     ctx.obj = CliState(verbose=verbose, quiet=quiet)
     setup_logging(verbose)
+
+
+# The table a command reads: a .tmx file or a folder of .npy curves (the real database's layout).
+_table_option = click.option(
+    "--table",
+    "table_path",
+    required=True,
+    type=click.Path(exists=True, path_type=Path),
+    help="Table file (.tmx) or folder of .npy curves.",
+)
+# The table of a command that starts tofmatd on the simulated camera.
+_sim_table_option = click.option(
+    "--table",
+    "table_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Table for the daemon (default: the simulated camera's own, recorded once into build/).",
+)
 
 
 @main.group()
@@ -120,13 +135,7 @@ def result_dict(r: ClassificationResult, top: int) -> dict[str, Any]:
 
 
 @main.command()
-@click.option(
-    "--table",
-    "table_path",
-    required=True,
-    type=click.Path(exists=True, path_type=Path),
-    help="Table file (.tmx) or folder of .npy curves.",
-)
+@_table_option
 @click.argument("query", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--materials", help="Comma-separated candidate materials (default: all).")
 @click.option("--top", default=5, show_default=True, type=click.IntRange(1, 255), help="Ranking entries to print.")
@@ -170,13 +179,7 @@ def plot_table_cmd(path: Path, output: Path) -> None:
 
 
 @main.command()
-@click.option(
-    "--table",
-    "table_path",
-    required=True,
-    type=click.Path(exists=True, path_type=Path),
-    help="Table file or .npy folder.",
-)
+@_table_option
 @click.option(
     "--windows",
     default="1,3,10,30,100",
@@ -212,13 +215,7 @@ def bench(table_path: Path, windows: list[int], noise: float, per_material: int,
 
 
 @main.command("sweeps")
-@click.option(
-    "--table",
-    "table_path",
-    required=True,
-    type=click.Path(exists=True, path_type=Path),
-    help="Table file or .npy folder.",
-)
+@_table_option
 @click.option("--sweeps", default=8, show_default=True, type=click.IntRange(1, 10000))
 @click.option(
     "--sweep-bins",
@@ -238,8 +235,7 @@ def sweeps_cmd(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: i
 
 
 @main.command()
-@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@_sim_table_option
 @click.option("--materials", default="cork,pvc,wood,paper,acryl", show_default=True, help="Targets swept, in order.")
 @click.option(
     "--frames", default=60, show_default=True, type=click.IntRange(2, 10000), help="Frames per sweep (600 to 1200 mm)."
@@ -256,8 +252,7 @@ def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None
 
 
 @main.command("line-demo")
-@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@_sim_table_option
 @click.option("--materials", default="acryl,copper,fabric,silicone,cork", show_default=True,
               help="The items' materials; each gets an outlet, in this order along the belt.")  # fmt: skip
 @click.option("--seconds", default=60.0, show_default=True, type=FiniteFloat(5, 3600),
@@ -284,8 +279,7 @@ def line_demo(table_path: Path | None, materials: str, seconds: float, speed: fl
 
 
 @main.command("bench-line")
-@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Table for the daemon (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@_sim_table_option
 @click.option(
     "--speeds", default="200,500,1000", show_default=True, type=NumberList(float, 50, 2000), help="Belt speeds, mm/s."
 )
@@ -311,8 +305,7 @@ def bench_line_cmd(table_path: Path | None, speeds: list[float], loads: list[flo
 
 
 @main.command("bench-daemon")
-@click.option("--table", "table_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Table (default: the simulated camera's own, recorded once into build/).")  # fmt: skip
+@_sim_table_option
 @click.option("--profiles", default="handheld,segmentation,sorting", show_default=True)
 @click.option(
     "--clients",
