@@ -504,6 +504,9 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
     L: list[str] = []
     add = L.append
 
+    def table(header: Sequence[str], rows: Sequence[Sequence[str]], align: str = "") -> None:
+        L.extend(_table(header, rows, align))
+
     def figure(name: str) -> None:
         if name in figs:
             caption, path = figs[name]
@@ -522,7 +525,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
     add("")
     add(f"## {SECTIONS[0]}")
     add("")
-    L += _table(["what", "this host"], [[k, v] for k, v in res.machine.rows()], "ll")
+    table(["what", "this host"], [[k, v] for k, v in res.machine.rows()], "ll")
     add("")
 
     add(f"## {SECTIONS[1]}")
@@ -551,7 +554,6 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
     add("")
 
     def section_1_1_python() -> None:  # 1.1 Python
-        nonlocal L
         add(f"### {SECTIONS[3]}")
         add("")
         add(
@@ -580,7 +582,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                     marks[i],
                 ]
             )
-        L += _table(
+        table(
             [
                 "backend",
                 "window (bins)",
@@ -599,7 +601,6 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
         figure("classifier_python")
 
     def section_1_2_c_nn() -> None:  # 1.2 C++ nn
-        nonlocal L
         add(f"### {SECTIONS[4]}")
         add("")
         if not res.fixed:
@@ -634,7 +635,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                         marks[i],
                     ]
                 )
-            L += _table(
+            table(
                 [
                     "path",
                     "window (bins)",
@@ -653,7 +654,6 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
             figure("nn_cpp")
 
     def section_1_3_decode() -> None:  # 1.3 decode
-        nonlocal L
         add(f"### {SECTIONS[5]}")
         add("")
         if not res.fixed:
@@ -689,7 +689,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                         marks[i],
                     ]
                 )
-            L += _table(
+            table(
                 [
                     "path",
                     "ms per frame",
@@ -708,7 +708,6 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
             figure("decode")
 
     def section_1_4_stages() -> None:  # 1.4 stages
-        nonlocal L
         add(f"### {SECTIONS[6]}")
         add("")
         if not res.fixed:
@@ -742,7 +741,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                     err, mark = f"{pt.error:.1f} % wrong" + (f" ({pt.note})" if pt.note else ""), marks[j]
                     j += 1
                 rows.append([s.stage, s.kernel, _f(st.median), st.spread("{:.2f}"), _f(best.median), err, mark])
-            L += _table(
+            table(
                 ["stage", "kernel", "ms per frame", "range over runs", "best pass", "error", "Pareto"], rows, "llrrrll"
             )
             add("")
@@ -769,7 +768,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                         marks[i],
                     ]
                 )
-            L += _table(
+            table(
                 [
                     "kernel",
                     "whole packet, ms",
@@ -786,7 +785,6 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
             figure("frame")
 
     def section_1_5_profiles() -> None:  # 1.5 profiles
-        nonlocal L
         add(f"### {SECTIONS[7]}")
         add("")
         if not res.profiles:
@@ -845,7 +843,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                             marks[1],
                         ]
                     )
-            L += _table(
+            table(
                 [
                     "profile",
                     "path",
@@ -869,12 +867,11 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
             for i, s in enumerate(p0.steps):
                 st = Stat.of([pb.steps[i].median_ms for pb in res.profiles])
                 rows.append([s.stage, _f(st.median, "{:.3f}"), st.spread("{:.3f}")])
-            L += _table(["step", "ms per frame", "range over runs"], rows, "lrr")
+            table(["step", "ms per frame", "range over runs"], rows, "lrr")
             add("")
             figure("profiles")
 
     def section_1_6_aarch64() -> None:  # 1.6 aarch64
-        nonlocal L
         add(f"### {SECTIONS[8]}")
         add("")
         if res.insn is None:
@@ -906,18 +903,17 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                 ]
                 for r in res.insn.rows
             ]
-            L += _table(["op", "unit", "float", "fixed scalar", "fixed NEON", "scalar / NEON"], rows, "llrrrr")
+            table(["op", "unit", "float", "fixed scalar", "fixed NEON", "scalar / NEON"], rows, "llrrrr")
             add("")
             figure("aarch64")
         if res.profile_counts:
             add(f"From `{res.profile_counts_file}` (aarch64 instructions per frame of each profile):")
             add("")
             for t in res.profile_counts:
-                L += _table(t.header, t.rows)
+                table(t.header, t.rows)
                 add("")
 
     def section_2_stability() -> None:  # 2 stability
-        nonlocal L
         add(f"## {SECTIONS[9]}")
         add("")
         add(
@@ -956,7 +952,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                     r.covered_by,
                 ]
             )
-        L += _table(
+        table(
             [
                 "case",
                 "inputs",
@@ -981,7 +977,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
             "C++ tests that cover each case, in `make test`:"
         )
         add("")
-        L += _table(
+        table(
             ["stage", "stiff cases", "budget (docs/numerics.md)", "covered by"],
             [[n.stage, n.cases, n.budget, n.tests] for n in NOT_REACHABLE],
             "llll",
@@ -997,7 +993,7 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
                 "for bit). Its worst errors against the float decode:"
             )
             add("")
-            L += _table(
+            table(
                 ["quantity", "worst (the test, now)", "budget (docs/numerics.md)"],
                 [
                     ["phase, rad (80 / 16 / 120 MHz)", " / ".join(_g(x) for x in dt.phase_rad), "1e-6"],
@@ -1031,13 +1027,12 @@ def _markdown(res: _Results, families: list[tuple[str, str, list[Family]]]) -> s
             add("")
 
     def section_3_how() -> None:  # 3 how
-        nonlocal L
         add(f"## {SECTIONS[12]}")
         add("")
         add("Commands, in the order run (each benchmark once per run, the runs interleaved):")
         add("")
         add("```")
-        L += res.commands
+        L.extend(res.commands)
         add("```")
         add("")
         add("The benchmarks' own output, as printed:")
