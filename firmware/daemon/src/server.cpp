@@ -60,8 +60,6 @@ std::string unknown_stream(const std::string& s) {
 
 }  // namespace
 
-bool valid_stream(const std::string& s) { return protocol::valid_stream(s); }
-
 struct Server::Connection {
   std::uint64_t id = 0;
   protocol::Fd fd;
@@ -351,7 +349,7 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       return refuse(protocol::codes::kInvalidArgument, e.what(), false);
     }
     for (const auto& s : streams)
-      if (!valid_stream(s)) return refuse(protocol::codes::kInvalidArgument, unknown_stream(s), false);
+      if (!protocol::valid_stream(s)) return refuse(protocol::codes::kInvalidArgument, unknown_stream(s), false);
     if (req.cmd == "subscribe") {
       c.streams.insert(streams.begin(), streams.end());
     } else if (streams.empty()) {
@@ -374,7 +372,8 @@ void Server::handle(Connection& c, const protocol::Message& m) {
     } catch (const protocol::ProtocolError& e) {
       return refuse(protocol::codes::kInvalidArgument, e.what(), false);
     }
-    if (!valid_stream(stream)) return refuse(protocol::codes::kInvalidArgument, unknown_stream(stream), false);
+    if (!protocol::valid_stream(stream))
+      return refuse(protocol::codes::kInvalidArgument, unknown_stream(stream), false);
     if (!protocol::pollable_stream(stream))
       return refuse(protocol::codes::kInvalidArgument,
                     "\"" + stream + "\" carries images: subscribe to it; `latest` serves the streams without", false);

@@ -57,9 +57,6 @@ struct ServerOptions {
   std::vector<std::string> capabilities;
 };
 
-// The streams a client can subscribe to.
-bool valid_stream(const std::string& stream);
-
 class Server {
  public:
   // All peers together, per listener: connections accepted a second (and as
