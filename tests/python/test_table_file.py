@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import os
 import struct
+import types
 import zlib
 from pathlib import Path
 
@@ -400,9 +401,13 @@ def test_index_of_an_unknown_material_is_key_error_naming_the_table(real_table) 
         real_table.index_of("unobtainium")
 
 
-def test_devices_are_typed_records() -> None:
-    """tofmat.devices() is public: a list of Device (none on a machine without a Kinect, as here)."""
+def test_devices_are_typed_records(monkeypatch: pytest.MonkeyPatch) -> None:
+    """tofmat.devices() is public: the driver's listing as Device records (none here: no Kinect)."""
     found = tofmat.devices()
     assert isinstance(found, list) and all(isinstance(d, tofmat.Device) for d in found)
-    d = tofmat.Device(bus=2, port="2-1", product_id=0x02D8, serial="x", accessible=False, problem="busy")
-    assert d.as_dict()["product_id"] == 0x02D8
+    listing = [{"bus": 2, "port": "2-1", "product_id": 0x02D8, "serial": "0123", "accessible": False,
+                "problem": "busy"}]  # fmt: skip
+    monkeypatch.setattr(tofmat._tofmat, "kinect", types.SimpleNamespace(list_devices=lambda: listing))
+    (d,) = tofmat.devices()
+    assert d == tofmat.Device(bus=2, port="2-1", product_id=0x02D8, serial="0123", accessible=False, problem="busy")
+    assert d.as_dict() == listing[0]
