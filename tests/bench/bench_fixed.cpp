@@ -3,7 +3,7 @@
 // (issue 5). A benchmark, not a test: it prints figures and never fails on
 // timing (it exits non-zero only on bad options or a missing database).
 //
-//   tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]
+//   tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]
 //                      [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]
 //
 // --op all (the default) measures everything on this host and prints markdown
@@ -16,6 +16,11 @@
 // unpack of a depth packet (firmware/kinect raw_unpack.hpp: nine sub-images
 // to raw values), whole, rows 188..236 and the 48x48 region at the centre, the
 // definition (the unpack as first written) against the scalar and best kernels.
+//
+// --op stiff prints the fixed-point stages' worst errors against the float
+// reference at their stiff cases (tests/cpp/stiff_cases.hpp, asserted by
+// test_stiff_cases), 200,000 pixels per decode case: what `tofmat report`
+// shows in its stability section. No timing.
 //
 // Any other --op runs only that operation with that kernel N times after its
 // set-up (N = 0: set-up only) and prints one line, so that an instruction
@@ -50,6 +55,7 @@
 #include <string>
 #include <vector>
 
+#include "stiff_cases.hpp"
 #include "synthetic_raw.hpp"
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/compact_table.hpp"
@@ -281,7 +287,7 @@ struct Options {
 [[noreturn]] void usage(const char* why) {
   std::fprintf(
       stderr,
-      "error: %s\nusage: tofmat_bench_fixed [--op all|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]\n"
+      "error: %s\nusage: tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]\n"
       "                          [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]\n",
       why);
   std::exit(2);
@@ -309,8 +315,8 @@ Options parse(int argc, char** argv) {
       usage(("unknown option " + a).c_str());
     }
   }
-  const std::vector<std::string> ops{"all",   "decode", "roi",        "nn",           "dist",
-                                     "frame", "unpack", "unpack_roi", "unpack_region"};
+  const std::vector<std::string> ops{"all",  "stiff", "decode", "roi",        "nn",
+                                     "dist", "frame", "unpack", "unpack_roi", "unpack_region"};
   if (std::find(ops.begin(), ops.end(), o.op) == ops.end()) usage("unknown --op");
   if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float" && o.kernel != "reference") {
     usage("unknown --kernel");
@@ -616,6 +622,10 @@ int run_all(const Options& o) {
 int main(int argc, char** argv) {
   const Options o = parse(argc, argv);
   try {
+    if (o.op == "stiff") {
+      std::fputs(tofmat_test::stiff_cases_markdown(tofmat_test::stiff_cases(200000)).c_str(), stdout);
+      return 0;
+    }
     return o.op == "all" ? run_all(o) : run_single(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tofmat_bench_fixed: %s\n", e.what());

@@ -25,6 +25,7 @@ from tofmat.report.cppbench import (
     parse_bench_fixed,
     parse_decode_test,
     parse_insn_counts,
+    parse_stiff_cases,
 )
 from tofmat.report.stability import classifier_stability
 
@@ -111,6 +112,25 @@ def test_the_report_tables_read_as_measured(quick_report: Path) -> None:
     section = text.split("### " + SECTIONS[10])[1].split("### ")[0]
     rows = [r for r in section.splitlines() if r.startswith("| ") and not r.startswith("| case")]
     assert len(rows) == 7 and all("| yes |" in r for r in rows)
+    # The C++ stages at their stiff cases: every case the issue names, each row within its budget.
+    section = text.split("### " + SECTIONS[11])[1].split("### ")[0]
+    first_table = section.split("| stage | case |")[1].split("\n\n")[0]
+    rows = [r for r in first_table.splitlines() if r.startswith("| ")]
+    assert len(rows) >= 30 and all(r.endswith("| yes |") for r in rows)
+    for case in (
+        "near-zero amplitude",
+        "saturation",
+        "largest magnitudes",
+        "wrap points",
+        "range ends",
+        "tiny tau (1 ps)",
+        "huge tau (100 ns), half the light",
+        "one valid element",
+        "widest window at the extremes",
+    ):
+        assert any(f"| {case} |" in r for r in rows), case
+    summary = text.split("## " + SECTIONS[1])[1].split("## ")[0]
+    assert re.search(rf"Numerical stability \(section 2\): {7 + len(rows)} of {7 + len(rows)} stiff-case rows", summary)
 
 
 @pytest.mark.parametrize(
@@ -163,6 +183,36 @@ def test_the_decode_tests_figures_are_within_the_documented_budget(quick_report:
     assert f is not None and f.passed
     assert max(f.phase_rad) < 1e-6 and max(f.depth_mm) < 0.002
     assert f.combined_mm < 0.006 and f.features_mm < 0.004 and f.amplitude_rel < 1e-4
+
+
+STIFF_SAMPLE = """\
+## Stiff cases
+
+| stage | case | inputs | compared | quantity | worst error | budget | within budget |
+|---|---|---|--:|---|--:|--:|---|
+| decode: phase | near-zero amplitude | A 0.01..3 | 271673 | phase, rad | 2.78e-07 | 1e-06 | yes |
+| depth bins | one valid element | one pixel a bin | 390 | observations in another bin | 0 | 0 | yes |
+"""
+
+
+def test_the_stiff_cases_reader_and_a_changed_format() -> None:
+    rows = parse_stiff_cases(STIFF_SAMPLE)
+    assert [(r.case, r.compared, r.worst, r.budget, r.within) for r in rows] == [
+        ("near-zero amplitude", 271673, 2.78e-07, 1e-06, True),
+        ("one valid element", 390, 0.0, 0.0, True),
+    ]
+    # A row outside its budget reads as such (the report shows it, it does not hide it).
+    bad = parse_stiff_cases(STIFF_SAMPLE.replace("| 2.78e-07 | 1e-06 | yes |", "| 2e-06 | 1e-06 | NO |"))
+    assert not bad[0].within
+    # The program's verdict must agree with its numbers; a missing table or number is an error.
+    with pytest.raises(BenchFormatError, match="within budget 'yes'"):
+        parse_stiff_cases(STIFF_SAMPLE.replace("| 2.78e-07 | 1e-06 | yes |", "| 2e-06 | 1e-06 | yes |"))
+    with pytest.raises(BenchFormatError, match="no table with the columns"):
+        parse_stiff_cases(STIFF_SAMPLE.replace("worst error", "largest"))
+    with pytest.raises(BenchFormatError, match="expected a number"):
+        parse_stiff_cases(STIFF_SAMPLE.replace("| 390 |", "| - |"))
+    with pytest.raises(BenchFormatError, match="no rows"):
+        parse_stiff_cases("\n".join(STIFF_SAMPLE.splitlines()[:4]))
 
 
 def test_the_counts_reader_and_a_changed_format() -> None:

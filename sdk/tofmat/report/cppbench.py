@@ -481,6 +481,57 @@ class DecodeTestFigures:
     line: str  # as printed
 
 
+@dataclass(frozen=True)
+class StiffCaseRow:
+    """One row of ``tofmat_bench_fixed --op stiff``: a stage's worst error at one stiff case."""
+
+    stage: str
+    case: str
+    inputs: str
+    compared: int  # pixels, bins or windows the worst is taken over
+    quantity: str  # with its unit
+    worst: float
+    budget: float  # docs/numerics.md
+
+    @property
+    def within(self) -> bool:
+        return self.worst <= self.budget
+
+
+STIFF_SOURCE = "tofmat_bench_fixed --op stiff"
+
+
+def parse_stiff_cases(text: str) -> list[StiffCaseRow]:
+    """The rows of ``tofmat_bench_fixed --op stiff`` (its "Stiff cases" table).
+
+    The program states whether each row is within its budget; that is checked against the numbers
+    it printed, so a disagreement (a changed format or rounding) is an error here, not a quiet pass.
+    """
+    t = find_table(parse_tables(text, STIFF_SOURCE), STIFF_SOURCE, "stage", "case", "worst error", "budget")
+    cols = [t.col(c) for c in ("stage", "case", "inputs", "compared", "quantity", "worst error", "budget", "within")]
+    rows: list[StiffCaseRow] = []
+    for cells in t.rows:
+        stage, case, inputs, compared, quantity, worst, budget, within = (cells[i] for i in cols)
+        row = StiffCaseRow(
+            stage=stage,
+            case=case,
+            inputs=inputs,
+            compared=int(_need(number(compared), "compared", STIFF_SOURCE)),
+            quantity=quantity,
+            worst=_need(number(worst), f"the worst error of {stage}, {case}", STIFF_SOURCE),
+            budget=_need(number(budget), f"the budget of {stage}, {case}", STIFF_SOURCE),
+        )
+        if row.within != (within.strip().lower() == "yes"):
+            raise BenchFormatError(
+                f"{STIFF_SOURCE}: {stage}, {case}, {quantity}: it says within budget {within!r} "
+                f"for worst {worst} against budget {budget}"
+            )
+        rows.append(row)
+    if not rows:
+        raise BenchFormatError(f"{STIFF_SOURCE}: its table has no rows")
+    return rows
+
+
 DECODE_TEST = "FixedDecode.MatchesTheFloatDecodeWithinTheErrorBudget"
 
 
@@ -513,6 +564,7 @@ def parse_decode_test(text: str) -> DecodeTestFigures | None:
 
 __all__ = [
     "DECODE_TEST",
+    "STIFF_SOURCE",
     "BenchFormatError",
     "BenchRunError",
     "Composite",
@@ -526,6 +578,7 @@ __all__ = [
     "ProfileRow",
     "ProfilesBench",
     "StageRow",
+    "StiffCaseRow",
     "UnpackRow",
     "find_table",
     "number",
@@ -535,6 +588,7 @@ __all__ = [
     "parse_decode_test",
     "parse_insn_counts",
     "parse_profile_counts",
+    "parse_stiff_cases",
     "parse_tables",
     "run_program",
 ]

@@ -7,8 +7,10 @@ queries: each candidate's distance against the float classifier's, next to the b
 docs/numerics.md (each query element moves by at most half a table step ``s`` when quantised, so a
 mean squared distance moves by at most ``s * mean|q - e| + s^2 / 4``; two labels can differ only
 where the float distances of the two lie within the sum of their bounds). The decode's stages, the
-depth bins, the per-pixel classifier and the smoothing have no Python binding: their cases are
-listed with the C++ tests that cover them (:data:`NOT_REACHABLE`).
+depth bins and the box mean are measured at their stiff cases by the C++ build
+(``tofmat_bench_fixed --op stiff``, read by :func:`.cppbench.parse_stiff_cases`); what only the C++
+tests check (the vector kernels bit for bit, the per-pixel classifier, the majority filter) is
+listed with those tests (:data:`CPP_TESTS_ONLY`).
 """
 
 from __future__ import annotations
@@ -61,8 +63,8 @@ class StabilityRow:
 
 
 @dataclass(frozen=True)
-class NotReachable:
-    """A stage and its stiff cases that Python cannot reach: the C++ tests that cover them."""
+class CppTestsOnly:
+    """A stage and its stiff cases that only the C++ tests check: the tests that cover them."""
 
     stage: str
     cases: str
@@ -70,56 +72,40 @@ class NotReachable:
     tests: str
 
 
-# The fixed-point stages with no Python binding (the SDK exposes the float decode only), with the
-# C++ tests that exercise their stiff cases (tests/cpp).
-NOT_REACHABLE: list[NotReachable] = [
-    NotReachable(
-        "decode: phase, amplitude (`phase_amplitude`)",
-        "near-zero amplitude (a zero phasor, samples of 0 and +-1 counts, amplitudes from 3 counts); "
-        "saturated samples (32767) and the largest magnitudes (+-16320) in every combination",
-        "phase 1e-6 rad; amplitude 1e-4 relative beyond its Q8 step; saturation flagged alike; no signed overflow "
-        "(sanitizer build)",
-        "`FixedDecode.ExtremeSamplesNeitherOverflowNorDisagree`, `FixedDecode.MatchesTheFloatDecodeWithinTheErrorBudget`, "
-        "`FixedDecode.VectorKernelIsBitExactWithScalar` (tests/cpp/test_fixed_decode.cpp)",
+# What neither Python nor `tofmat_bench_fixed --op stiff` measures, with the C++ tests (tests/cpp,
+# run by `make test`; the NEON kernels by `make cross-test`) that check it.
+CPP_TESTS_ONLY: list[CppTestsOnly] = [
+    CppTestsOnly(
+        "decode, depth bins, box mean: the NEON and AVX2 kernels",
+        "random pixels over the whole range, exact wrap points, extremes, lengths that leave a scalar tail; "
+        "thresholds none, default, strict and NaN",
+        "bit for bit the scalar kernel (the one 2.2 measures)",
+        "`FixedDecode.VectorKernelIsBitExactWithScalar`, `FixedDepthBins.VectorBinKernelIsBitExactWithScalar`, "
+        "`BoxMeanFilter.TheKernelsAgreeBitForBit`",
     ),
-    NotReachable(
-        "decode: per-frequency depth, unwrap, combined depth, features, flags (`finish_pixels`)",
-        "phase at the wrap points (depths on every multiple of 1250 mm, just below those of 80 MHz); depths at the "
-        "ends of each frequency's unambiguous range (1875 / 9375 / 1250 mm for 80 / 16 / 120 MHz) and over the "
-        "whole 9375 mm; thresholds none, default, strict and NaN",
-        "depth 0.002 mm per frequency; combined 0.006 mm; features 0.004 mm; flags only on a threshold's edge or "
-        "at the 16 MHz wrap point",
-        "`FixedDecode.MatchesTheFloatDecodeWithinTheErrorBudget`, `FixedDecode.VectorKernelIsBitExactWithScalar`, "
-        "`FixedDecode.UnwrapDivisionMagicIsExact` (tests/cpp/test_fixed_decode.cpp)",
-    ),
-    NotReachable(
-        "depth-bin accumulation (`FixedDepthBinAccumulator`, `bin_indices`)",
-        "depths over the whole int32 range, exactly on the first edge, invalid and flagged; a bin at its 2^32 "
-        "observations",
-        "bin means within 0.03 mm of the float accumulator, at most 0.5 % of observations in a neighbouring bin",
-        "`FixedDepthBins.MatchesTheFloatAccumulatorOnDecodedFrames`, `FixedDepthBins.VectorBinKernelIsBitExactWithScalar`, "
+    CppTestsOnly(
+        "depth bins: a full bin",
+        "a bin at its limit of observations (2^32; a test asks for 3)",
+        "further observations refused and counted, the sums never overflow",
         "`FixedDepthBins.FullBinsRefuseFurtherObservations` (tests/cpp/test_fixed_depth_bins.cpp)",
     ),
-    NotReachable(
+    CppTestsOnly(
         "per-pixel classification (`PixelClassifier`)",
         "features at the int32 extremes, 1 to 254 candidates, missing elements",
         "labels differ from `FloatClassifier` only in near ties (the features' quantisation)",
         "`PixelClassifier.AgreesWithTheFloatClassifierUpToTheQuantisation`, `PixelClassifier.VectorKernelIsBitExactWithScalar` "
         "(tests/cpp/test_pixel_classifier.cpp)",
     ),
-    NotReachable(
-        "segmentation smoothing (`BoxMeanFilter`, `MajorityFilter`)",
-        "features at the int32 extremes and beyond the decode's range, windows up to 15 x 15, frames narrower than "
-        "the window",
-        "1/512 mm + 1/65536 mm of a binary64 box filter; the majority filter exact",
-        "`BoxMeanReference.WithinTheBudgetOfOpenCVsDoubleBoxFilter` (tests/cpp/test_smoothing_reference.cpp), "
-        "`BoxMeanFilter.AFullFrameAtTheExtremesWithTheWidestWindow`, `BoxMeanFilter.TheKernelsAgreeBitForBit`, "
+    CppTestsOnly(
+        "segmentation majority filter (`MajorityFilter`)",
+        "windows up to 15 x 15, up to 255 classes, frames narrower than the window",
+        "exact: every label its window's majority",
         "`MajorityFilter.EveryLabelIsItsWindowsMajority` (tests/cpp/test_frame_smoothing.cpp)",
     ),
-    NotReachable(
+    CppTestsOnly(
         "Eq. (12) NEON kernel (aarch64)",
         "saturated opposite values, the longest rows (16 x 65535 elements), 20,000 short random inputs",
-        "bit for bit the scalar kernel (this host runs the scalar kernel, measured above)",
+        "bit for bit the scalar kernel (this host runs the scalar kernel, measured in 2.1)",
         "`FixedKernel.NeonIsBitExactWithScalar`, `FixedKernel.ScalarEqualsThePlainDefinition` "
         "(tests/cpp/test_fixed_classifier.cpp; NEON under `make cross-test`)",
     ),
@@ -448,8 +434,8 @@ def all_within_budget(rows: Iterable[StabilityRow]) -> bool:
 
 __all__ = [
     "CLASSIFIER_BUDGET",
-    "NOT_REACHABLE",
-    "NotReachable",
+    "CPP_TESTS_ONLY",
+    "CppTestsOnly",
     "StabilityRow",
     "all_within_budget",
     "classifier_stability",
