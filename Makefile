@@ -235,3 +235,6 @@ include mk/lint-cpp.mk
 
 # The error-against-run-time report: `make report` (docs/report.md).
 include mk/report.mk
+
+# The classifiers' held-out evaluation: `make evaluate` (docs/evaluation.md).
+include mk/evaluate.mk

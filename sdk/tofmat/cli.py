@@ -531,11 +531,13 @@ def devices(as_json: bool) -> None:
 
 
 def _register_sim() -> None:
+    from .evaluation.cli import evaluate
     from .report.cli import report
     from .sim.cli import sim_cli
 
     main.add_command(sim_cli)
     main.add_command(report)
+    main.add_command(evaluate)
 
 
 _register_sim()

@@ -1,0 +1,85 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""`tofmat evaluate`: the held-out evaluation of docs/evaluation.md. Registered in the `tofmat`
+group by ``main.add_command(evaluate)``."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import click
+
+from .._clikit import TofmatCommand, UserError, progress_bar
+from ..report.cli import DEFAULT_DB, DEFAULT_TABLE, default_table
+
+
+@click.command("evaluate", cls=TofmatCommand)
+@click.option(
+    "--source",
+    type=click.Choice(["curves", "sim", "all"]),
+    default="all",
+    show_default=True,
+    help="curves: the real curves in new sessions; sim: simulator sweeps in new sessions; all: both.",
+)
+@click.option(
+    "--table",
+    "table_path",
+    type=click.Path(exists=True, path_type=Path),
+    default=None,
+    help=f"The real curves' table (.tmx or .npy folder). [default: {DEFAULT_TABLE} if it exists, else {DEFAULT_DB}]",
+)
+@click.option(
+    "--sessions",
+    type=click.IntRange(1, 1000),
+    default=10,
+    show_default=True,
+    help="New sessions per material of the real curves, per split (one sweep of each length in each).",
+)
+@click.option(
+    "--sim-sessions",
+    type=click.IntRange(1, 1000),
+    default=6,
+    show_default=True,
+    help="New sessions per material of the simulator, per split (rendered: about 5 s each for 29 materials).",
+)
+@click.option("--sim-materials", help="Comma-separated materials for the simulator source (default: its library's).")
+@click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), help="Also write the table to this file.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
+def evaluate(
+    source: str,
+    table_path: Path | None,
+    sessions: int,
+    sim_sessions: int,
+    sim_materials: str | None,
+    out: Path | None,
+    as_json: bool,
+) -> None:
+    """Accuracy of every matcher by sweep length on a test split of new capture sessions, after
+    tuning on a separate split (docs/evaluation.md): Eq. (12), the paper's classifier, against the
+    session-robust matcher, each with its host time per query."""
+    from ..tools.tables import open_table
+    from .run import evaluate_curves, evaluate_sim, format_markdown
+
+    results = []
+    with progress_bar("evaluate") as progress:
+        if source in ("curves", "all"):
+            path = table_path if table_path is not None else default_table()
+            if not path.exists():
+                raise UserError(f"no table: neither {DEFAULT_TABLE} nor {DEFAULT_DB} exists (give --table)")
+            results.append(evaluate_curves(open_table(path), sessions, progress=progress))
+        if source in ("sim", "all"):
+            names = [m.strip() for m in sim_materials.split(",")] if sim_materials else None
+            try:
+                results.append(evaluate_sim(names, sim_sessions, progress=progress))
+            except ValueError as e:  # an unknown material name
+                raise UserError(str(e)) from e
+    text = (
+        json.dumps([{**asdict(r), "tuning": [[asdict(p), s] for p, s in r.tuning]} for r in results], indent=2)
+        if as_json
+        else format_markdown(results)
+    )
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n")
+    click.echo(text)

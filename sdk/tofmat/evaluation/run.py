@@ -1,0 +1,204 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""The held-out protocol of docs/evaluation.md: draw a tuning split and a test split from separate
+seeds, tune the session-robust matcher on the tuning split only, report every matcher on the test
+split by sweep length, with its cost per query."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .. import ExemplarTable
+from .._progress import Progress
+from .matchers import Eq12Matcher, Matcher, SessionMatcher, SessionParams
+from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries
+
+LENGTHS = (1, 3, 10, 30, 100)
+# Every random draw of a split comes from its own generator: nothing of the test split is seen
+# while tuning.
+SPLIT_SEEDS = {"tune": 1001, "test": 2002}
+
+# The tuning grid of the session matcher (its offset prior is the calibration's spread, not tuned).
+DRIFT_GRID: tuple[tuple[float, ...], ...] = ((), (3.0,), (5.0, 3.0))
+FLOOR_GRID = (0.1, 0.3, 0.5, 1.0, 2.0)
+HUBER_GRID = (3.0, math.inf)
+
+
+@dataclass(frozen=True)
+class Row:
+    source: str
+    method: str
+    split: str
+    accuracy: dict[int, float]  # % right by sweep length
+    queries: dict[int, int]
+    us_per_query: float  # host time per query (the whole batch / its queries)
+
+
+@dataclass
+class SourceResult:
+    source: str
+    description: str
+    materials: int
+    rows: list[Row] = field(default_factory=list)
+    tuned: SessionParams | None = None
+    tuning: list[tuple[SessionParams, float]] = field(default_factory=list)  # each setting and its tuning score
+    seconds: float = 0.0
+
+
+def accuracy_by_length(scores: np.ndarray, q: Queries) -> tuple[dict[int, float], dict[int, int]]:
+    pred = np.argmin(scores, axis=1)
+    acc: dict[int, float] = {}
+    count: dict[int, int] = {}
+    for n in sorted(set(q.lengths.tolist())):
+        sel = q.lengths == n
+        count[n] = int(sel.sum())
+        acc[n] = 100.0 * float(np.mean(pred[sel] == q.truth[sel]))
+    return acc, count
+
+
+def _score(matcher: Matcher, q: Queries) -> tuple[np.ndarray, float]:
+    t0 = time.perf_counter()
+    s = matcher.scores(q.queries)
+    return s, 1e6 * (time.perf_counter() - t0) / max(1, len(q.truth))
+
+
+def tune(
+    table: ExemplarTable, model: SessionModel, q: Queries, progress: Progress | None = None
+) -> list[tuple[SessionParams, float]]:
+    """Every setting of the grid with its mean accuracy over the sweep lengths on ``q`` (the tuning
+    split), best first (ties: the simpler setting, fewer drift terms, then the larger floor)."""
+    grid = list(itertools.product(DRIFT_GRID, FLOOR_GRID, HUBER_GRID))
+    out: list[tuple[SessionParams, float]] = []
+    for i, (drift, floor, k) in enumerate(grid):
+        if progress:
+            progress(i, len(grid), "tuning the session matcher")
+        p = SessionParams(model.offsets_sd_mm, drift_sd_mm=drift, floor_mm=floor, huber_k=k)
+        acc, _ = accuracy_by_length(SessionMatcher(table, p).scores(q.queries), q)
+        out.append((p, float(np.mean(list(acc.values())))))
+    out.sort(key=lambda t: (-t[1], len(t[0].drift_sd_mm), -t[0].floor_mm))
+    return out
+
+
+def evaluate_source(
+    source: str,
+    description: str,
+    table: ExemplarTable,
+    model: SessionModel,
+    draw: Callable[[int], Queries],
+    progress: Progress | None = None,
+) -> SourceResult:
+    """``draw(seed)``: the queries of one split."""
+    t0 = time.perf_counter()
+    res = SourceResult(source, description, len(table.materials))
+    tune_q = draw(SPLIT_SEEDS["tune"])
+    res.tuning = tune(table, model, tune_q, progress)
+    res.tuned = res.tuning[0][0]
+    test_q = draw(SPLIT_SEEDS["test"])
+    matchers: list[Matcher] = [Eq12Matcher(table), SessionMatcher(table, res.tuned)]
+    for split, q in (("tune", tune_q), ("test", test_q)):
+        for m in matchers:
+            s, us = _score(m, q)
+            acc, count = accuracy_by_length(s, q)
+            res.rows.append(Row(source, m.name, split, acc, count, us))
+    res.seconds = time.perf_counter() - t0
+    return res
+
+
+def evaluate_curves(
+    table: ExemplarTable, sessions_per_material: int, lengths: Sequence[int] = LENGTHS, progress: Progress | None = None
+) -> SourceResult:
+    """The real curves in new sessions (:mod:`.sessions`), with the calibrated simulator's drift."""
+    library, device = calibrated_json()
+    model = calibrated_model(library, table)
+    cs = CurveSessions(table, model, device, library)
+    return evaluate_source(
+        "curves",
+        _describe(model, f"the {len(table.materials)} stored curves in new sessions"),
+        table,
+        model,
+        lambda seed: draw_queries(cs, list(lengths), sessions_per_material, seed),
+        progress,
+    )
+
+
+def evaluate_sim(
+    materials: list[str] | None,
+    sessions_per_material: int,
+    lengths: Sequence[int] = LENGTHS,
+    progress: Progress | None = None,
+) -> SourceResult:
+    """Simulator captures in new sessions against a table the simulated camera recorded (:mod:`.sim_sessions`)."""
+    from .sim_sessions import SimSessions
+
+    library, _ = calibrated_json()
+    # The session spreads as the calibration measured them; the simulator's own noise is the bin noise.
+    from ..sim.evaluate import session_offset_spread, session_state_spread
+
+    model = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
+    ss = SimSessions(materials, model, progress=progress)
+    return evaluate_source(
+        "sim",
+        _describe(
+            model, f"simulator sweeps of {len(ss.table.materials)} materials in new sessions, against a simulated table"
+        ),
+        ss.table,
+        model,
+        lambda seed: ss.draw(list(lengths), sessions_per_material, seed, progress),
+        progress,
+    )
+
+
+def calibrated_json() -> tuple[dict[str, Any], dict[str, Any]]:
+    """The calibrated simulator's material library and device as JSON, with the calibration's
+    per-capture fits (the loaded objects keep only what rendering needs)."""
+    from ..sim import DEFAULT_DEVICE, DEFAULT_LIBRARY, data_dir
+
+    root = data_dir()
+    library = json.loads((root / "materials" / f"{DEFAULT_LIBRARY}.json").read_text())
+    device = json.loads((root / "devices" / f"{DEFAULT_DEVICE}.json").read_text())
+    return library, device
+
+
+def _describe(model: SessionModel, what: str) -> str:
+    o = ", ".join(f"{s:.2f}" for s in model.offsets_sd_mm)
+    t = ", ".join(f"{s:.2f}" for s in model.state_sd)
+    extra = (
+        f"; dropped bins {100 * model.drop_p:.0f} %, outlier bins {100 * model.outlier_p:.1f} % of "
+        f"{model.outlier_units:.1f} roughness units"
+        if model.drop_p or model.outlier_p
+        else ""
+    )
+    return f"{what}: row offsets sd {o} mm, session states sd {t}{extra}"
+
+
+def format_markdown(results: Sequence[SourceResult]) -> str:
+    """The test split's table (and the tuning split's beside it), per source."""
+    lines: list[str] = []
+    for r in results:
+        lengths = sorted(next(iter(r.rows)).accuracy) if r.rows else []
+        lines += [f"### {r.source}: {r.description}", ""]
+        head = "| method | split | " + " | ".join(f"{n} bins" for n in lengths) + " | host us / query |"
+        lines += [head, "|---|---|" + "---:|" * (len(lengths) + 1)]
+        for row in sorted(r.rows, key=lambda x: (x.split != "test", x.method)):
+            cells = " | ".join(f"{row.accuracy[n]:.1f} %" for n in lengths)
+            lines.append(f"| {row.method} | {row.split} | {cells} | {row.us_per_query:.0f} |")
+        if r.rows:
+            counts = next(x for x in r.rows if x.split == "test").queries
+            lines.append("")
+            lines.append("Test queries per length: " + ", ".join(f"{n} bins {counts[n]}" for n in lengths) + ".")
+        if r.tuned is not None:
+            t = r.tuned
+            lines.append(
+                f"Tuned on the tuning split: drift priors {list(t.drift_sd_mm) or 'none'} mm, floor {t.floor_mm:g} mm, "
+                f"Huber k {t.huber_k:g}, offset priors {', '.join(f'{s:.2f}' for s in t.offset_sd_mm)} mm "
+                f"(the calibration's spread); {r.seconds:.0f} s."
+            )
+        lines.append("")
+    return "\n".join(lines)

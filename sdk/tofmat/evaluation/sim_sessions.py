@@ -1,0 +1,86 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""Simulator captures in new sessions: the second test source of docs/evaluation.md.
+
+The table is recorded with the simulated camera in its nominal session (:func:`tofmat.sim.table.
+simulated_table`, as a box records its own). A query is a hand-held sweep rendered by the calibrated
+simulator in a session of its own: the waveform's state drawn from the calibration's spread
+(``DeviceProfile.in_session``), the rows' offsets likewise, the target at a random yaw; one frame
+per bin of the window, each frame's 48 x 48 region decoded as tofmatd does and binned by its own
+combined depth (a bin no frame lands in is missing, as in a real sweep).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import ExemplarTable
+from .._progress import Progress
+from ..sim import Renderer, load_device, load_library
+from ..sim.table import database_bins, roi_observation, simulated_table
+from .sessions import Queries, SessionModel, window_starts
+
+YAW_RANGE_DEG = (0.0, 20.0)  # the queries' target orientation (the table's is 10 degrees)
+
+
+class SimSessions:
+    """Records the table once; :meth:`draw` renders queries in new sessions."""
+
+    def __init__(
+        self, materials: list[str] | None, model: SessionModel, seed: int = 7, progress: Progress | None = None
+    ) -> None:
+        self.device = load_device()
+        self.library = load_library()
+        self.renderer = Renderer(self.device, self.library, 0)
+        self.model = model
+        names = materials if materials is not None else list(self.library.names)
+        self.table: ExemplarTable = simulated_table(self.renderer, names, database_bins(), seed=seed, progress=progress)
+
+    def _sweep(self, renderer: Renderer, m: int, start: int, length: int, yaw: float, seed: int) -> np.ndarray:
+        bins = self.table.bins
+        p0 = np.asarray(renderer.p0_tables())
+        sums = np.zeros((self.table.n_rows, bins.count))
+        counts = np.zeros(bins.count)
+        for i in range(length):
+            z = bins.start_mm + bins.width_mm * (start + i + 0.5)
+            obs = roi_observation(renderer, p0, self.table.materials[m], float(z), yaw, seed + i)
+            if obs is None:
+                continue
+            j = int(np.floor((obs[0] - bins.start_mm) / bins.width_mm))
+            if 0 <= j < bins.count:
+                sums[:, j] += obs[1]
+                counts[j] += 1
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(counts > 0, sums / counts, np.nan)
+
+    def draw(
+        self, lengths: list[int], sessions_per_material: int, seed: int, progress: Progress | None = None
+    ) -> Queries:
+        """As :func:`.sessions.draw_queries`, rendered: a session per material and draw."""
+        rng = np.random.default_rng(seed)
+        truth: list[int] = []
+        lens: list[int] = []
+        qs: list[np.ndarray] = []
+        n_mat = len(self.table.materials)
+        for m in range(n_mat):
+            if progress:
+                progress(m, n_mat, f"rendering {self.table.materials[m]}")
+            for _ in range(sessions_per_material):
+                sd = self.model.state_sd
+                state = (float(rng.normal(0.0, sd[0])), float(rng.normal(0.0, sd[1])), float(rng.normal(0.0, sd[2])))
+                renderer = Renderer(self.device.in_session(state), self.library, 0)
+                offsets = np.array([rng.normal(0.0, s) for s in self.model.offsets_sd_mm])
+                yaw = float(rng.uniform(*YAW_RANGE_DEG))
+                for n in lengths:
+                    starts = window_starts(self.table, m, n)
+                    if starts.size == 0:
+                        continue
+                    start = int(starts[rng.integers(0, starts.size)])
+                    q = self._sweep(renderer, m, start, n, yaw, int(rng.integers(0, 2**31)))
+                    if not np.isfinite(q).any():
+                        continue  # nothing valid in the sweep: no query
+                    truth.append(m)
+                    lens.append(n)
+                    qs.append((q + offsets[:, None]).astype(np.float32))
+        if progress:
+            progress(n_mat, n_mat, "rendered")
+        return Queries(np.array(truth, dtype=np.int64), np.array(lens, dtype=np.int64), np.stack(qs))

@@ -1,0 +1,232 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""tofmat.evaluation: the held-out protocol of docs/evaluation.md (`tofmat evaluate`).
+
+The session model's parts against inputs whose answer is known (noise of a known level, spikes
+of a known rate), the draws' reproducibility and split separation, the session-robust matcher
+against Eq. (12) where the difference is constructed, and the command on the real curves and a
+small simulator run.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import tofmat
+from tofmat.cli import main
+from tofmat.evaluation import run
+from tofmat.evaluation.matchers import Eq12Matcher, SessionMatcher, SessionParams
+from tofmat.evaluation.sessions import (
+    CurveSessions,
+    Queries,
+    SessionModel,
+    draw_queries,
+    outliers,
+    roughness,
+)
+
+BINS = tofmat.BinSpec(600.0, 600.0 / 199.0, 200)
+
+
+def _table(curves: np.ndarray, names: list[str] | None = None) -> tofmat.ExemplarTable:
+    names = names or [f"m{i}" for i in range(curves.shape[0])]
+    return tofmat.ExemplarTable(names, curves.astype(np.float32), BINS, [(16, 120), (80, 120)])
+
+
+def _smooth_curves(n: int, rng: np.random.Generator) -> np.ndarray:
+    x = np.linspace(-1, 1, 200)
+    return np.stack(
+        [
+            np.stack([rng.normal(0, 5) + rng.normal(0, 5) * x + rng.normal(0, 3) * x**2 for _ in range(2)])
+            for _ in range(n)
+        ]
+    )
+
+
+def test_roughness_recovers_a_known_noise_level_on_a_smooth_curve() -> None:
+    rng = np.random.default_rng(3)
+    curves = _smooth_curves(4, rng)
+    sd = np.array([[0.3, 0.1], [0.6, 0.2], [1.0, 0.05], [0.2, 0.4]])
+    noisy = curves + rng.normal(0, 1, curves.shape) * sd[:, :, None]
+    est = roughness(noisy)
+    assert np.allclose(est, sd, rtol=0.2), est
+    # Missing elements are skipped, and too few observed give NaN.
+    noisy[0, 0, :100] = np.nan
+    noisy[1, 1, 3:] = np.nan
+    est = roughness(noisy)
+    assert est[0, 0] == pytest.approx(0.3, rel=0.25) and math.isnan(est[1, 1])
+
+
+def test_outliers_finds_the_rate_and_size_of_spikes() -> None:
+    rng = np.random.default_rng(4)
+    curves = _smooth_curves(6, rng)
+    sigma = np.full((6, 2), 0.2)
+    noisy = curves + rng.normal(0, 0.2, curves.shape)
+    spikes = rng.random(curves.shape) < 0.02
+    noisy[spikes] += rng.choice([-1, 1], spikes.sum()) * 4.0  # 20 noise units
+    p, size = outliers(noisy, sigma)
+    assert p == pytest.approx(0.02, abs=0.006)
+    assert 15 < size < 25
+    assert outliers(curves, sigma)[0] == 0.0  # a smooth curve has none
+
+
+def test_a_session_model_refuses_bad_settings() -> None:
+    with pytest.raises(ValueError, match="finite and >= 0"):
+        SessionModel((-1.0, 0.5), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="drop_p"):
+        SessionModel((1.0, 0.5), (0.0, 0.0, 0.0), 1.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="finite"):
+        SessionModel((math.nan, 0.5), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+    table = _table(_smooth_curves(2, np.random.default_rng(0)))
+    with pytest.raises(ValueError, match="row offsets"):
+        CurveSessions(table, SessionModel((1.0,), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="needs the simulator"):
+        CurveSessions(table, SessionModel((1.0, 1.0), (0.5, 0.0, 0.0), 0.0, 0.0, 0.0))
+
+
+def test_sessions_move_the_rows_by_the_model_s_offsets() -> None:
+    table = _table(_smooth_curves(3, np.random.default_rng(1)))
+    still = CurveSessions(table, SessionModel((0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, noise_scale=0.0))
+    rng = np.random.default_rng(0)
+    assert np.allclose(still.curve(1, rng), table.features[1])
+    moving = CurveSessions(table, SessionModel((2.0, 0.5), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0))
+    shifts = np.array([moving.curve(0, rng)[:, 50] - table.features[0][:, 50] for _ in range(4000)])
+    assert np.std(shifts, axis=0) == pytest.approx([2.0, 0.5], rel=0.05)
+    # A sweep: NaN outside its window, the material's own noise inside.
+    q = moving.measure(0, table.features[0].astype(np.float64), 20, 10, rng)
+    assert np.isnan(q[:, :20]).all() and np.isnan(q[:, 30:]).all() and np.isfinite(q[:, 20:30]).all()
+
+
+def test_draws_are_reproducible_and_the_splits_differ() -> None:
+    table = _table(_smooth_curves(3, np.random.default_rng(2)))
+    cs = CurveSessions(table, SessionModel((2.0, 0.7), (0.0, 0.0, 0.0), 0.1, 0.02, 10.0))
+    a = draw_queries(cs, [1, 10], 4, seed=run.SPLIT_SEEDS["tune"])
+    b = draw_queries(cs, [1, 10], 4, seed=run.SPLIT_SEEDS["tune"])
+    c = draw_queries(cs, [1, 10], 4, seed=run.SPLIT_SEEDS["test"])
+    assert np.array_equal(a.queries, b.queries, equal_nan=True)
+    assert not np.array_equal(a.queries, c.queries, equal_nan=True)
+    assert a.queries.shape == (3 * 4 * 2, 2, 200)
+    assert sorted(set(a.lengths.tolist())) == [1, 10] and (np.bincount(a.truth) == 8).all()
+    # Every query holds at most its length of bins, and at least one element.
+    for q, n in zip(a.queries, a.lengths, strict=True):
+        cols = np.isfinite(q).any(axis=0)
+        assert 1 <= cols.sum() <= n
+    with pytest.raises(ValueError, match="sweep length"):
+        draw_queries(cs, [0], 1, seed=0)
+    with pytest.raises(ValueError, match="at least 1"):
+        draw_queries(cs, [3], 0, seed=0)
+
+
+def _offset_problem() -> tuple[tofmat.ExemplarTable, Queries]:
+    """Curves that differ in shape by about 1 mm, and queries moved by session offsets of 3 mm."""
+    x = np.linspace(-1, 1, 200)
+    curves = np.stack([np.stack([0.6 * np.sin(3 * x + k), 0.3 * np.cos(2 * x + k)]) for k in range(5)])
+    table = _table(curves)
+    rng = np.random.default_rng(9)
+    qs, truth, lens = [], [], []
+    for m in range(5):
+        for _ in range(20):
+            q = np.full((2, 200), np.nan)
+            start = int(rng.integers(0, 170))
+            q[:, start : start + 30] = curves[m][:, start : start + 30] + rng.normal(0, 3.0, (2, 1))
+            q[:, start : start + 30] += rng.normal(0, 0.02, (2, 30))
+            qs.append(q)
+            truth.append(m)
+            lens.append(30)
+    return table, Queries(np.array(truth), np.array(lens), np.stack(qs).astype(np.float32))
+
+
+def test_the_session_matcher_sees_through_session_offsets_where_eq12_cannot() -> None:
+    table, q = _offset_problem()
+    eq12, _ = run.accuracy_by_length(Eq12Matcher(table).scores(q.queries), q)
+    params = SessionParams((3.0, 3.0), noise_scale=1.0, floor_mm=0.05)
+    session, _ = run.accuracy_by_length(SessionMatcher(table, params, np.full((5, 2), 0.02)).scores(q.queries), q)
+    assert session[30] > 95.0 and eq12[30] < 60.0, (session, eq12)
+
+
+def test_outlier_bins_are_down_weighted() -> None:
+    x = np.linspace(-1, 1, 200)
+    curves = np.stack(
+        [np.stack([np.zeros_like(x), np.zeros_like(x)]), np.stack([np.full_like(x, 1.0), np.zeros_like(x)])]
+    )
+    table = _table(curves)
+    q = np.full((1, 2, 200), np.nan, np.float32)
+    q[0, :, 100:110] = 0.0
+    q[0, 0, 105] = 60.0  # one wild bin: Gaussian scoring would prefer the material 1 mm above
+    sigma = np.full((2, 2), 0.1)
+    huber = SessionMatcher(table, SessionParams((0.01, 0.01), huber_k=3.0, noise_scale=1.0), sigma).scores(q)
+    gauss = SessionMatcher(table, SessionParams((0.01, 0.01), huber_k=math.inf, noise_scale=1.0), sigma).scores(q)
+    assert np.argmin(huber[0]) == 0 and np.argmin(gauss[0]) == 1
+
+
+def test_a_noisy_candidate_does_not_win_by_being_vague() -> None:
+    # Two candidates equally far from the query, one with ten times the noise: the likelihood
+    # prefers the precise one (the noisy one's wider spread costs log sigma per element).
+    curves = np.zeros((2, 2, 200))
+    table = _table(curves)
+    q = np.full((1, 2, 200), np.nan, np.float32)
+    q[0, :, 0:20] = 0.05
+    sigma = np.array([[0.1, 0.1], [1.0, 1.0]])
+    s = SessionMatcher(table, SessionParams((0.01, 0.01), noise_scale=1.0), sigma).scores(q)
+    assert np.argmin(s[0]) == 0
+    # A candidate with no element in common with the query scores inf.
+    curves[1, :, :100] = np.nan
+    q2 = np.full((1, 2, 200), np.nan, np.float32)
+    q2[0, :, 10:20] = 0.0
+    s2 = SessionMatcher(_table(curves), SessionParams((0.5, 0.5)), sigma).scores(q2)
+    assert math.isinf(s2[0, 1]) and math.isfinite(s2[0, 0])
+    with pytest.raises(ValueError, match="queries must be"):
+        SessionMatcher(table, SessionParams((0.5, 0.5))).scores(np.zeros((1, 3, 200), np.float32))
+    with pytest.raises(ValueError, match="offset_sd_mm"):
+        SessionMatcher(table, SessionParams((0.5,)))
+
+
+def test_tuning_sees_only_the_tuning_split() -> None:
+    table, q = _offset_problem()
+    seen: list[int] = []
+
+    def draw(seed: int) -> Queries:
+        seen.append(seed)
+        return q
+
+    model = SessionModel((3.0, 3.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+    res = run.evaluate_source("toy", "a toy", table, model, draw)
+    # The tuning split is drawn (and tuned on) before the test split exists.
+    assert seen == [run.SPLIT_SEEDS["tune"], run.SPLIT_SEEDS["test"]]
+    assert res.tuned is not None and res.tuning[0][0] == res.tuned
+    assert {(r.method, r.split) for r in res.rows} == {(m, s) for m in ("eq12", "session") for s in ("tune", "test")}
+
+
+def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
+    out = tmp_path / "evaluation.md"
+    r = CliRunner().invoke(
+        main, ["-q", "evaluate", "--source", "curves", "--table", str(real_tmx), "--sessions", "3", "-o", str(out)]
+    )
+    assert r.exit_code == 0, r.output
+    text = out.read_text()
+    assert text.strip() == r.output.strip()
+    test_rows = {m: re.search(rf"^\| {m} \| test \| (.*) \|$", text, re.M) for m in ("eq12", "session")}
+    acc = {
+        m: [float(v) for v in re.findall(r"([\d.]+) %", row.group(1))]
+        for m, row in test_rows.items()
+        if row is not None
+    }
+    assert len(acc["eq12"]) == 5 and len(acc["session"]) == 5
+    # The session-robust matcher well above Eq. (12) at 10 and 30 bins on new sessions.
+    assert acc["session"][2] > acc["eq12"][2] + 15 and acc["session"][3] > acc["eq12"][3] + 15, acc
+    r = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--sessions", "0"])
+    assert r.exit_code == 2 and "--sessions" in r.output
+
+
+def test_a_small_simulator_run() -> None:
+    res = run.evaluate_sim(["wood", "copper", "fakeleather"], 1, lengths=[3, 30])
+    assert res.source == "sim" and res.materials == 3
+    test = [r for r in res.rows if r.split == "test"]
+    assert {r.method for r in test} == {"eq12", "session"}
+    assert all(sorted(r.accuracy) == [3, 30] and all(0 <= a <= 100 for a in r.accuracy.values()) for r in test)
+    assert sum(test[0].queries.values()) > 0
