@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-// Classifier for Python: Eq. (12) nearest neighbour (float or fixed point) over an exemplar
-// table, single queries and batches, with the GIL released.
+// Classifier for Python: Eq. (12) nearest neighbour (float or fixed point) or the
+// session-robust matcher (float) over an exemplar table, single queries and batches,
+// with the GIL released.
 #include <pybind11/stl.h>
 
 #include <algorithm>
@@ -10,6 +11,7 @@
 #include "bindings.hpp"
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/fixed_classifier.hpp"
+#include "tofmat/core/session_classifier.hpp"
 
 namespace tofmat::py {
 
@@ -43,12 +45,23 @@ std::string match_repr(const RankedMatch& m) {
 class Classifier {
  public:
   Classifier(std::shared_ptr<ExemplarTable> table, const std::string& backend,
-             const std::optional<std::vector<std::string>>& materials)
+             const std::optional<std::vector<std::string>>& materials, const std::string& method,
+             const std::optional<SessionPrior>& prior, const pyb::handle& noise_mm)
       : table_(std::move(table)) {
     if (backend != "float" && backend != "fixed") {
       throw pyb::value_error("unknown backend '" + backend + "': available backends are 'fixed' and 'float'");
     }
+    if (method != "eq12" && method != "session") {
+      throw pyb::value_error("unknown method '" + method + "': available methods are 'eq12' and 'session'");
+    }
+    if (method == "session" && backend == "fixed") {
+      throw pyb::value_error("method 'session' has no fixed-point backend yet: use backend='float'");
+    }
+    if (method != "session" && (prior || !noise_mm.is_none())) {
+      throw pyb::value_error("prior and noise_mm are settings of method='session'");
+    }
     backend_ = backend;
+    method_ = method;
     std::vector<std::uint32_t> candidates;
     if (materials) {
       if (materials->empty()) throw pyb::value_error("materials: give at least one candidate, or None for all");
@@ -58,7 +71,17 @@ class Classifier {
         candidates.push_back(static_cast<std::uint32_t>(i));
       }
     }
-    if (backend == "fixed") {
+    if (method == "session") {
+      std::vector<double> noise;
+      if (!noise_mm.is_none()) {
+        auto a = as_float32(
+            noise_mm, {static_cast<pyb::ssize_t>(table_->n_materials()), static_cast<pyb::ssize_t>(table_->n_rows())},
+            "noise_mm");
+        noise.assign(a.data(), a.data() + a.size());
+      }
+      session_ = std::make_unique<SessionClassifier>(table_, prior ? *prior : SessionPrior::tuned(*table_),
+                                                     std::move(noise), std::move(candidates));
+    } else if (backend == "fixed") {
       fixed_ = std::make_unique<FixedClassifier>(table_, std::move(candidates));
     } else {
       float_ = std::make_unique<FloatClassifier>(table_, std::move(candidates));
@@ -100,10 +123,22 @@ class Classifier {
 
   std::vector<std::string> materials() const {
     std::vector<std::string> out;
-    for (auto i : fixed_ ? fixed_->candidates() : float_->candidates()) out.push_back(table_->materials()[i]);
+    const auto& c = session_ ? session_->candidates() : fixed_ ? fixed_->candidates() : float_->candidates();
+    for (auto i : c) out.push_back(table_->materials()[i]);
     return out;
   }
   const std::string& backend() const { return backend_; }
+  const std::string& method() const { return method_; }
+  std::optional<SessionPrior> prior() const {
+    return session_ ? std::optional<SessionPrior>(session_->prior()) : std::nullopt;
+  }
+  std::optional<pyb::array_t<double>> noise_mm() const {
+    if (!session_) return std::nullopt;
+    pyb::array_t<double> a(
+        {static_cast<pyb::ssize_t>(table_->n_materials()), static_cast<pyb::ssize_t>(table_->n_rows())});
+    std::copy(session_->noise_mm().begin(), session_->noise_mm().end(), a.mutable_data());
+    return a;
+  }
   std::shared_ptr<ExemplarTable> table() const { return table_; }
 
  private:
@@ -112,13 +147,14 @@ class Classifier {
   }
 
   Classification core_classify(const float* q, std::size_t n) const {
-    return fixed_ ? fixed_->classify(q, n) : float_->classify(q, n);
+    return session_ ? session_->classify(q, n) : fixed_ ? fixed_->classify(q, n) : float_->classify(q, n);
   }
 
   std::shared_ptr<ExemplarTable> table_;
-  std::string backend_;
-  std::unique_ptr<FloatClassifier> float_;  // one of the two, by backend
+  std::string backend_, method_;
+  std::unique_ptr<FloatClassifier> float_;  // one of the three, by method and backend
   std::unique_ptr<FixedClassifier> fixed_;
+  std::unique_ptr<SessionClassifier> session_;
 };
 
 }  // namespace
@@ -127,7 +163,8 @@ void register_classifier(pyb::module_& m) {
   pyb::class_<RankedMatch>(m, "RankedMatch", "One candidate of a ranking.")
       .def_readonly("material", &RankedMatch::material)
       .def_readonly("index", &RankedMatch::index, "Index into table.materials.")
-      .def_readonly("distance", &RankedMatch::distance, "Eq. (12) distance, mm^2.")
+      .def_readonly("distance", &RankedMatch::distance,
+                    "Eq. (12) distance, mm^2; for method='session' the score (negative log-likelihood).")
       .def_readonly("valid", &RankedMatch::valid, "Elements valid in both the query and the exemplar.")
       .def("__repr__", [](const RankedMatch& r) { return "RankedMatch(" + match_repr(r) + ")"; });
 
@@ -139,16 +176,72 @@ void register_classifier(pyb::module_& m) {
       .def_readonly("ranking", &Result::ranking)
       .def("__repr__", [](const Result& r) { return "ClassificationResult(" + match_repr(r.ranking.front()) + ")"; });
 
-  pyb::class_<Classifier>(m, "Classifier", "Nearest-neighbour classifier with partial matching (Eq. 12).")
-      .def(pyb::init<std::shared_ptr<ExemplarTable>, const std::string&,
-                     const std::optional<std::vector<std::string>>&>(),
-           pyb::arg("table"), pyb::arg("backend") = "float", pyb::arg("materials") = pyb::none())
+  pyb::class_<SessionPrior>(m, "SessionPrior",
+                            "Settings of the session-robust matcher (docs/evaluation.md): the priors of a row's "
+                            "offset and drift, the noise model and the outliers' threshold.")
+      .def(pyb::init([](const std::vector<double>& offset_sd_mm, double drift1_sd_mm, double drift2_sd_mm,
+                        double noise_scale, double floor_mm, double huber_k, int iterations) {
+             SessionPrior p;
+             p.offset_sd_mm = offset_sd_mm;
+             p.drift1_sd_mm = drift1_sd_mm;
+             p.drift2_sd_mm = drift2_sd_mm;
+             p.noise_scale = noise_scale;
+             p.floor_mm = floor_mm;
+             p.huber_k = huber_k;
+             p.iterations = iterations;
+             p.validate(static_cast<std::uint32_t>(offset_sd_mm.size()));
+             return p;
+           }),
+           pyb::arg("offset_sd_mm"), pyb::arg("drift1_sd_mm") = 5.0, pyb::arg("drift2_sd_mm") = 3.0,
+           pyb::arg("noise_scale") = 1.4142135623730951, pyb::arg("floor_mm") = 0.5, pyb::arg("huber_k") = 3.0,
+           pyb::arg("iterations") = 3)
+      .def_static("tuned", &SessionPrior::tuned, pyb::arg("table"),
+                  "The settings docs/evaluation.md tuned, for this table's rows.")
+      .def_readonly("offset_sd_mm", &SessionPrior::offset_sd_mm, "Prior sd of each row's offset, mm.")
+      .def_readonly("drift1_sd_mm", &SessionPrior::drift1_sd_mm, "Prior sd of the drift's degree-1 term, mm.")
+      .def_readonly("drift2_sd_mm", &SessionPrior::drift2_sd_mm, "Prior sd of the drift's degree-2 term, mm.")
+      .def_readonly("noise_scale", &SessionPrior::noise_scale, "Element noise in units of a material's noise.")
+      .def_readonly("floor_mm", &SessionPrior::floor_mm, "Noise floor combined with it, mm.")
+      .def_readonly("huber_k", &SessionPrior::huber_k, "Outlier threshold in noise units (inf: Gaussian).")
+      .def_readonly("iterations", &SessionPrior::iterations, "Reweighting passes.")
+      .def("__repr__", [](const SessionPrior& p) {
+        std::string o;
+        for (double v : p.offset_sd_mm) o += (o.empty() ? "" : ", ") + std::to_string(v);
+        return "SessionPrior(offset_sd_mm=[" + o + "], drift1_sd_mm=" + std::to_string(p.drift1_sd_mm) +
+               ", drift2_sd_mm=" + std::to_string(p.drift2_sd_mm) + ", noise_scale=" + std::to_string(p.noise_scale) +
+               ", floor_mm=" + std::to_string(p.floor_mm) + ", huber_k=" + std::to_string(p.huber_k) +
+               ", iterations=" + std::to_string(p.iterations) + ")";
+      });
+
+  m.def(
+      "curve_roughness",
+      [](const ExemplarTable& t) {
+        const std::vector<double> r = curve_roughness(t);
+        pyb::array_t<double> a({static_cast<pyb::ssize_t>(t.n_materials()), static_cast<pyb::ssize_t>(t.n_rows())});
+        std::copy(r.begin(), r.end(), a.mutable_data());
+        return a;
+      },
+      pyb::arg("table"),
+      "Each material's bin noise per row (n_materials, n_rows), mm: 1.4826 MAD of its second differences / "
+      "sqrt(6); NaN for a row of fewer than 5 elements.");
+
+  pyb::class_<Classifier>(m, "Classifier",
+                          "Nearest-neighbour classifier with partial matching: Eq. (12), or the session-robust "
+                          "matcher (method='session', docs/evaluation.md).")
+      .def(pyb::init<std::shared_ptr<ExemplarTable>, const std::string&, const std::optional<std::vector<std::string>>&,
+                     const std::string&, const std::optional<SessionPrior>&, const pyb::handle&>(),
+           pyb::arg("table"), pyb::arg("backend") = "float", pyb::arg("materials") = pyb::none(),
+           pyb::arg("method") = "eq12", pyb::arg("prior") = pyb::none(), pyb::arg("noise_mm") = pyb::none())
       .def("classify", &Classifier::classify, pyb::arg("query"),
            "query: float array (n_rows, n_bins), NaN = missing. Raises ValueError if no element is valid.")
       .def("classify_batch", &Classifier::classify_batch, pyb::arg("queries"),
            "queries: float array (n, n_rows, n_bins). Returns a list of results.")
       .def_property_readonly("materials", &Classifier::materials, "Candidate materials searched.")
       .def_property_readonly("backend", &Classifier::backend)
+      .def_property_readonly("method", &Classifier::method, "'eq12' or 'session'.")
+      .def_property_readonly("prior", &Classifier::prior, "The session matcher's settings (None for eq12).")
+      .def_property_readonly("noise_mm", &Classifier::noise_mm,
+                             "The session matcher's noise per material and row, mm (None for eq12).")
       .def_property_readonly("table", &Classifier::table);
 }
 

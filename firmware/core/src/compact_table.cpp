@@ -17,19 +17,9 @@ std::int16_t quantise_to_step(float value_mm, double inv_step) {
 }
 
 CompactTable::CompactTable(const ExemplarTable& table, std::vector<std::uint32_t> candidates)
-    : n_rows_(table.n_rows()), n_bins_(table.n_bins()), candidates_(std::move(candidates)) {
-  if (candidates_.empty()) {
-    candidates_.resize(table.n_materials());
-    for (std::uint32_t i = 0; i < candidates_.size(); ++i) candidates_[i] = i;
-  }
-  std::sort(candidates_.begin(), candidates_.end());
-  candidates_.erase(std::unique(candidates_.begin(), candidates_.end()), candidates_.end());
-  for (std::uint32_t c : candidates_) {
-    if (c >= table.n_materials()) {
-      throw std::invalid_argument("candidate index " + std::to_string(c) + " is outside the table's " +
-                                  std::to_string(table.n_materials()) + " materials");
-    }
-  }
+    : n_rows_(table.n_rows()),
+      n_bins_(table.n_bins()),
+      candidates_(candidate_indices(table.n_materials(), std::move(candidates))) {
   // A table read from a .tmx file keeps the file's step (the same int16 values
   // bit for bit). One built from floats gets four times the step that would
   // just fit its largest value: queries share the int16 range, and a query

@@ -138,4 +138,20 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
   return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values));
 }
 
+std::vector<std::uint32_t> candidate_indices(std::size_t n_materials, std::vector<std::uint32_t> candidates) {
+  if (candidates.empty()) {
+    candidates.resize(n_materials);
+    for (std::uint32_t i = 0; i < candidates.size(); ++i) candidates[i] = i;
+  }
+  std::sort(candidates.begin(), candidates.end());
+  candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  for (std::uint32_t c : candidates) {
+    if (c >= n_materials) {
+      throw std::invalid_argument("candidate index " + std::to_string(c) + " is outside the table's " +
+                                  std::to_string(n_materials) + " materials");
+    }
+  }
+  return candidates;
+}
+
 }  // namespace tofmat

@@ -4,7 +4,10 @@ better) so that accuracy, rejection and confidence come from the same numbers.
 
 - :class:`Eq12Matcher`: the paper's Eq. (12) (mean squared difference over the elements both have),
   through the SDK's C++ classifier: what tofmat ships.
-- :class:`SessionMatcher`: the float reference of the session-robust matcher (docs/evaluation.md).
+- :class:`CompiledSessionMatcher`: the session-robust matcher of the C++ core
+  (``Classifier(table, method="session")``), what ``tofmat evaluate`` reports.
+- :class:`SessionMatcher`: its reference in NumPy (docs/evaluation.md), which the compiled one must
+  equal (tests/python/test_session_classifier.py).
   Per candidate and row, the query's difference from the stored curve is modelled as what a
   session does (an offset and, optionally, a slope along depth, each with a Gaussian prior) plus
   bin noise at the candidate's own level (its roughness, stored per material and row), with
@@ -22,7 +25,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from .. import Classifier, ExemplarTable
+from .. import Classifier, ExemplarTable, SessionPrior
 from .sessions import roughness
 
 F64 = npt.NDArray[np.float64]
@@ -70,10 +73,41 @@ class SessionParams:
     iterations: int = 3  # reweighting passes for the outliers
 
 
+def session_prior(params: SessionParams) -> SessionPrior:
+    """The core's :class:`tofmat.SessionPrior` for these settings."""
+    drift = [*params.drift_sd_mm, 0.0, 0.0]
+    return SessionPrior(
+        list(params.offset_sd_mm),
+        drift1_sd_mm=drift[0],
+        drift2_sd_mm=drift[1],
+        noise_scale=params.noise_scale,
+        floor_mm=params.floor_mm,
+        huber_k=params.huber_k,
+        iterations=params.iterations,
+    )
+
+
+class CompiledSessionMatcher:
+    """The session-robust matcher of the C++ core through :class:`tofmat.Classifier`."""
+
+    name = "session"
+
+    def __init__(self, table: ExemplarTable, params: SessionParams) -> None:
+        self.classifier = Classifier(table, method="session", prior=session_prior(params))
+        self.n = len(table.materials)
+
+    def scores(self, queries: F32) -> F64:
+        out = np.full((queries.shape[0], self.n), np.inf)
+        for i, res in enumerate(self.classifier.classify_batch(queries)):
+            for r in res.ranking:
+                out[i, r.index] = r.distance
+        return out
+
+
 class SessionMatcher:
     """The session-robust matcher, float reference in NumPy (module docstring)."""
 
-    name = "session"
+    name = "session (NumPy)"
 
     def __init__(self, table: ExemplarTable, params: SessionParams, noise_mm: F64 | None = None) -> None:
         """``noise_mm`` (M, R): each candidate's bin noise; default its roughness measured from the
@@ -112,9 +146,9 @@ class SessionMatcher:
         # Nuisance basis per row: an offset, and Legendre polynomials of depth for the drift; a
         # term whose prior is 0 is left out (it is known to be 0).
         x = 2.0 * self.x
-        legendre = [np.ones_like(x), x, 0.5 * (3 * x * x - 1), 0.5 * (5 * x**3 - 3 * x)]
-        if len(p.drift_sd_mm) > 3:
-            raise ValueError("drift_sd_mm: at most 3 degrees")
+        legendre = [np.ones_like(x), x, 0.5 * (3 * x * x - 1)]
+        if len(p.drift_sd_mm) > 2:
+            raise ValueError("drift_sd_mm: at most 2 degrees")
         rows = len(p.offset_sd_mm)
         priors = [np.asarray(p.offset_sd_mm, dtype=np.float64)] + [np.full(rows, d) for d in p.drift_sd_mm]
         terms = [j for j, prior_sd in enumerate(priors) if np.all(prior_sd > 0)]

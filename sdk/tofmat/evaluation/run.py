@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """The held-out protocol of docs/evaluation.md: draw a tuning split and a test split from separate
-seeds, tune the session-robust matcher on the tuning split only, report every matcher on the test
-split by sweep length, with its cost per query."""
+seeds, tune the session-robust matcher (the C++ core's) on the tuning split only, report every
+matcher on the test split by sweep length, with its cost per query."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 
 from .. import ExemplarTable
 from .._progress import Progress
-from .matchers import Eq12Matcher, Matcher, SessionMatcher, SessionParams
+from .matchers import CompiledSessionMatcher, Eq12Matcher, Matcher, SessionParams
 from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries
 
 LENGTHS = (1, 3, 10, 30, 100)
@@ -80,7 +80,7 @@ def tune(
         if progress:
             progress(i, len(grid), "tuning the session matcher")
         p = SessionParams(model.offsets_sd_mm, drift_sd_mm=drift, floor_mm=floor, huber_k=k)
-        acc, _ = accuracy_by_length(SessionMatcher(table, p).scores(q.queries), q)
+        acc, _ = accuracy_by_length(CompiledSessionMatcher(table, p).scores(q.queries), q)
         out.append((p, float(np.mean(list(acc.values())))))
     out.sort(key=lambda t: (-t[1], len(t[0].drift_sd_mm), -t[0].floor_mm))
     return out
@@ -101,7 +101,7 @@ def evaluate_source(
     res.tuning = tune(table, model, tune_q, progress)
     res.tuned = res.tuning[0][0]
     test_q = draw(SPLIT_SEEDS["test"])
-    matchers: list[Matcher] = [Eq12Matcher(table), SessionMatcher(table, res.tuned)]
+    matchers: list[Matcher] = [Eq12Matcher(table), CompiledSessionMatcher(table, res.tuned)]
     for split, q in (("tune", tune_q), ("test", test_q)):
         for m in matchers:
             s, us = _score(m, q)

@@ -27,6 +27,19 @@ struct Classification {
   const Match& best() const { return ranking.front(); }
 };
 
+// A query's valid elements: their indices into n_rows x n_bins and values.
+struct QueryElements {
+  std::vector<std::uint32_t> index;
+  std::vector<double> value;
+};
+// Throws std::invalid_argument if the size is not the table's, an element is
+// infinite, or no element is valid.
+QueryElements gather_query(const ExemplarTable& table, const float* query, std::size_t n);
+// Sorts a ranking best first (ties: the lower table index, so the order is the
+// same on every backend). Throws std::invalid_argument when it is empty (the
+// query shares no valid element with any candidate).
+void rank(Classification& c);
+
 class FloatClassifier {
  public:
   // `candidates`: indices into the table to search; empty means all. Throws

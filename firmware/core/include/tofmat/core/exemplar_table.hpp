@@ -85,4 +85,9 @@ std::vector<RowSpec> kinect2_database_rows();
 // Throws std::invalid_argument unless the name is 1..64 bytes of printable ASCII.
 void validate_material_name(const std::string& name);
 
+// A classifier's candidates: indices into a table of n_materials (empty:
+// all), sorted and without repeats. Throws std::invalid_argument on an
+// index outside the table.
+std::vector<std::uint32_t> candidate_indices(std::size_t n_materials, std::vector<std::uint32_t> candidates);
+
 }  // namespace tofmat

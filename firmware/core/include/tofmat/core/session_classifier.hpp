@@ -1,0 +1,88 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The session-robust matcher (docs/evaluation.md), float reference in double
+// precision. Eq. (12) counts every difference between a query and a stored
+// curve against the material; a new capture session moves the rows by an
+// offset and a drift along depth that are not about the material. Per
+// candidate and row this matcher models the query's difference from the
+// curve as
+//   e_j = sum_k beta_k a_k(x_j) + noise_j,
+// a_0 = 1 (the row's offset), a_1 = P1(x), a_2 = P2(x) (Legendre drift over
+// the table's depth range, x in [-1, 1]), beta_k ~ N(0, s_k^2) (a prior, not
+// free), noise_j ~ N(0, v) with v = (noise_scale sigma_m,r)^2 + floor^2 and
+// sigma_m,r the candidate's own bin noise; outlier elements weigh less
+// (Huber's loss, reweighted). The score is the negative log-likelihood with
+// the beta integrated out (Laplace: exact for the Gaussian part):
+//   sum_j rho(r_j / sqrt v) + n/2 log(2 pi v) + sum_k beta_k^2 / (2 s_k^2)
+//   + log det(S P) / 2,  S = diag(s_k^2), P the posterior precision,
+// summed over rows, plus (1/2 + log(2 pi v)/2) for each query element the
+// candidate lacks. Lower is better. The NumPy reference it must equal is
+// tofmat.evaluation.matchers.SessionMatcher (tests/python/test_session_classifier.py).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "tofmat/core/classifier.hpp"
+#include "tofmat/core/exemplar_table.hpp"
+
+namespace tofmat {
+
+struct SessionPrior {
+  // Prior sd of each row's offset, mm (one per table row; 0 leaves the term out).
+  std::vector<double> offset_sd_mm;
+  // Prior sd of the drift's Legendre degree 1 and 2 terms over the table, mm (0: left out).
+  double drift1_sd_mm = 5.0;
+  double drift2_sd_mm = 3.0;
+  // Element noise: noise_scale x the candidate's bin noise, combined with floor_mm.
+  double noise_scale = 1.4142135623730951;
+  double floor_mm = 0.5;
+  // Residuals beyond huber_k noise units count linearly (infinity: Gaussian).
+  double huber_k = 3.0;
+  int iterations = 3;  // reweighting passes, at least 1
+
+  // The settings docs/evaluation.md tuned on its tuning split, for a table
+  // of the Kinect v2 database rows (16-120 and 80-120 MHz): the offset
+  // priors are the calibration's spread (2.27 and 0.73 mm). Other rows get
+  // 1 mm each. Throws std::invalid_argument for n_rows 0.
+  static SessionPrior tuned(const ExemplarTable& table);
+  // Throws std::invalid_argument naming the bad setting (negative or NaN
+  // sd, noise_scale, floor; huber_k <= 0; iterations < 1; the offsets'
+  // count not the table's rows; no noise at all: noise_scale and floor 0).
+  void validate(std::uint32_t n_rows) const;
+};
+
+// Each material's bin noise per row (n_materials x n_rows, mm): 1.4826 x the
+// median absolute deviation of its observed elements' second differences,
+// over sqrt(6) (white noise of sd s has second differences of sd s sqrt(6);
+// a smooth trend almost none). NaN where a row has fewer than 5 elements.
+std::vector<double> curve_roughness(const ExemplarTable& table);
+
+class SessionClassifier {
+ public:
+  // noise_mm: n_materials x n_rows bin noise (empty: curve_roughness(table));
+  // a NaN or non-positive entry takes the median of the others. Throws
+  // std::invalid_argument on a bad prior, a noise of the wrong size, or a
+  // candidate index outside the table.
+  SessionClassifier(std::shared_ptr<const ExemplarTable> table, SessionPrior prior, std::vector<double> noise_mm = {},
+                    std::vector<std::uint32_t> candidates = {});
+
+  // As FloatClassifier::classify: Match::distance is the score (lower is
+  // better), Match::valid the elements compared. Same errors.
+  Classification classify(const float* query, std::size_t n) const;
+
+  const ExemplarTable& table() const { return *table_; }
+  const SessionPrior& prior() const { return prior_; }
+  const std::vector<double>& noise_mm() const { return noise_; }
+  const std::vector<std::uint32_t>& candidates() const { return candidates_; }
+
+ private:
+  std::shared_ptr<const ExemplarTable> table_;
+  SessionPrior prior_;
+  std::vector<double> noise_;  // n_materials x n_rows
+  std::vector<std::uint32_t> candidates_;
+};
+
+}  // namespace tofmat

@@ -1,0 +1,251 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// SessionClassifier: the session-robust matcher of session_classifier.hpp in
+// double precision, candidate by candidate and row by row.
+#include "tofmat/core/session_classifier.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace tofmat {
+
+namespace {
+
+constexpr double kLog2Pi = 1.8378770664093453;  // log(2 pi)
+constexpr int kMaxTerms = 3;                    // offset, Legendre 1, Legendre 2
+
+// numpy.median: the mean of the two middle values for an even count.
+double median(std::vector<double> v) {
+  const std::size_t n = v.size();
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(n / 2), v.end());
+  const double hi = v[n / 2];
+  if (n % 2 == 1) return hi;
+  return 0.5 * (hi + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(n / 2)));
+}
+
+// Solves the K x K symmetric positive definite system P beta = b (K <= 3) by
+// Cholesky; returns log det P.
+double cholesky_solve(std::array<std::array<double, kMaxTerms>, kMaxTerms> P, int k,
+                      const std::array<double, kMaxTerms>& b, std::array<double, kMaxTerms>& beta) {
+  std::array<std::array<double, kMaxTerms>, kMaxTerms> L{};
+  double logdet = 0.0;
+  for (int i = 0; i < k; ++i) {
+    for (int j = 0; j <= i; ++j) {
+      double s = P[i][j];
+      for (int m = 0; m < j; ++m) s -= L[i][m] * L[j][m];
+      if (i == j) {
+        // P = (prior precision, > 0) + a Gram matrix: positive definite.
+        L[i][i] = std::sqrt(s);
+        logdet += 2.0 * std::log(L[i][i]);
+      } else {
+        L[i][j] = s / L[j][j];
+      }
+    }
+  }
+  std::array<double, kMaxTerms> y{};
+  for (int i = 0; i < k; ++i) {
+    double s = b[i];
+    for (int m = 0; m < i; ++m) s -= L[i][m] * y[m];
+    y[i] = s / L[i][i];
+  }
+  for (int i = k - 1; i >= 0; --i) {
+    double s = y[i];
+    for (int m = i + 1; m < k; ++m) s -= L[m][i] * beta[m];
+    beta[i] = s / L[i][i];
+  }
+  return logdet;
+}
+
+}  // namespace
+
+SessionPrior SessionPrior::tuned(const ExemplarTable& table) {
+  if (table.n_rows() == 0) throw std::invalid_argument("session prior: the table has no rows");
+  SessionPrior p;
+  const bool kinect = table.n_rows() == 2 && table.rows()[0] == RowSpec{16, 120} && table.rows()[1] == RowSpec{80, 120};
+  p.offset_sd_mm = kinect ? std::vector<double>{2.27, 0.73} : std::vector<double>(table.n_rows(), 1.0);
+  return p;
+}
+
+void SessionPrior::validate(std::uint32_t n_rows) const {
+  const auto bad = [](double v) { return !(v >= 0.0) || std::isinf(v); };
+  if (offset_sd_mm.size() != n_rows) {
+    throw std::invalid_argument("session prior: " + std::to_string(offset_sd_mm.size()) +
+                                " row offsets for a table of " + std::to_string(n_rows) + " rows");
+  }
+  for (double s : offset_sd_mm) {
+    if (bad(s)) throw std::invalid_argument("session prior: a row offset's sd must be finite and >= 0");
+  }
+  if (bad(drift1_sd_mm) || bad(drift2_sd_mm)) {
+    throw std::invalid_argument("session prior: the drift's sd must be finite and >= 0");
+  }
+  if (bad(noise_scale) || bad(floor_mm)) {
+    throw std::invalid_argument("session prior: noise_scale and floor_mm must be finite and >= 0");
+  }
+  if (noise_scale == 0.0 && floor_mm == 0.0) {
+    throw std::invalid_argument("session prior: noise_scale and floor_mm are both 0 (no noise at all)");
+  }
+  if (!(huber_k > 0.0)) throw std::invalid_argument("session prior: huber_k must be > 0 (infinity: Gaussian)");
+  if (iterations < 1) throw std::invalid_argument("session prior: iterations must be at least 1");
+}
+
+std::vector<double> curve_roughness(const ExemplarTable& table) {
+  const std::uint32_t rows = table.n_rows(), bins = table.n_bins();
+  std::vector<double> out(table.n_materials() * rows, std::nan(""));
+  for (std::size_t m = 0; m < table.n_materials(); ++m) {
+    for (std::uint32_t r = 0; r < rows; ++r) {
+      const float* v = table.material_values(m) + static_cast<std::size_t>(r) * bins;
+      std::vector<double> x;
+      for (std::uint32_t j = 0; j < bins; ++j) {
+        if (!std::isnan(v[j])) x.push_back(v[j]);
+      }
+      if (x.size() < 5) continue;
+      std::vector<double> d2(x.size() - 2);
+      for (std::size_t j = 0; j + 2 < x.size(); ++j) d2[j] = x[j + 2] - 2.0 * x[j + 1] + x[j];
+      const double med = median(d2);
+      for (double& d : d2) d = std::fabs(d - med);
+      out[m * rows + r] = 1.4826 * median(d2) / std::sqrt(6.0);
+    }
+  }
+  return out;
+}
+
+SessionClassifier::SessionClassifier(std::shared_ptr<const ExemplarTable> table, SessionPrior prior,
+                                     std::vector<double> noise_mm, std::vector<std::uint32_t> candidates)
+    : table_(std::move(table)), prior_(std::move(prior)), noise_(std::move(noise_mm)) {
+  if (!table_) throw std::invalid_argument("classifier needs a table");
+  prior_.validate(table_->n_rows());
+  candidates_ = candidate_indices(table_->n_materials(), std::move(candidates));
+  const std::size_t size = table_->n_materials() * table_->n_rows();
+  if (noise_.empty()) noise_ = curve_roughness(*table_);
+  if (noise_.size() != size) {
+    throw std::invalid_argument("noise_mm has " + std::to_string(noise_.size()) + " values, the table needs " +
+                                std::to_string(table_->n_materials()) + " x " + std::to_string(table_->n_rows()));
+  }
+  // A material without a usable noise level (too few elements) gets the
+  // median of the others (0.3 mm, the database's typical roughness, if none).
+  std::vector<double> usable;
+  for (double s : noise_) {
+    if (s > 0.0 && std::isfinite(s)) usable.push_back(s);
+  }
+  const double fill = usable.empty() ? 0.3 : median(usable);
+  for (double& s : noise_) {
+    if (!(s > 0.0 && std::isfinite(s))) s = fill;
+  }
+}
+
+Classification SessionClassifier::classify(const float* query, std::size_t n) const {
+  const QueryElements q = gather_query(*table_, query, n);
+  const std::uint32_t rows = table_->n_rows(), bins = table_->n_bins();
+  // The nuisance terms with a prior (a zero prior leaves its term out).
+  int k = 0;
+  std::array<int, kMaxTerms> degree{};
+  std::vector<std::array<double, kMaxTerms>> prior_var(rows);
+  const double drift[2] = {prior_.drift1_sd_mm, prior_.drift2_sd_mm};
+  bool offset = true;
+  for (double s : prior_.offset_sd_mm) offset = offset && s > 0.0;
+  if (offset) degree[k++] = 0;
+  for (int d = 0; d < 2; ++d) {
+    if (drift[d] > 0.0) degree[k++] = d + 1;
+  }
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    for (int t = 0; t < k; ++t) {
+      const double s = degree[t] == 0 ? prior_.offset_sd_mm[r] : drift[degree[t] - 1];
+      prior_var[r][t] = s * s;
+    }
+  }
+  // The query's elements by row, and their basis values.
+  std::vector<std::size_t> row_begin(rows + 1, 0);
+  for (std::uint32_t i : q.index) ++row_begin[i / bins + 1];
+  for (std::uint32_t r = 0; r < rows; ++r) row_begin[r + 1] += row_begin[r];
+  std::vector<std::array<double, kMaxTerms>> basis(q.index.size());
+  for (std::size_t i = 0; i < q.index.size(); ++i) {
+    const std::uint32_t j = q.index[i] % bins;
+    const double x = 2.0 * ((j + 0.5) / bins - 0.5);
+    const double legendre[3] = {1.0, x, 0.5 * (3.0 * x * x - 1.0)};
+    for (int t = 0; t < k; ++t) basis[i][t] = legendre[degree[t]];
+  }
+  const bool huber = std::isfinite(prior_.huber_k);
+  const double hk = prior_.huber_k;
+
+  std::vector<double> e, z, w;
+  std::vector<std::size_t> at;  // which query element each e is
+  Classification out;
+  out.ranking.reserve(candidates_.size());
+  for (std::uint32_t p : candidates_) {
+    const float* ex = table_->material_values(p);
+    double total = 0.0;
+    std::uint32_t compared = 0;
+    for (std::uint32_t r = 0; r < rows; ++r) {
+      const double sigma = prior_.noise_scale * noise_[p * rows + r];
+      const double v = sigma * sigma + prior_.floor_mm * prior_.floor_mm, sd = std::sqrt(v);
+      e.clear();
+      at.clear();
+      for (std::size_t i = row_begin[r]; i < row_begin[r + 1]; ++i) {
+        const float c = ex[q.index[i]];
+        if (std::isnan(c)) continue;
+        e.push_back(q.value[i] - static_cast<double>(c));
+        at.push_back(i);
+      }
+      const std::size_t nr = e.size();
+      const std::size_t lacking = (row_begin[r + 1] - row_begin[r]) - nr;
+      compared += static_cast<std::uint32_t>(nr);
+      z.assign(nr, 0.0);
+      double penalty = 0.0, logdet = 0.0;
+      if (k == 0) {
+        for (std::size_t i = 0; i < nr; ++i) z[i] = std::fabs(e[i]) / sd;
+      } else {
+        w.assign(nr, 1.0);
+        std::array<double, kMaxTerms> beta{};
+        std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
+        for (int it = 0; it < prior_.iterations; ++it) {
+          // Weighted normal equations: P beta = b.
+          std::array<double, kMaxTerms> b{};
+          for (auto& row : P) row.fill(0.0);
+          for (std::size_t i = 0; i < nr; ++i) {
+            const auto& a = basis[at[i]];
+            for (int s = 0; s < k; ++s) {
+              b[s] += w[i] * e[i] * a[s];
+              for (int t = 0; t < k; ++t) P[s][t] += w[i] * a[s] * a[t];
+            }
+          }
+          for (int s = 0; s < k; ++s) {
+            b[s] /= v;
+            for (int t = 0; t < k; ++t) P[s][t] /= v;
+            P[s][s] += 1.0 / prior_var[r][s];
+          }
+          cholesky_solve(P, k, b, beta);
+          for (std::size_t i = 0; i < nr; ++i) {
+            double fit = 0.0;
+            for (int s = 0; s < k; ++s) fit += beta[s] * basis[at[i]][s];
+            z[i] = std::fabs(e[i] - fit) / sd;
+          }
+          if (!huber) break;
+          for (std::size_t i = 0; i < nr; ++i) w[i] = std::min(1.0, hk / std::max(z[i], 1e-12));
+        }
+        // The prior's penalty and log det(S P), S = diag(prior variances).
+        std::array<std::array<double, kMaxTerms>, kMaxTerms> SP{};
+        for (int s = 0; s < k; ++s) {
+          penalty += 0.5 * beta[s] * beta[s] / prior_var[r][s];
+          for (int t = 0; t < k; ++t) SP[s][t] = P[s][t] * std::sqrt(prior_var[r][s] * prior_var[r][t]);
+        }
+        std::array<double, kMaxTerms> unused{}, zero{};
+        logdet = cholesky_solve(SP, k, zero, unused);
+      }
+      double data = 0.0;
+      for (std::size_t i = 0; i < nr; ++i) {
+        data += huber && z[i] > hk ? hk * z[i] - 0.5 * hk * hk : 0.5 * z[i] * z[i];
+      }
+      const double log_norm = 0.5 * (kLog2Pi + std::log(v));
+      total += data + static_cast<double>(nr) * log_norm + penalty + 0.5 * logdet +
+               static_cast<double>(lacking) * (0.5 + log_norm);
+    }
+    if (compared == 0) continue;  // nothing in common: this candidate cannot be judged
+    out.ranking.push_back(Match{p, total, compared});
+  }
+  rank(out);
+  return out;
+}
+
+}  // namespace tofmat

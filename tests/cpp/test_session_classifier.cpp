@@ -1,0 +1,158 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The session-robust matcher (session_classifier.hpp) on cases worked by hand:
+// the Gaussian marginal likelihood of an offset in closed form, an outlier
+// down-weighted, a gap charged, the roughness of a known noise. (Its equality
+// with the NumPy reference on real queries: tests/python/test_session_classifier.py.)
+#include "tofmat/core/session_classifier.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+namespace {
+
+using namespace tofmat;
+constexpr double kLog2Pi = 1.8378770664093453;
+
+std::shared_ptr<const ExemplarTable> table_of(std::vector<float> values, std::size_t materials, std::uint32_t rows,
+                                              std::uint32_t bins) {
+  std::vector<std::string> names;
+  for (std::size_t m = 0; m < materials; ++m) names.push_back("m" + std::to_string(m));
+  std::vector<RowSpec> spec(rows, RowSpec{0, 0});
+  return std::make_shared<const ExemplarTable>(names, spec, BinSpec{600.0, 3.0, bins}, std::move(values));
+}
+
+SessionPrior offset_only(double s, double floor_mm, double huber_k) {
+  SessionPrior p;
+  p.offset_sd_mm = {s};
+  p.drift1_sd_mm = p.drift2_sd_mm = 0.0;
+  p.noise_scale = 0.0;
+  p.floor_mm = floor_mm;
+  p.huber_k = huber_k;
+  return p;
+}
+
+TEST(SessionClassifier, AnOffsetsMarginalLikelihoodInClosedForm) {
+  // One row of 8 bins, one material at 0; the query 1.5 + small wiggles.
+  const std::uint32_t bins = 8;
+  auto t = table_of(std::vector<float>(bins, 0.0f), 1, 1, bins);
+  std::vector<float> q(bins);
+  for (std::uint32_t j = 0; j < bins; ++j) q[j] = static_cast<float>(1.5 + 0.1 * ((j % 3) - 1.0));
+  const double s = 2.0, v = 0.25;  // offset prior sd, noise variance (floor 0.5)
+  SessionClassifier c(t, offset_only(s, 0.5, std::numeric_limits<double>::infinity()), {1.0});
+  const double got = c.classify(q.data(), q.size()).best().distance;
+  // -log of N(e; 0, v I + s^2 1 1^T), by the matrix determinant lemma and Sherman-Morrison.
+  double se = 0.0, see = 0.0;
+  for (float e : q) {
+    se += e;
+    see += static_cast<double>(e) * e;
+  }
+  const double n = bins, prec = n / v + 1.0 / (s * s);
+  const double want =
+      0.5 * (see / v - (se / v) * (se / v) / prec) + 0.5 * n * (kLog2Pi + std::log(v)) + 0.5 * std::log(s * s * prec);
+  EXPECT_NEAR(got, want, 1e-12 * std::fabs(want));
+}
+
+TEST(SessionClassifier, OffsetsAreForgivenWhereEq12CountsThem) {
+  // Two materials of different shape; the query is material 0 moved by 3 mm.
+  const std::uint32_t bins = 30;
+  std::vector<float> v(2 * bins);
+  for (std::uint32_t j = 0; j < bins; ++j) {
+    v[j] = static_cast<float>(0.6 * std::sin(0.2 * j));
+    v[bins + j] = static_cast<float>(2.0 + 0.6 * std::sin(0.2 * j + 1.0));
+  }
+  auto t = table_of(v, 2, 1, bins);
+  std::vector<float> q(v.begin(), v.begin() + bins);
+  for (float& x : q) x += 3.0f;
+  EXPECT_EQ(FloatClassifier(t).classify(q.data(), q.size()).best().index, 1u);  // Eq. (12): the nearer level
+  SessionClassifier c(t, offset_only(3.0, 0.05, 3.0), {0.02, 0.02});
+  EXPECT_EQ(c.classify(q.data(), q.size()).best().index, 0u);
+}
+
+TEST(SessionClassifier, AnOutlierBinIsDownWeighted) {
+  const std::uint32_t bins = 10;
+  std::vector<float> v(2 * bins, 0.0f);
+  for (std::uint32_t j = 0; j < bins; ++j) v[bins + j] = 1.0f;
+  auto t = table_of(v, 2, 1, bins);
+  std::vector<float> q(bins, 0.0f);
+  q[5] = 60.0f;
+  const std::vector<double> noise{0.1, 0.1};
+  SessionPrior robust = offset_only(0.01, 0.0, 3.0), gauss = robust;
+  robust.noise_scale = gauss.noise_scale = 1.0;
+  gauss.huber_k = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(SessionClassifier(t, robust, noise).classify(q.data(), q.size()).best().index, 0u);
+  EXPECT_EQ(SessionClassifier(t, gauss, noise).classify(q.data(), q.size()).best().index, 1u);
+}
+
+TEST(SessionClassifier, AGapIsNoAdvantage) {
+  // The query equals material 0 over 10 bins; material 2 equals it too but
+  // has only the first 5 of them, material 1 none. The 5 elements material 2
+  // lacks are charged a matching element's cost, so it does not beat the
+  // complete match; material 1 shares nothing and is no candidate.
+  const std::uint32_t bins = 10;
+  std::vector<float> v(3 * bins, 0.3f);
+  for (std::uint32_t j = 0; j < bins; ++j) v[bins + j] = std::nanf("");
+  for (std::uint32_t j = 5; j < bins; ++j) v[2 * bins + j] = std::nanf("");
+  auto t = table_of(v, 3, 1, bins);
+  std::vector<float> q(bins, 0.3f);
+  SessionClassifier c(t, SessionPrior::tuned(*t), {0.2, 0.2, 0.2});
+  const Classification r = c.classify(q.data(), q.size());
+  ASSERT_EQ(r.ranking.size(), 2u);
+  EXPECT_EQ(r.ranking[0].index, 0u);
+  EXPECT_EQ(r.ranking[0].valid, 10u);
+  EXPECT_EQ(r.ranking[1].index, 2u);
+  EXPECT_EQ(r.ranking[1].valid, 5u);
+  EXPECT_LT(r.ranking[0].distance, r.ranking[1].distance);
+  // Ties go to the lower index: two identical materials.
+  auto twins = table_of(std::vector<float>(2 * bins, 0.3f), 2, 1, bins);
+  const Classification tie = SessionClassifier(twins, SessionPrior::tuned(*twins)).classify(q.data(), q.size());
+  EXPECT_EQ(tie.ranking[0].distance, tie.ranking[1].distance);
+  EXPECT_EQ(tie.ranking[0].index, 0u);
+}
+
+TEST(SessionClassifier, RoughnessOfAKnownNoise) {
+  const std::uint32_t bins = 4000;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  std::vector<float> v(bins);
+  for (std::uint32_t j = 0; j < bins; ++j) v[j] = static_cast<float>(5.0 + 0.001 * j + noise(rng));
+  const std::vector<double> r = curve_roughness(*table_of(v, 1, 1, bins));
+  EXPECT_NEAR(r[0], 0.3, 0.02);
+  std::vector<float> few(bins, std::nanf(""));
+  few[0] = few[1] = few[2] = few[3] = 1.0f;
+  EXPECT_TRUE(std::isnan(curve_roughness(*table_of(few, 1, 1, bins))[0]));
+}
+
+TEST(SessionClassifier, BadSettingsAndQueriesAreClearErrors) {
+  auto t = table_of(std::vector<float>(2 * 4, 0.0f), 1, 2, 4);
+  SessionPrior p = SessionPrior::tuned(*t);
+  EXPECT_EQ(p.offset_sd_mm, (std::vector<double>{1.0, 1.0}));             // rows of unknown frequency
+  EXPECT_THROW(SessionClassifier(t, p, {1.0}), std::invalid_argument);    // noise of the wrong size
+  EXPECT_THROW(SessionClassifier(t, p, {}, {3}), std::invalid_argument);  // candidate outside
+  p.offset_sd_mm = {1.0};
+  EXPECT_THROW(SessionClassifier(t, p), std::invalid_argument);
+  p.offset_sd_mm = {1.0, -1.0};
+  EXPECT_THROW(SessionClassifier(t, p), std::invalid_argument);
+  p.offset_sd_mm = {1.0, 1.0};
+  p.noise_scale = p.floor_mm = 0.0;
+  EXPECT_THROW(SessionClassifier(t, p), std::invalid_argument);
+  p = SessionPrior::tuned(*t);
+  p.huber_k = 0.0;
+  EXPECT_THROW(SessionClassifier(t, p), std::invalid_argument);
+  p = SessionPrior::tuned(*t);
+  p.iterations = 0;
+  EXPECT_THROW(SessionClassifier(t, p), std::invalid_argument);
+  SessionClassifier c(t, SessionPrior::tuned(*t));
+  std::vector<float> q(8, std::nanf(""));
+  EXPECT_THROW(c.classify(q.data(), q.size()), std::invalid_argument);  // nothing valid
+  EXPECT_THROW(c.classify(q.data(), 7), std::invalid_argument);         // wrong size
+  q[0] = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(c.classify(q.data(), q.size()), std::invalid_argument);
+}
+
+}  // namespace

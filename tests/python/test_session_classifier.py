@@ -1,0 +1,109 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""The session-robust matcher of the C++ core (``Classifier(table, method="session")``) against
+its NumPy reference (tofmat.evaluation.matchers.SessionMatcher) on queries of new sessions of the
+real curves, under every kind of setting; its roughness against the reference's; its errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import tofmat
+from tofmat.evaluation.matchers import CompiledSessionMatcher, SessionMatcher, SessionParams, session_prior
+from tofmat.evaluation.sessions import CurveSessions, SessionModel, draw_queries, roughness
+
+
+@pytest.fixture(scope="module")
+def queries(real_table: tofmat.ExemplarTable) -> np.ndarray:
+    # Offsets, noise at each material's level, outliers and dropped bins (no drift: that needs
+    # the simulator, and the matcher does not care where a query came from).
+    model = SessionModel((2.27, 0.73), (0.0, 0.0, 0.0), 0.05, 0.02, 18.0)
+    q = draw_queries(CurveSessions(real_table, model), [1, 3, 10, 30, 100], 2, seed=5).queries
+    return q
+
+
+SETTINGS = [
+    SessionParams((2.27, 0.73), drift_sd_mm=(5.0, 3.0), floor_mm=0.5, huber_k=3.0),  # the tuned one
+    SessionParams((2.27, 0.73), drift_sd_mm=(3.0,), floor_mm=0.3, huber_k=math.inf),  # Gaussian, one drift term
+    SessionParams((2.27, 0.73), floor_mm=0.1, huber_k=1.5, iterations=5),  # offsets only, hard Huber
+    SessionParams((0.0, 0.0), drift_sd_mm=(0.0, 2.0), floor_mm=1.0),  # no offset term, degree 2 only
+    SessionParams((0.0, 0.0), noise_scale=1.0, floor_mm=0.0),  # no nuisance term at all
+]
+
+
+@pytest.mark.parametrize("params", SETTINGS, ids=lambda p: f"drift{p.drift_sd_mm}-k{p.huber_k}-floor{p.floor_mm}")
+def test_the_compiled_matcher_equals_its_numpy_reference(
+    real_table: tofmat.ExemplarTable, queries: np.ndarray, params: SessionParams
+) -> None:
+    ref = SessionMatcher(real_table, params).scores(queries)
+    got = CompiledSessionMatcher(real_table, params).scores(queries)
+    assert np.array_equal(np.isinf(ref), np.isinf(got))
+    finite = np.isfinite(ref)
+    assert np.allclose(got[finite], ref[finite], rtol=1e-9, atol=1e-9), np.max(np.abs(got - ref)[finite])
+    # The same labels (ties aside: none here).
+    assert np.array_equal(np.argmin(got, axis=1), np.argmin(ref, axis=1))
+
+
+def test_the_roughness_is_the_reference_s(real_table: tofmat.ExemplarTable) -> None:
+    got = tofmat.curve_roughness(real_table)
+    ref = roughness(real_table.features.astype(np.float64))
+    assert got.shape == (29, 2) and np.allclose(got, ref, rtol=1e-12)
+    clf = tofmat.Classifier(real_table, method="session")
+    assert clf.noise_mm is not None and np.allclose(clf.noise_mm, got)
+    fl = real_table.index_of("fakeleather")
+    wood = real_table.index_of("wood")
+    assert got[fl, 0] > 3 * got[wood, 0]  # the noisiest curve is several times the quietest's
+
+
+def test_the_tuned_prior_and_the_classifier_s_settings(real_table: tofmat.ExemplarTable) -> None:
+    p = tofmat.SessionPrior.tuned(real_table)
+    assert p.offset_sd_mm == [2.27, 0.73] and (p.drift1_sd_mm, p.drift2_sd_mm) == (5.0, 3.0)
+    assert (p.floor_mm, p.huber_k, p.iterations) == (0.5, 3.0, 3)
+    clf = tofmat.Classifier(real_table, method="session")
+    assert clf.method == "session" and clf.prior is not None and clf.prior.offset_sd_mm == [2.27, 0.73]
+    assert tofmat.Classifier(real_table).method == "eq12" and tofmat.Classifier(real_table).prior is None
+    # Candidates and given noise levels.
+    noise = np.full((29, 2), 0.25)
+    c = tofmat.Classifier(real_table, method="session", materials=["wood", "cork"], noise_mm=noise)
+    assert c.materials == ["cork", "wood"]
+    r = c.classify(real_table.features[real_table.index_of("cork")])
+    assert r.material == "cork" and [m.material for m in r.ranking] == ["cork", "wood"]
+
+
+def test_bad_settings_are_clear_errors(real_table: tofmat.ExemplarTable) -> None:
+    with pytest.raises(ValueError, match="unknown method 'nearest'"):
+        tofmat.Classifier(real_table, method="nearest")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="no fixed-point backend yet"):
+        tofmat.Classifier(real_table, backend="fixed", method="session")
+    with pytest.raises(ValueError, match="settings of method='session'"):
+        tofmat.Classifier(real_table, prior=tofmat.SessionPrior([1.0, 1.0]))
+    with pytest.raises(ValueError, match="noise_mm"):
+        tofmat.Classifier(real_table, method="session", noise_mm=np.ones((29, 3)))
+    with pytest.raises(ValueError, match="3 row offsets for a table of 2 rows"):
+        tofmat.Classifier(real_table, method="session", prior=tofmat.SessionPrior([1.0, 1.0, 1.0]))
+    for kwargs, message in [
+        ({"offset_sd_mm": [-1.0, 1.0]}, "finite and >= 0"),
+        ({"offset_sd_mm": [math.nan, 1.0]}, "finite and >= 0"),
+        ({"offset_sd_mm": [1.0, 1.0], "drift1_sd_mm": math.inf}, "drift"),
+        ({"offset_sd_mm": [1.0, 1.0], "noise_scale": 0.0, "floor_mm": 0.0}, "no noise at all"),
+        ({"offset_sd_mm": [1.0, 1.0], "huber_k": 0.0}, "huber_k"),
+        ({"offset_sd_mm": [1.0, 1.0], "iterations": 0}, "iterations"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            tofmat.SessionPrior(**kwargs)  # type: ignore[arg-type]
+    clf = tofmat.Classifier(real_table, method="session")
+    with pytest.raises(ValueError, match="no valid element"):
+        clf.classify(np.full((2, 200), np.nan, np.float32))
+    with pytest.raises(ValueError, match="infinite"):
+        clf.classify(np.full((2, 200), np.inf, np.float32))
+    # session_prior maps the evaluation's settings one to one.
+    p = session_prior(SessionParams((1.0, 2.0), drift_sd_mm=(4.0,), floor_mm=0.2, huber_k=math.inf))
+    assert (p.offset_sd_mm, p.drift1_sd_mm, p.drift2_sd_mm, p.floor_mm, p.huber_k) == (
+        [1.0, 2.0],
+        4.0,
+        0.0,
+        0.2,
+        math.inf,
+    )
