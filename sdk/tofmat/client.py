@@ -47,6 +47,7 @@ Stream = Literal[
 ]
 Profile = Literal["handheld", "segmentation", "sorting"]
 Backend = Literal["fixed", "float"]
+ClassifierMethod = Literal["eq12", "session"]
 DepthKind = Literal["80", "16", "120", "combined"]
 LabelState = Literal["tracking", "no_target", "final", "mixed"]
 DeviceState = Literal["opening", "streaming", "disconnected", "stopped", "failed"]
@@ -82,6 +83,7 @@ class Status(TypedDict):
     server: str
     profile: Profile
     backend: Backend
+    classifier: NotRequired[ClassifierMethod]  # minor 6 on; before it always "eq12"
     roi: list[int]
     candidates: list[str]
     table: TableStatus
@@ -523,6 +525,7 @@ __all__ = [
     "STREAMS",
     "AuthenticationError",
     "Backend",
+    "ClassifierMethod",
     "Client",
     "ClientError",
     "CommandError",

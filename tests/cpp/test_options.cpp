@@ -66,6 +66,7 @@ TEST(Options, TheDefaultsAreTheCameraAndTheServicesSocket) {
   EXPECT_TRUE(o.server.tcp.empty());
   EXPECT_EQ(o.profile.name, "handheld");
   EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFixed);
+  EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kEq12);
   EXPECT_EQ(o.queue_frames, 2u);
   EXPECT_EQ(p.cl->log_level, "info");
   // This test program is not installed: no simulator data beside it, and no
@@ -80,7 +81,8 @@ TEST(Options, EveryFlagReachesItsOption) {
   // One flag and its value a pair, as on a command line (clang-format would put one string a line).
   // clang-format off
   const auto p = parse({"--table", "t.tmx", "--source", "sim:static,material=cork", "--profile", "sorting",
-                        "--backend", "float", "--socket", "/tmp/s.sock", "--socket-mode", "0600",
+                        "--backend", "float", "--classifier", "session",
+                        "--socket", "/tmp/s.sock", "--socket-mode", "0600",
                         "--tcp", "127.0.0.1:7020", "--token-file", token.string(),
                         "--control-token-file", control.string(), "--control-group", "root",
                         "--max-tcp-clients", "5", "--max-clients-per-peer", "3", "--idle-timeout", "12",
@@ -96,6 +98,7 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.source, "sim:static,material=cork");
   EXPECT_EQ(o.profile.name, "sorting");
   EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFloat);
+  EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kSession);
   EXPECT_EQ(o.server.socket_path, "/tmp/s.sock");
   EXPECT_EQ(o.server.socket_mode, 0600u);
   EXPECT_EQ(o.server.tcp, "127.0.0.1:7020");
@@ -189,17 +192,21 @@ TEST(Options, HelpAndVersionExitWithZero) {
 
 TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   const auto short_token = token_file("short_token", "too short\n");
-  expect_usage_error({});                                                         // no table
-  expect_usage_error({"--table", "t", "--no-such-flag"});                         // unknown flag
-  expect_usage_error({"--table", "t", "stray"});                                  // stray argument
-  expect_usage_error({"--table"});                                                // a flag without its value
-  expect_usage_error({"--table", "t", "--top-k", "many"});                        // not a number
-  expect_usage_error({"--table", "t", "--queue-frames", "0"});                    // out of range
-  expect_usage_error({"--table", "t", "--max-clients", "5000"});                  // out of range
-  expect_usage_error({"--table", "t", "--threads", "-1"});                        // out of range
-  expect_usage_error({"--config", "/dev/zero"});                                  // not a regular file (endless)
-  expect_usage_error({"--table", "t", "--log-level", "chatty"});                  // not a level
-  expect_usage_error({"--table", "t", "--backend", "gpu"});                       // not a backend
+  expect_usage_error({});                                         // no table
+  expect_usage_error({"--table", "t", "--no-such-flag"});         // unknown flag
+  expect_usage_error({"--table", "t", "stray"});                  // stray argument
+  expect_usage_error({"--table"});                                // a flag without its value
+  expect_usage_error({"--table", "t", "--top-k", "many"});        // not a number
+  expect_usage_error({"--table", "t", "--queue-frames", "0"});    // out of range
+  expect_usage_error({"--table", "t", "--max-clients", "5000"});  // out of range
+  expect_usage_error({"--table", "t", "--threads", "-1"});        // out of range
+  expect_usage_error({"--config", "/dev/zero"});                  // not a regular file (endless)
+  expect_usage_error({"--table", "t", "--log-level", "chatty"});  // not a level
+  expect_usage_error({"--table", "t", "--backend", "gpu"});       // not a backend
+  expect_usage_error({"--table", "t", "--classifier", "knn"});    // not a classifier
+  // An Eq. (12) distance bound means nothing to the session classifier's score.
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
+                      "--classifier", "session", "--line-max-distance", "2"});
   expect_usage_error({"--table", "t", "--roi", "1,2,3"});                         // three numbers
   expect_usage_error({"--table", "t", "--roi", "1;2;3;4"});                       // wrong separators
   expect_usage_error({"--table", "t", "--socket-mode", "0999"});                  // not octal

@@ -117,6 +117,34 @@ TEST_P(RegionMatcherBackends, EachFrameAddsItsBinAndTheSweepMatchesItsMaterial) 
   EXPECT_EQ(m.bins_covered(), frames);
 }
 
+TEST_P(RegionMatcherBackends, TheSessionClassifierForgivesASessionsOffset) {
+  // A sweep of cork whose 16 MHz row reads 3 mm high (another session's
+  // offset, added to the query as the camera would): Eq. (12) takes it for
+  // another material, the session classifier still says cork.
+  const auto table = real_table();
+  RegionMatcher eq12(table, {}, GetParam());
+  RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession);
+  FrameMaker maker;
+  for (std::uint32_t k = 0; k < 12; ++k) {
+    auto target = target_in_roi("cork", 40 + 8 * k);
+    target.depths.mm[1] += 3.0;  // the 16 MHz group: row 0 (d16 - d120) reads 3 mm high
+    const RawFrame& f = maker.draw(k, {target});
+    eq12.accumulate(eq12.decode(f, kCentreRoi));
+    session.accumulate(session.decode(f, kCentreRoi));
+  }
+  const auto a = eq12.classify(), b = session.classify();
+  ASSERT_TRUE(a && b);
+  EXPECT_NE(table->materials()[a->best().index], "cork");
+  EXPECT_EQ(table->materials()[b->best().index], "cork");
+  EXPECT_EQ(b->ranking.size(), table->n_materials());
+  EXPECT_EQ(b->best().valid, 24u);
+  // The label event carries the score as its distance.
+  const LabelEvent e = session.label_event(*b, 3);
+  EXPECT_EQ(e.material, "cork");
+  EXPECT_EQ(e.distance, b->best().distance);
+  EXPECT_EQ(e.ranking.size(), 3u);
+}
+
 TEST_P(RegionMatcherBackends, ASweepOfAnOrdinaryMaterialIsToldFromItsNeighbours) {
   // Cork, wood, mdf, pvc ... lie within a millimetre of each other: only the
   // accumulated curve separates them.

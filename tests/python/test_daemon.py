@@ -73,6 +73,7 @@ def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]
         assert sorted(label.material for label in labels) == ["acryl", "cork", "paper", "pvc"]
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["device"]["state"] == "streaming"
+        assert s["classifier"] == "eq12"
         assert s["simulated"] is True
         assert s["frames_processed"] > 0 and s["processing_errors"] == 0
 
@@ -83,6 +84,19 @@ def test_float_backend_agrees(start: Callable[..., Daemon]) -> None:
         assert c.status()["backend"] == "float"
         for label in final_labels(c, 2):
             assert label.truth is not None and label.material == label.truth.material
+
+
+def test_the_session_classifier_labels_the_sweeps(start: Callable[..., Daemon]) -> None:
+    # The simulator's table against its own sweeps (one session): both matchers should be right;
+    # the session one reports itself in status, and its score is the label's distance.
+    d = start(sweep(["cork", "acryl"]), "--classifier", "session")
+    with d.client() as c:
+        s = c.status()
+        assert s["classifier"] == "session" and s["backend"] == "fixed"
+        for label in final_labels(c, 2):
+            assert label.truth is not None and label.material == label.truth.material
+            distances = [r.distance for r in label.ranking]
+            assert distances == sorted(distances) and label.distance == distances[0]
 
 
 def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:

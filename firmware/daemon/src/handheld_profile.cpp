@@ -13,7 +13,9 @@ namespace {
 class HandheldProfile : public Profile {
  public:
   HandheldProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
-      : config_(c), table_(std::move(table)), matcher_(table_, candidate_indices(*table_, c.candidates), c.backend) {}
+      : config_(c),
+        table_(std::move(table)),
+        matcher_(table_, candidate_indices(*table_, c.candidates), c.backend, c.method) {}
 
   std::optional<PixelRegion> input_region() const override { return config_.roi; }
 

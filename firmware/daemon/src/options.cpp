@@ -133,8 +133,8 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   DaemonOptions& o = cl.daemon;
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
   o.source_options.sim_data_dir = installed_sim_data_dir();
-  std::string profile = o.profile.name, backend = "fixed", roi, tcp, token_file, control_token_file, control_group,
-              socket_mode = "0660";
+  std::string profile = o.profile.name, backend = "fixed", classifier = "eq12", roi, tcp, token_file,
+              control_token_file, control_group, socket_mode = "0660";
   int idle_timeout_s = o.server.idle_timeout_ms / 1000;
   std::vector<std::string> candidates;
 
@@ -192,6 +192,11 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       ->check(CLI::Range(0, 86400));
   app.add_option("--backend", backend, "fixed (integer path, NEON on aarch64) | float (reference)")
       ->capture_default_str();
+  app.add_option("--classifier", classifier,
+                 "eq12 (the paper's Eq. (12)) | session (the session-robust matcher, docs/evaluation.md): how the "
+                 "handheld and sorting profiles match a query")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"eq12", "session"}));
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
   app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
@@ -279,6 +284,11 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     app.parse(argc, argv);
     o.profile.name = profile;
     o.profile.backend = parse_backend(backend);
+    o.profile.method = parse_method(classifier);
+    if (o.profile.method == Method::kSession && line.max_distance > 0)
+      throw CLI::ValidationError("--line-max-distance",
+                                 "it bounds an Eq. (12) distance (mm^2): the session classifier's score is no "
+                                 "distance; leave it 0 with --classifier session");
     o.profile.candidates = candidates;
     if (!roi.empty()) o.profile.roi = parse_roi(roi);
     const bool line_options = !line.barrier.empty() || !line.outlets.empty() || line.speed_mm_s > 0 ||

@@ -146,6 +146,7 @@ nlohmann::json Pipeline::status() const {
   const auto& r = config_.roi;
   return {{"profile", config_.name},
           {"backend", config_.backend == Backend::kFixed ? "fixed" : "float"},
+          {"classifier", method_name(config_.method)},
           {"roi", {r.x0, r.y0, r.x1, r.y1}},
           {"candidates", config_.candidates},
           {"table",

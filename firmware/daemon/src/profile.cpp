@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-// Backend names, candidate lookup, profile configuration checks, and the factory of the scene profiles.
+// Backend and classifier names, candidate lookup, profile configuration checks, and the factory of the scene profiles.
 #include "tofmat/daemon/profile.hpp"
 
 #include <stdexcept>
@@ -17,6 +17,14 @@ Backend parse_backend(const std::string& name) {
   if (name == "float") return Backend::kFloat;
   throw std::invalid_argument("unknown backend \"" + name + "\" (fixed, float)");
 }
+
+Method parse_method(const std::string& name) {
+  if (name == "eq12") return Method::kEq12;
+  if (name == "session") return Method::kSession;
+  throw std::invalid_argument("unknown classifier \"" + name + "\" (eq12, session)");
+}
+
+const char* method_name(Method method) { return method == Method::kSession ? "session" : "eq12"; }
 
 std::uint64_t Profile::trigger(int) { throw std::logic_error("only the sorting profile takes triggers"); }
 

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-// RegionMatcher: decode, depth-bin accumulation and classification of a pixel region on the fixed-point or float path.
+// RegionMatcher: decode, depth-bin accumulation and classification (Eq. (12) or the session matcher) of a pixel
+// region on the fixed-point or float path.
 #include "tofmat/daemon/region_matcher.hpp"
 
 #include <algorithm>
@@ -20,12 +21,15 @@ double median_of(std::vector<double>& v) {
 }  // namespace
 
 RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
-                             Backend backend)
+                             Backend backend, Method method)
     : table_(std::move(table)),
       backend_(backend),
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
-  if (backend_ == Backend::kFixed)
+  if (method == Method::kSession)
+    session_ = std::make_unique<SessionClassifier>(table_, SessionPrior::tuned(*table_), std::vector<double>{},
+                                                   std::move(candidates));
+  else if (backend_ == Backend::kFixed)
     fixed_ = std::make_unique<FixedClassifier>(table_, std::move(candidates));
   else
     float_ = std::make_unique<FloatClassifier>(table_, std::move(candidates));
@@ -72,6 +76,7 @@ std::optional<Classification> RegionMatcher::classify() const {
   const std::vector<float> q = backend_ == Backend::kFixed ? fixed_acc_.query() : float_acc_.query();
   if (std::none_of(q.begin(), q.end(), [](float v) { return std::isfinite(v); })) return std::nullopt;
   try {
+    if (session_) return session_->classify(q.data(), q.size());
     return backend_ == Backend::kFixed ? fixed_->classify(q.data(), q.size()) : float_->classify(q.data(), q.size());
   } catch (const std::invalid_argument&) {
     return std::nullopt;  // no candidate shares an observed element yet

@@ -24,8 +24,8 @@ class SortingProfile : public Profile {
  public:
   SortingProfile(const ProfileConfig& c, const std::shared_ptr<const ExemplarTable>& table)
       : config_(c),
-        matcher_(table, candidate_indices(*table, c.candidates), c.backend),
-        frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend) {}
+        matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method),
+        frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method) {}
 
   std::uint64_t trigger(int burst) override {
     matcher_.reset();

@@ -26,9 +26,18 @@ namespace tofmat::daemon {
 enum class Backend { kFixed, kFloat };
 Backend parse_backend(const std::string& name);  // "fixed" | "float"; throws std::invalid_argument
 
+// How the handheld and sorting profiles match a region's query: Eq. (12), or
+// the session-robust matcher (session_classifier.hpp; docs/evaluation.md),
+// which runs in double precision on either backend's query. The segmentation
+// profile's per-pixel labels are Eq. (12) whatever this says.
+enum class Method { kEq12, kSession };
+Method parse_method(const std::string& name);  // "eq12" | "session"; throws std::invalid_argument
+const char* method_name(Method method);
+
 struct ProfileConfig {
   std::string name = "handheld";
   Backend backend = Backend::kFixed;
+  Method method = Method::kEq12;
   PixelRegion roi{232, 188, 280, 236};  // 48 x 48 at the centre
   std::vector<std::string> candidates;  // empty: every material of the table
   int top_k = 5;                        // ranking entries in a label event

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 // Decode of a pixel region, depth-bin accumulation of its Eq. (10) features
-// and Eq. (12) partial matching, on the fixed-point path (the default) or the
-// float reference: what the handheld and sorting profiles share.
+// and partial matching (Eq. (12), or the session-robust matcher), on the
+// fixed-point path (the default) or the float reference: what the handheld
+// and sorting profiles share.
 #pragma once
 #include <memory>
 #include <optional>
@@ -12,13 +13,15 @@
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/fixed_depth_bins.hpp"
+#include "tofmat/core/session_classifier.hpp"
 #include "tofmat/daemon/profile.hpp"
 
 namespace tofmat::daemon {
 
 class RegionMatcher {
  public:
-  RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend);
+  RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend,
+                Method method = Method::kEq12);
 
   struct Decoded {
     std::variant<DecodedFrame, FixedDecodedFrame> frame;
@@ -28,7 +31,7 @@ class RegionMatcher {
   };
   Decoded decode(const RawFrame& frame, const PixelRegion& region) const;
   void accumulate(const Decoded& d);
-  // Eq. (12) on the query so far; nothing while no bin holds an observation.
+  // The method's match of the query so far; nothing while no bin holds an observation.
   std::optional<Classification> classify() const;
   std::uint32_t bins_covered() const;
   void reset();
@@ -42,6 +45,7 @@ class RegionMatcher {
   Backend backend_;
   std::unique_ptr<FixedClassifier> fixed_;
   std::unique_ptr<FloatClassifier> float_;
+  std::unique_ptr<SessionClassifier> session_;  // Method::kSession (on either backend's query)
   FixedDepthBinAccumulator fixed_acc_;
   DepthBinAccumulator float_acc_;
 };
