@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from .._clikit import TofmatCommand, UserError, progress_bar
-from ..report.cli import DEFAULT_DB, DEFAULT_TABLE, default_table
+from ..report.cli import resolve_table, table_option
 
 
 @click.command("evaluate", cls=TofmatCommand)
@@ -22,13 +22,7 @@ from ..report.cli import DEFAULT_DB, DEFAULT_TABLE, default_table
     show_default=True,
     help="curves: the real curves in new sessions; sim: simulator sweeps in new sessions; all: both.",
 )
-@click.option(
-    "--table",
-    "table_path",
-    type=click.Path(exists=True, path_type=Path),
-    default=None,
-    help=f"The real curves' table (.tmx or .npy folder). [default: {DEFAULT_TABLE} if it exists, else {DEFAULT_DB}]",
-)
+@table_option("The real curves' table")
 @click.option(
     "--sessions",
     type=click.IntRange(1, 1000),
@@ -64,10 +58,7 @@ def evaluate(
     results = []
     with progress_bar("evaluate") as progress:
         if source in ("curves", "all"):
-            path = table_path if table_path is not None else default_table()
-            if not path.exists():
-                raise UserError(f"no table: neither {DEFAULT_TABLE} nor {DEFAULT_DB} exists (give --table)")
-            results.append(evaluate_curves(open_table(path), sessions, progress=progress))
+            results.append(evaluate_curves(open_table(resolve_table(table_path)), sessions, progress=progress))
         if source in ("sim", "all"):
             names = [m.strip() for m in sim_materials.split(",")] if sim_materials else None
             try:

@@ -6,11 +6,15 @@ The command is registered in the `tofmat` group by ``main.add_command(report)``.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import click
 
 from .._clikit import FiniteFloat, TofmatCommand, UserError, progress_bar
+
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 DEFAULT_TABLE = Path("build/tanaka2017.tmx")
 DEFAULT_DB = Path("../shared/data/tanaka2017_kinect2_db")
@@ -21,14 +25,27 @@ def default_table() -> Path:
     return DEFAULT_TABLE if DEFAULT_TABLE.is_file() else DEFAULT_DB
 
 
+def table_option(what: str) -> Callable[[_F], _F]:
+    """``--table`` (into ``table_path``, None: :func:`default_table`), its help starting with ``what``."""
+    return click.option(
+        "--table",
+        "table_path",
+        type=click.Path(exists=True, path_type=Path),
+        default=None,
+        help=f"{what} (.tmx, or a folder of .npy curves). [default: {DEFAULT_TABLE} if it exists, else {DEFAULT_DB}]",
+    )
+
+
+def resolve_table(table_path: Path | None) -> Path:
+    """The table given, else :func:`default_table`; a UserError when neither exists."""
+    table = table_path if table_path is not None else default_table()
+    if not table.exists():
+        raise UserError(f"no table: neither {DEFAULT_TABLE} nor {DEFAULT_DB} exists (give --table)")
+    return table
+
+
 @click.command("report", cls=TofmatCommand)
-@click.option(
-    "--table",
-    "table_path",
-    type=click.Path(exists=True, path_type=Path),
-    default=None,
-    help=f"Table file (.tmx) or .npy folder. [default: {DEFAULT_TABLE} if it exists, else {DEFAULT_DB}]",
-)
+@table_option("The table")
 @click.option(
     "-o",
     "--out",
@@ -86,9 +103,7 @@ def report(
     """
     from . import write_report
 
-    table = table_path if table_path is not None else default_table()
-    if not table.exists():
-        raise UserError(f"no table: neither {DEFAULT_TABLE} nor {DEFAULT_DB} exists (give --table)")
+    table = resolve_table(table_path)
     with progress_bar("report") as progress:
         md = write_report(
             out_dir,
