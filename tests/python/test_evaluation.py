@@ -216,7 +216,7 @@ def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
         for m, row in test_rows.items()
         if row is not None
     }
-    assert len(acc["eq12"]) == 5 and len(acc["session"]) == 5
+    assert len(acc["eq12"]) == 6 and len(acc["session"]) == 6  # five lengths and the ECE
     # The session-robust matcher well above Eq. (12) at 10 and 30 bins on new sessions.
     assert acc["session"][2] > acc["eq12"][2] + 15 and acc["session"][3] > acc["eq12"][3] + 15, acc
     r = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--sessions", "0"])
@@ -230,3 +230,47 @@ def test_a_small_simulator_run() -> None:
     assert {r.method for r in test} == {"eq12", "session"}
     assert all(sorted(r.accuracy) == [3, 30] and all(0 <= a <= 100 for a in r.accuracy.values()) for r in test)
     assert sum(test[0].queries.values()) > 0
+
+
+def test_confidence_from_scores_with_a_known_temperature() -> None:
+    from tofmat.evaluation.confidence import fit_temperature, probabilities, reliability
+
+    rng = np.random.default_rng(11)
+    # Scores whose softmax at T = 2 is the true distribution of the label: a calibrated source.
+    scores = rng.normal(0.0, 4.0, (6000, 8))
+    p_true = probabilities(scores, 2.0)
+    assert np.allclose(p_true.sum(axis=1), 1.0) and (p_true >= 0).all()
+    truth = np.array([rng.choice(8, p=p) for p in p_true])
+    t = fit_temperature(scores, truth)
+    assert 1.7 < t < 2.3, t
+    lengths = np.full(len(truth), 10)
+    ece, diagram = reliability(scores, truth, lengths, {10: t})
+    assert ece < 0.03 and sum(n for _c, _a, n in diagram) == len(truth)
+    # Far too cold a temperature is overconfident: a large ECE.
+    assert reliability(scores, truth, lengths, {10: 0.05})[0] > 0.15
+    # An infinite score (a candidate with nothing in common) gets probability 0.
+    s = np.array([[0.0, np.inf, 1.0]])
+    assert probabilities(s, 1.0)[0, 1] == 0.0
+    with pytest.raises(ValueError, match="temperature"):
+        probabilities(s, 0.0)
+
+
+def test_the_command_s_confidence_json_and_plot(real_tmx: Path, tmp_path: Path) -> None:
+    png = tmp_path / "reliability.png"
+    r = CliRunner().invoke(
+        main,
+        ["-q", "evaluate", "--source", "curves", "--table", str(real_tmx), "--sessions", "2", "--plot", str(png)],
+    )
+    assert r.exit_code == 0, r.output
+    assert re.search(r"^\| session \| test \|.*\| [\d.]+ % \| \d+ \|$", r.output, re.M)  # the ECE column
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    r = CliRunner().invoke(
+        main, ["-q", "evaluate", "--source", "curves", "--table", str(real_tmx), "--sessions", "1", "--json"]
+    )
+    assert r.exit_code == 0, r.output
+    import json
+
+    data = json.loads(r.output)  # strict JSON: no Infinity
+    rows = data[0]["rows"]
+    assert {(x["method"], x["split"]) for x in rows} == {(m, s) for m in ("eq12", "session") for s in ("tune", "test")}
+    assert all(0.0 <= x["ece"] <= 1.0 and x["temperature"] for x in rows)

@@ -5,8 +5,10 @@ group by ``main.add_command(evaluate)``."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -40,6 +42,11 @@ from ..report.cli import resolve_table, table_option
 @click.option("--sim-materials", help="Comma-separated materials for the simulator source (default: its library's).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), help="Also write the table to this file.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
+@click.option(
+    "--plot",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also draw the test split's reliability diagram (confidence against accuracy) into this PNG.",
+)
 def evaluate(
     source: str,
     table_path: Path | None,
@@ -48,6 +55,7 @@ def evaluate(
     sim_materials: str | None,
     out: Path | None,
     as_json: bool,
+    plot: Path | None,
 ) -> None:
     """Accuracy of every matcher by sweep length on a test split of new capture sessions, after
     tuning on a separate split (docs/evaluation.md): Eq. (12), the paper's classifier, against the
@@ -66,11 +74,28 @@ def evaluate(
             except ValueError as e:  # an unknown material name
                 raise UserError(str(e)) from e
     text = (
-        json.dumps([{**asdict(r), "tuning": [[asdict(p), s] for p, s in r.tuning]} for r in results], indent=2)
+        json.dumps(
+            _strict_json([{**asdict(r), "tuning": [[asdict(p), s] for p, s in r.tuning]} for r in results]), indent=2
+        )
         if as_json
         else format_markdown(results)
     )
+    if plot is not None:
+        from .plots import reliability_diagram
+
+        reliability_diagram(results, plot)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text + "\n")
     click.echo(text)
+
+
+def _strict_json(value: Any) -> Any:
+    """``value`` with every infinite or NaN float as a string ("inf", "nan"): JSON has no such numbers."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {k: _strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_strict_json(v) for v in value]
+    return value

@@ -17,6 +17,7 @@ import numpy as np
 
 from .. import ExemplarTable
 from .._progress import Progress
+from .confidence import ECE_BINS, fit_temperatures, reliability
 from .matchers import CompiledSessionMatcher, Eq12Matcher, Matcher, SessionParams
 from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries
 
@@ -39,6 +40,11 @@ class Row:
     accuracy: dict[int, float]  # % right by sweep length
     queries: dict[int, int]
     us_per_query: float  # host time per query (the whole batch / its queries)
+    temperature: dict[int, float] = field(
+        default_factory=dict
+    )  # of the confidence per length, fitted on the tuning split
+    ece: float = math.nan  # expected calibration error of that confidence on this split, 0..1
+    reliability: list[tuple[float, float, int]] = field(default_factory=list)  # (confidence, accuracy, queries)
 
 
 @dataclass
@@ -102,11 +108,15 @@ def evaluate_source(
     res.tuned = res.tuning[0][0]
     test_q = draw(SPLIT_SEEDS["test"])
     matchers: list[Matcher] = [Eq12Matcher(table), CompiledSessionMatcher(table, res.tuned)]
-    for split, q in (("tune", tune_q), ("test", test_q)):
+    temperature: dict[str, dict[int, float]] = {}
+    for split, q in (("tune", tune_q), ("test", test_q)):  # (the tuning split first: it fits T)
         for m in matchers:
             s, us = _score(m, q)
             acc, count = accuracy_by_length(s, q)
-            res.rows.append(Row(source, m.name, split, acc, count, us))
+            if split == "tune":
+                temperature[m.name] = fit_temperatures(s, q.truth, q.lengths)
+            ece, diagram = reliability(s, q.truth, q.lengths, temperature[m.name])
+            res.rows.append(Row(source, m.name, split, acc, count, us, temperature[m.name], ece, diagram))
     res.seconds = time.perf_counter() - t0
     return res
 
@@ -184,15 +194,23 @@ def format_markdown(results: Sequence[SourceResult]) -> str:
     for r in results:
         lengths = sorted(next(iter(r.rows)).accuracy) if r.rows else []
         lines += [f"### {r.source}: {r.description}", ""]
-        head = "| method | split | " + " | ".join(f"{n} bins" for n in lengths) + " | host us / query |"
-        lines += [head, "|---|---|" + "---:|" * (len(lengths) + 1)]
+        head = "| method | split | " + " | ".join(f"{n} bins" for n in lengths) + " | ECE | host us / query |"
+        lines += [head, "|---|---|" + "---:|" * (len(lengths) + 2)]
         for row in sorted(r.rows, key=lambda x: (x.split != "test", x.method)):
             cells = " | ".join(f"{row.accuracy[n]:.1f} %" for n in lengths)
-            lines.append(f"| {row.method} | {row.split} | {cells} | {row.us_per_query:.0f} |")
+            lines.append(f"| {row.method} | {row.split} | {cells} | {100 * row.ece:.1f} % | {row.us_per_query:.0f} |")
         if r.rows:
             counts = next(x for x in r.rows if x.split == "test").queries
             lines.append("")
             lines.append("Test queries per length: " + ", ".join(f"{n} bins {counts[n]}" for n in lengths) + ".")
+            temps = {x.method: x.temperature for x in r.rows if x.split == "test"}
+            lines.append(
+                "Confidence: softmax(-score / T) over the candidates, T fitted on the tuning split for each length ("
+                + "; ".join(
+                    f"{m}: " + ", ".join(f"{t:.3g}" for _n, t in sorted(ts.items())) for m, ts in sorted(temps.items())
+                )
+                + f"); ECE over {ECE_BINS} confidence bins, all lengths together."
+            )
         if r.tuned is not None:
             t = r.tuned
             lines.append(

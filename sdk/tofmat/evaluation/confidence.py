@@ -1,0 +1,92 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""Confidence from a matcher's scores: a probability over the candidates, ``softmax(-score / T)``,
+with the temperature T fitted on the tuning split for each sweep length (a score sums over the
+sweep's elements, so its scale grows with the length: one T for all lengths makes the short sweeps
+over- or the long ones under-confident), the T of the least Brier score; and its expected calibration error (ECE) on the test split: the gap between the top
+label's confidence and how often it is right, averaged over confidence bins by their share of
+queries."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+ECE_BINS = 10
+
+
+def probabilities(scores: F64, temperature: float) -> F64:
+    """(N, M) probabilities: softmax of -score / T over each query's finite scores (0 elsewhere)."""
+    if not (math.isfinite(temperature) and temperature > 0):
+        raise ValueError(f"temperature must be a finite number > 0, got {temperature}")
+    z = -np.asarray(scores, dtype=np.float64) / temperature
+    z = np.where(np.isfinite(z), z, -np.inf)
+    z = z - np.max(z, axis=1, keepdims=True)
+    e = np.exp(z)
+    return np.asarray(e / e.sum(axis=1, keepdims=True), dtype=np.float64)
+
+
+def brier(scores: F64, truth: I64, temperature: float) -> float:
+    """The mean squared difference of the probabilities from the true material's indicator."""
+    p = probabilities(scores, temperature)
+    p[np.arange(len(truth)), truth] -= 1.0
+    return float(np.mean(np.sum(p * p, axis=1)))
+
+
+def fit_temperature(scores: F64, truth: I64) -> float:
+    """The T of the least Brier score (golden section over log T in [-8, 8], scaled by the scores'
+    typical spread). Not the log-probability's: a bounded loss, so that the few queries a matcher
+    gets confidently wrong (a long sweep whose truth scores hundreds worse) do not flatten the
+    confidence of all the others."""
+    s = np.asarray(scores, dtype=np.float64)
+    spread = float(np.median(np.std(np.where(np.isfinite(s), s, np.nan), axis=1)))
+    scale = spread if math.isfinite(spread) and spread > 0 else 1.0
+    lo, hi = -8.0, 8.0
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    fa, fb = brier(s, truth, scale * math.exp(a)), brier(s, truth, scale * math.exp(b))
+    for _ in range(80):
+        if fa < fb:
+            hi, b, fb = b, a, fa
+            a = hi - g * (hi - lo)
+            fa = brier(s, truth, scale * math.exp(a))
+        else:
+            lo, a, fa = a, b, fb
+            b = lo + g * (hi - lo)
+            fb = brier(s, truth, scale * math.exp(b))
+    return scale * math.exp(0.5 * (lo + hi))
+
+
+def fit_temperatures(scores: F64, truth: I64, lengths: I64) -> dict[int, float]:
+    """:func:`fit_temperature` for the queries of each sweep length."""
+    return {int(n): fit_temperature(scores[lengths == n], truth[lengths == n]) for n in np.unique(lengths)}
+
+
+def reliability(
+    scores: F64, truth: I64, lengths: I64, temperatures: dict[int, float], bins: int = ECE_BINS
+) -> tuple[float, list[tuple[float, float, int]]]:
+    """The ECE (in probability, 0..1) and the reliability diagram's bins: (mean confidence, accuracy,
+    queries) of each confidence bin that holds queries; each query's T is its length's."""
+    p = np.zeros_like(np.asarray(scores, dtype=np.float64))
+    for n, t in temperatures.items():
+        sel = lengths == n
+        if sel.any():
+            p[sel] = probabilities(scores[sel], t)
+    conf = p.max(axis=1)
+    right = (np.argmax(p, axis=1) == truth).astype(np.float64)
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    which = np.clip(np.digitize(conf, edges[1:-1]), 0, bins - 1)
+    ece = 0.0
+    diagram: list[tuple[float, float, int]] = []
+    for b in range(bins):
+        sel = which == b
+        n = int(sel.sum())
+        if n == 0:
+            continue
+        c, a = float(conf[sel].mean()), float(right[sel].mean())
+        ece += n / len(truth) * abs(c - a)
+        diagram.append((c, a, n))
+    return ece, diagram
