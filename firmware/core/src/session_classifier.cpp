@@ -14,7 +14,7 @@ namespace tofmat {
 namespace {
 
 constexpr double kLog2Pi = 1.8378770664093453;  // log(2 pi)
-constexpr int kMaxTerms = 3;                    // offset, Legendre 1, Legendre 2
+constexpr int kMaxTerms = kSessionMaxTerms;
 
 // numpy.median: the mean of the two middle values for an even count.
 double median(std::vector<double> v) {
@@ -133,28 +133,28 @@ SessionClassifier::SessionClassifier(std::shared_ptr<const ExemplarTable> table,
   for (double& s : noise_) {
     if (!(s > 0.0 && std::isfinite(s))) s = fill;
   }
+  const std::uint32_t rows = table_->n_rows();
+  const double drift[2] = {prior_.drift1_sd_mm, prior_.drift2_sd_mm};
+  if (std::all_of(prior_.offset_sd_mm.begin(), prior_.offset_sd_mm.end(), [](double s) { return s > 0.0; }))
+    degree_[terms_++] = 0;
+  for (int d = 0; d < 2; ++d) {
+    if (drift[d] > 0.0) degree_[terms_++] = d + 1;
+  }
+  prior_var_.resize(rows);
+  log_det_prior_.assign(rows, 0.0);
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    for (int t = 0; t < terms_; ++t) {
+      const double s = degree_[t] == 0 ? prior_.offset_sd_mm[r] : drift[degree_[t] - 1];
+      prior_var_[r][t] = s * s;
+      log_det_prior_[r] += std::log(s * s);
+    }
+  }
 }
 
 Classification SessionClassifier::classify(const float* query, std::size_t n) const {
   const QueryElements q = gather_query(*table_, query, n);
   const std::uint32_t rows = table_->n_rows(), bins = table_->n_bins();
-  // The nuisance terms with a prior (a zero prior leaves its term out).
-  int k = 0;
-  std::array<int, kMaxTerms> degree{};
-  std::vector<std::array<double, kMaxTerms>> prior_var(rows);
-  const double drift[2] = {prior_.drift1_sd_mm, prior_.drift2_sd_mm};
-  bool offset = true;
-  for (double s : prior_.offset_sd_mm) offset = offset && s > 0.0;
-  if (offset) degree[k++] = 0;
-  for (int d = 0; d < 2; ++d) {
-    if (drift[d] > 0.0) degree[k++] = d + 1;
-  }
-  for (std::uint32_t r = 0; r < rows; ++r) {
-    for (int t = 0; t < k; ++t) {
-      const double s = degree[t] == 0 ? prior_.offset_sd_mm[r] : drift[degree[t] - 1];
-      prior_var[r][t] = s * s;
-    }
-  }
+  const int k = terms_;
   // The query's elements by row, and their basis values.
   std::vector<std::size_t> row_begin(rows + 1, 0);
   for (std::uint32_t i : q.index) ++row_begin[i / bins + 1];
@@ -164,7 +164,7 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
     const std::uint32_t j = q.index[i] % bins;
     const double x = 2.0 * ((j + 0.5) / bins - 0.5);
     const double legendre[3] = {1.0, x, 0.5 * (3.0 * x * x - 1.0)};
-    for (int t = 0; t < k; ++t) basis[i][t] = legendre[degree[t]];
+    for (int t = 0; t < k; ++t) basis[i][t] = legendre[degree_[t]];
   }
   const bool huber = std::isfinite(prior_.huber_k);
   const double hk = prior_.huber_k;
@@ -192,7 +192,7 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
       const std::size_t lacking = (row_begin[r + 1] - row_begin[r]) - nr;
       compared += static_cast<std::uint32_t>(nr);
       z.assign(nr, 0.0);
-      double penalty = 0.0, logdet = 0.0;
+      double penalty = 0.0, logdet = 0.0;  // log det(S P), S = diag(prior variances)
       if (k == 0) {
         for (std::size_t i = 0; i < nr; ++i) z[i] = std::fabs(e[i]) / sd;
       } else {
@@ -213,9 +213,9 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
           for (int s = 0; s < k; ++s) {
             b[s] /= v;
             for (int t = 0; t < k; ++t) P[s][t] /= v;
-            P[s][s] += 1.0 / prior_var[r][s];
+            P[s][s] += 1.0 / prior_var_[r][s];
           }
-          cholesky_solve(P, k, b, beta);
+          logdet = cholesky_solve(P, k, b, beta) + log_det_prior_[r];
           for (std::size_t i = 0; i < nr; ++i) {
             double fit = 0.0;
             for (int s = 0; s < k; ++s) fit += beta[s] * basis[at[i]][s];
@@ -224,14 +224,7 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
           if (!huber) break;
           for (std::size_t i = 0; i < nr; ++i) w[i] = std::min(1.0, hk / std::max(z[i], 1e-12));
         }
-        // The prior's penalty and log det(S P), S = diag(prior variances).
-        std::array<std::array<double, kMaxTerms>, kMaxTerms> SP{};
-        for (int s = 0; s < k; ++s) {
-          penalty += 0.5 * beta[s] * beta[s] / prior_var[r][s];
-          for (int t = 0; t < k; ++t) SP[s][t] = P[s][t] * std::sqrt(prior_var[r][s] * prior_var[r][t]);
-        }
-        std::array<double, kMaxTerms> unused{}, zero{};
-        logdet = cholesky_solve(SP, k, zero, unused);
+        for (int s = 0; s < k; ++s) penalty += 0.5 * beta[s] * beta[s] / prior_var_[r][s];
       }
       double data = 0.0;
       for (std::size_t i = 0; i < nr; ++i) {

@@ -41,22 +41,31 @@ class Matcher(Protocol):
         ...
 
 
-class Eq12Matcher:
-    """Eq. (12) through :class:`tofmat.Classifier` (float backend): the distance is the score."""
+class _ClassifierMatcher:
+    """A :class:`tofmat.Classifier`'s rankings as scores: a candidate outside a ranking shares no
+    element with the query (inf)."""
 
-    name = "eq12"
+    name: str
 
-    def __init__(self, table: ExemplarTable) -> None:
-        self.classifier = Classifier(table)
-        self.n = len(table.materials)
+    def __init__(self, classifier: Classifier) -> None:
+        self.classifier = classifier
+        self.n = len(classifier.table.materials)
 
     def scores(self, queries: F32) -> F64:
         out = np.full((queries.shape[0], self.n), np.inf)
         for i, res in enumerate(self.classifier.classify_batch(queries)):
             for r in res.ranking:
-                if r.valid > 0:
-                    out[i, r.index] = r.distance
+                out[i, r.index] = r.distance
         return out
+
+
+class Eq12Matcher(_ClassifierMatcher):
+    """Eq. (12) through :class:`tofmat.Classifier` (float backend): the distance is the score."""
+
+    name = "eq12"
+
+    def __init__(self, table: ExemplarTable) -> None:
+        super().__init__(Classifier(table))
 
 
 @dataclass(frozen=True)
@@ -87,21 +96,13 @@ def session_prior(params: SessionParams) -> SessionPrior:
     )
 
 
-class CompiledSessionMatcher:
+class CompiledSessionMatcher(_ClassifierMatcher):
     """The session-robust matcher of the C++ core through :class:`tofmat.Classifier`."""
 
     name = "session"
 
     def __init__(self, table: ExemplarTable, params: SessionParams) -> None:
-        self.classifier = Classifier(table, method="session", prior=session_prior(params))
-        self.n = len(table.materials)
-
-    def scores(self, queries: F32) -> F64:
-        out = np.full((queries.shape[0], self.n), np.inf)
-        for i, res in enumerate(self.classifier.classify_batch(queries)):
-            for r in res.ranking:
-                out[i, r.index] = r.distance
-        return out
+        super().__init__(Classifier(table, method="session", prior=session_prior(params)))
 
 
 class SessionMatcher:

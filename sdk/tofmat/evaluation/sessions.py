@@ -30,6 +30,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import ExemplarTable
+from ..tools.sweeps import window_starts
 
 F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
@@ -220,13 +221,6 @@ class Queries:
     truth: npt.NDArray[np.int64]
     lengths: npt.NDArray[np.int64]
     queries: F32  # (N, R, B)
-
-
-def window_starts(table: ExemplarTable, m: int, length: int) -> npt.NDArray[np.int64]:
-    """Starts of the windows of ``length`` bins holding at least one observed element of material m."""
-    observed = np.isfinite(table.features[m]).any(axis=0).astype(np.int64)
-    in_window = np.convolve(observed, np.ones(length, dtype=np.int64), mode="valid")
-    return np.flatnonzero(in_window > 0)
 
 
 def draw_queries(sessions: CurveSessions, lengths: list[int], sessions_per_material: int, seed: int) -> Queries:

@@ -17,7 +17,8 @@ from .. import ExemplarTable
 from .._progress import Progress
 from ..sim import Renderer, load_device, load_library
 from ..sim.table import database_bins, roi_observation, simulated_table
-from .sessions import Queries, SessionModel, window_starts
+from ..tools.sweeps import window_starts
+from .sessions import Queries, SessionModel
 
 YAW_RANGE_DEG = (0.0, 20.0)  # the queries' target orientation (the table's is 10 degrees)
 

@@ -38,6 +38,13 @@ def window_query(
     return q
 
 
+def window_starts(table: ExemplarTable, m: int, length: int) -> npt.NDArray[np.int64]:
+    """Starts of the windows of ``length`` bins holding at least one observed element of material m."""
+    observed = np.isfinite(table.features[m]).any(axis=0).astype(np.int64)
+    in_window = np.convolve(observed, np.ones(length, dtype=np.int64), mode="valid")
+    return np.flatnonzero(in_window > 0)
+
+
 def random_windows(
     table: ExemplarTable, length: int, noise_mm: float, per_material: int, rng: np.random.Generator
 ) -> Iterator[Window]:
@@ -52,9 +59,7 @@ def random_windows(
     if not 1 <= length <= n_bins:
         raise ValueError(f"window length must be 1..{n_bins}, got {length}")
     for m in range(len(table.materials)):
-        observed = np.isfinite(features[m]).any(axis=0).astype(np.int64)
-        in_window = np.convolve(observed, np.ones(length, dtype=np.int64), mode="valid")
-        starts = np.flatnonzero(in_window > 0)
+        starts = window_starts(table, m, length)
         if starts.size == 0:
             continue
         for _ in range(per_material):

@@ -19,6 +19,7 @@
 // tofmat.evaluation.matchers.SessionMatcher (tests/python/test_session_classifier.py).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -29,6 +30,9 @@
 #include "tofmat/core/exemplar_table.hpp"
 
 namespace tofmat {
+
+// The nuisance terms of a row at most: its offset and the drift's Legendre degrees 1 and 2.
+inline constexpr int kSessionMaxTerms = 3;
 
 struct SessionPrior {
   // Prior sd of each row's offset, mm (one per table row; 0 leaves the term out).
@@ -79,10 +83,19 @@ class SessionClassifier {
   const std::vector<std::uint32_t>& candidates() const { return candidates_; }
 
  private:
+  static constexpr int kMaxTerms = kSessionMaxTerms;
+
   std::shared_ptr<const ExemplarTable> table_;
   SessionPrior prior_;
   std::vector<double> noise_;  // n_materials x n_rows
   std::vector<std::uint32_t> candidates_;
+  // The nuisance terms with a prior (a zero prior leaves its term out): their
+  // Legendre degrees, per row their prior variances, and per row the log of
+  // their product (log det S).
+  int terms_ = 0;
+  std::array<int, kMaxTerms> degree_{};
+  std::vector<std::array<double, kMaxTerms>> prior_var_;
+  std::vector<double> log_det_prior_;
 };
 
 }  // namespace tofmat
