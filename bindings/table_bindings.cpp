@@ -4,8 +4,10 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <algorithm>
 #include <cstring>
 #include <memory>
+#include <optional>
 
 #include "bindings.hpp"
 #include "tofmat/core/bin_spec.hpp"
@@ -31,6 +33,13 @@ pyb::array_t<double> bin_centres(const BinSpec& b) {
   auto v = out.mutable_unchecked<1>();
   for (std::uint32_t j = 0; j < b.count; ++j) v(j) = b.centre_mm(j);
   return out;
+}
+
+// A (n_materials, n_rows) noise array, or None: no noise.
+std::vector<float> noise_from(const pyb::handle& noise, std::size_t n_materials, std::size_t n_rows) {
+  if (noise.is_none()) return {};
+  auto a = as_float32(noise, {static_cast<pyb::ssize_t>(n_materials), static_cast<pyb::ssize_t>(n_rows)}, "noise_mm");
+  return std::vector<float>(a.data(), a.data() + a.size());
 }
 
 std::vector<RowSpec> rows_from(const std::vector<std::pair<int, int>>& rows) {
@@ -69,16 +78,21 @@ void register_table(pyb::module_& m) {
   pyb::class_<ExemplarTable, Table>(m, "ExemplarTable",
                                     "Per-material relative-distortion curves (materials x rows x bins), NaN missing.")
       .def(pyb::init([](std::vector<std::string> materials, const pyb::handle& features, BinSpec bins,
-                        std::vector<std::pair<int, int>> rows) {
+                        std::vector<std::pair<int, int>> rows, const pyb::handle& noise_mm) {
              const auto n_m = static_cast<pyb::ssize_t>(materials.size());
              const auto n_r = static_cast<pyb::ssize_t>(rows.size());
              auto a = as_float32(features, {n_m, n_r, static_cast<pyb::ssize_t>(bins.count)}, "features");
              std::vector<float> values(a.data(), a.data() + a.size());
-             return std::make_shared<ExemplarTable>(std::move(materials), rows_from(rows), bins, std::move(values));
+             auto noise = noise_from(noise_mm, materials.size(), rows.size());
+             return std::make_shared<ExemplarTable>(std::move(materials), rows_from(rows), bins, std::move(values), 0.0,
+                                                    std::move(noise));
            }),
            pyb::arg("materials"), pyb::arg("features"), pyb::arg("bins"), pyb::arg("rows"),
+           pyb::arg("noise_mm") = pyb::none(),
            "features: float array (len(materials), len(rows), bins.count), NaN = missing. "
-           "rows: (freq_mhz, ref_freq_mhz) per row; a row holds d(freq) - d(ref).")
+           "rows: (freq_mhz, ref_freq_mhz) per row; a row holds d(freq) - d(ref). "
+           "noise_mm: None, or each material's bin noise per row (len(materials), len(rows)), mm, "
+           "NaN = not measured, else > 0; the session matcher's per-material noise.")
       .def_static(
           "from_npy_dir",
           [](const std::filesystem::path& dir, double start, double stop) {
@@ -108,6 +122,23 @@ void register_table(pyb::module_& m) {
       .def_property_readonly("n_bins", &ExemplarTable::n_bins)
       .def_property_readonly("quant_step_mm", &ExemplarTable::quant_step_mm,
                              "Step of the int16 quantisation the values went through (0: never quantised).")
+      .def_property_readonly(
+          "noise_mm",
+          [](const ExemplarTable& t) -> std::optional<pyb::array_t<double>> {
+            if (!t.has_noise()) return std::nullopt;
+            pyb::array_t<double> out(
+                {static_cast<pyb::ssize_t>(t.n_materials()), static_cast<pyb::ssize_t>(t.n_rows())});
+            std::copy(t.noise_mm().begin(), t.noise_mm().end(), out.mutable_data());
+            return out;
+          },
+          "Each material's bin noise per row (n_materials, n_rows), mm, NaN = not measured; None when the "
+          "table carries none (a version 1.0 file).")
+      .def(
+          "with_noise",
+          [](const ExemplarTable& t, const pyb::handle& noise_mm) {
+            return std::make_shared<ExemplarTable>(t.with_noise(noise_from(noise_mm, t.n_materials(), t.n_rows())));
+          },
+          pyb::arg("noise_mm"), "A copy of this table carrying noise_mm (as the constructor's; None drops it).")
       .def_property_readonly(
           "features",
           [](const ExemplarTable& t) {

@@ -12,7 +12,7 @@ from typing import Any, TypeVar, cast
 import click
 import numpy as np
 
-from . import ClassificationResult, Classifier, ExemplarTable, __version__
+from . import ClassificationResult, Classifier, ExemplarTable, __version__, curve_roughness
 from ._clikit import CliState, Failure, FiniteFloat, NumberList, TofmatGroup, progress_bar, setup_logging
 from ._extras import require_pyplot
 from .client import Backend
@@ -73,14 +73,26 @@ def table() -> None:
     type=FiniteFloat(0, 20000),
     help="Left edge of the last bin, mm (numpy.linspace convention).",
 )
-def table_import(directory: Path, output: Path, bin_start: float, bin_stop: float) -> None:
-    """Import a folder of <material>.npy curves into a compact table file."""
+@click.option(
+    "--no-noise",
+    is_flag=True,
+    help="Leave out each material's measured bin noise: a version 1.0 file, for readers older than 1.1.",
+)
+def table_import(directory: Path, output: Path, bin_start: float, bin_stop: float, no_noise: bool) -> None:
+    """Import a folder of <material>.npy curves into a compact table file.
+
+    Each material's bin noise per row is measured from its curve (tofmat.curve_roughness) and
+    stored with it (format 1.1), for the session matcher.
+    """
     t = ExemplarTable.from_npy_dir(directory, bin_start_mm=bin_start, bin_stop_mm=bin_stop)
+    if not no_noise:
+        t = t.with_noise(curve_roughness(t))
     t.save(output)
     saved = ExemplarTable.load(output)
     click.echo(
         f"wrote {output}: {len(saved)} materials x {saved.n_rows} rows x {saved.n_bins} bins, "
-        f"step {saved.quant_step_mm:g} mm, {output.stat().st_size} bytes"
+        f"step {saved.quant_step_mm:g} mm, {'with' if saved.noise_mm is not None else 'without'} noise, "
+        f"{output.stat().st_size} bytes"
     )
 
 
@@ -93,6 +105,11 @@ def table_summary(path: Path, t: ExemplarTable) -> dict[str, Any]:
         "rows": [{"freq_mhz": f, "ref_freq_mhz": r} for f, r in t.rows],
         "bins": {"start_mm": t.bins.start_mm, "width_mm": t.bins.width_mm, "count": t.bins.count},
         "quant_step_mm": t.quant_step_mm,
+        "noise_mm": None
+        if t.noise_mm is None
+        else {
+            m: [None if np.isnan(v) else float(v) for v in row] for m, row in zip(t.materials, t.noise_mm, strict=True)
+        },
     }
 
 
@@ -117,8 +134,11 @@ def table_info(path: Path, as_json: bool) -> None:
     click.echo("rows: " + ", ".join(f"d({f} MHz) - d({r} MHz)" for f, r in t.rows))
     click.echo(f"quantisation step: {t.quant_step_mm:g} mm" if t.quant_step_mm else "not quantised (float values)")
     per_mat = t.n_rows * t.n_bins
-    for name, n in zip(t.materials, t.valid_counts, strict=True):
-        click.echo(f"  {name:<14s} {n:5d}/{per_mat} valid")
+    noise = t.noise_mm
+    click.echo("bin noise: " + ("measured, mm per row" if noise is not None else "not stored (a version 1.0 table)"))
+    for i, (name, n) in enumerate(zip(t.materials, t.valid_counts, strict=True)):
+        sd = "" if noise is None else "  noise " + " ".join("-" if np.isnan(v) else f"{v:.3f}" for v in noise[i])
+        click.echo(f"  {name:<14s} {n:5d}/{per_mat} valid{sd}")
 
 
 def result_dict(r: ClassificationResult, top: int) -> dict[str, Any]:

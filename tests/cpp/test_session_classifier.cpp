@@ -128,6 +128,25 @@ TEST(SessionClassifier, RoughnessOfAKnownNoise) {
   EXPECT_TRUE(std::isnan(curve_roughness(*table_of(few, 1, 1, bins))[0]));
 }
 
+TEST(SessionClassifier, UsesTheTablesNoiseWhereItHoldsOne) {
+  // Two materials of one row: a rough one (roughness measurable) and one
+  // whose stored noise differs from its roughness; a NaN entry falls back.
+  const std::uint32_t bins = 400;
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  std::vector<float> v(2 * bins);
+  for (auto& x : v) x = static_cast<float>(noise(rng));
+  const auto plain = table_of(v, 2, 1, bins);
+  const std::vector<double> rough = curve_roughness(*plain);
+  const auto stored = std::make_shared<const ExemplarTable>(plain->with_noise({std::nanf(""), 1.75f}));
+  SessionClassifier c(stored, SessionPrior::tuned(*stored));
+  EXPECT_EQ(c.noise_mm()[0], rough[0]);
+  EXPECT_EQ(c.noise_mm()[1], 1.75);
+  // An explicit noise still wins over the table's.
+  SessionClassifier given(stored, SessionPrior::tuned(*stored), {0.5, 0.25});
+  EXPECT_EQ(given.noise_mm(), (std::vector<double>{0.5, 0.25}));
+}
+
 TEST(SessionClassifier, BadSettingsAndQueriesAreClearErrors) {
   auto t = table_of(std::vector<float>(2 * 4, 0.0f), 1, 2, 4);
   SessionPrior p = SessionPrior::tuned(*t);

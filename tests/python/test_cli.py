@@ -72,6 +72,22 @@ def test_table_import_writes_a_loadable_table(cli_table: Path, real_table) -> No
     assert np.nanmax(np.abs(t.features - real_table.features)) <= t.quant_step_mm / 2
 
 
+def test_table_import_stores_each_curves_noise(cli_table: Path, db_dir: Path, real_table, tmp_path: Path) -> None:
+    t = tofmat.ExemplarTable.load(cli_table)
+    assert t.noise_mm is not None
+    assert np.allclose(t.noise_mm, tofmat.curve_roughness(real_table), rtol=1e-6)
+    info = json.loads(run("table", "info", cli_table, "--json").stdout)
+    assert info["noise_mm"]["cork"] == pytest.approx(list(t.noise_mm[t.index_of("cork")]))
+    assert "noise" in run("table", "info", cli_table).stdout
+    # --no-noise writes a version 1.0 file for older readers.
+    old = tmp_path / "old.tmx"
+    p = run("table", "import", db_dir, "-o", old, "--no-noise")
+    assert "without noise" in p.stdout
+    assert old.read_bytes()[8:12] == b"\x01\x00\x00\x00"
+    assert tofmat.ExemplarTable.load(old).noise_mm is None
+    assert json.loads(run("table", "info", old, "--json").stdout)["noise_mm"] is None
+
+
 def test_table_info_text(cli_table: Path) -> None:
     p = run("table", "info", cli_table)
     assert "29 materials x 2 rows x 200 bins" in p.stdout

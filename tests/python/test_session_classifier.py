@@ -46,6 +46,23 @@ def test_the_compiled_matcher_equals_its_numpy_reference(
     assert np.array_equal(np.argmin(got, axis=1), np.argmin(ref, axis=1))
 
 
+def test_both_take_the_tables_stored_noise(real_table: tofmat.ExemplarTable, queries: np.ndarray) -> None:
+    # A table carrying its noise (format 1.1): measured for half the materials, NaN for the rest.
+    stored = np.full((29, 2), np.nan)
+    stored[::2] = np.linspace(0.2, 2.0, 15)[:, None]
+    noisy = real_table.with_noise(stored)
+    ref = SessionMatcher(noisy, SETTINGS[0])
+    assert np.allclose(ref.sigma[::2], stored[::2]) and np.array_equal(
+        ref.sigma[1::2], SessionMatcher(real_table, SETTINGS[0]).sigma[1::2]
+    )
+    want = ref.scores(queries)
+    got = CompiledSessionMatcher(noisy, SETTINGS[0]).scores(queries)
+    finite = np.isfinite(want)
+    assert np.allclose(got[finite], want[finite], rtol=1e-9, atol=1e-9)
+    # The stored noise changes the scores: it is used, not ignored.
+    assert not np.allclose(want[finite], SessionMatcher(real_table, SETTINGS[0]).scores(queries)[finite])
+
+
 def test_the_roughness_is_the_reference_s(real_table: tofmat.ExemplarTable) -> None:
     got = tofmat.curve_roughness(real_table)
     ref = roughness(real_table.features.astype(np.float64))

@@ -223,10 +223,57 @@ def test_wrong_major_version(real_tmx, tmp_path, major) -> None:
 
 
 def test_unknown_minor_version(real_tmx, tmp_path) -> None:
-    # docs/table-format.md: minor version must be 0, else "unsupported version".
+    # docs/table-format.md: minor version 0 or 1, else "unsupported version".
     data = real_tmx.read_bytes()
-    with pytest.raises(tofmat.FormatError, match="version"):
+    for minor in (2, 0xFFFF):
+        with pytest.raises(tofmat.FormatError, match="version"):
+            load_bytes(tmp_path, patch(data, 10, "<H", minor))
+    # A 1.0 file relabelled 1.1 lacks the noise block.
+    with pytest.raises(tofmat.FormatError, match="truncated"):
         load_bytes(tmp_path, patch(data, 10, "<H", 1))
+
+
+def test_noise_round_trips_in_a_version_1_1_file(real_table, real_tmx, tmp_path) -> None:
+    noise = tofmat.curve_roughness(real_table)
+    assert noise.shape == (29, 2) and np.all(noise > 0)
+    t = real_table.with_noise(noise)
+    path = tmp_path / "noisy.tmx"
+    t.save(path)
+    data = path.read_bytes()
+    assert struct.unpack_from("<HH", data, 8) == (1, 1)
+    assert len(data) == real_tmx.stat().st_size + 29 * 2 * 4  # one float32 per material and row
+    back = tofmat.ExemplarTable.load(path)
+    assert back.noise_mm is not None
+    assert np.array_equal(back.noise_mm, noise.astype(np.float32).astype(np.float64))
+    assert np.array_equal(back.features, tofmat.ExemplarTable.load(real_tmx).features, equal_nan=True)
+    # A table without noise says so, and keeps writing 1.0.
+    assert real_table.noise_mm is None and back.with_noise(None).noise_mm is None
+    assert struct.unpack_from("<HH", real_tmx.read_bytes(), 8) == (1, 0)
+
+
+def test_the_session_matcher_takes_the_tables_noise(real_table) -> None:
+    stored = np.full((29, 2), np.nan)
+    stored[3] = [0.9, 1.1]  # one material measured, the rest left to the roughness
+    c = tofmat.Classifier(real_table.with_noise(stored), method="session")
+    assert c.noise_mm is not None
+    rough = tofmat.curve_roughness(real_table)
+    assert np.allclose(c.noise_mm[3], [0.9, 1.1])
+    assert np.array_equal(np.delete(c.noise_mm, 3, axis=0), np.delete(rough, 3, axis=0))
+
+
+@pytest.mark.parametrize(
+    ("noise", "match"),
+    [
+        (np.ones((29, 1)), "noise_mm"),
+        (np.ones((28, 2)), "noise_mm"),
+        (-np.ones((29, 2)), "noise"),
+        (np.zeros((29, 2)), "noise"),
+        (np.full((29, 2), np.inf), "noise"),
+    ],
+)
+def test_bad_noise_is_a_clear_error(real_table, noise, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        real_table.with_noise(noise)
 
 
 def test_trailing_bytes(real_tmx, tmp_path) -> None:

@@ -28,12 +28,13 @@ void validate_material_name(const std::string& name) {
 }
 
 ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins,
-                             std::vector<float> values, double quant_step_mm)
+                             std::vector<float> values, double quant_step_mm, std::vector<float> noise_mm)
     : materials_(std::move(materials)),
       rows_(std::move(rows)),
       bins_(bins),
       values_(std::move(values)),
-      quant_step_mm_(quant_step_mm) {
+      quant_step_mm_(quant_step_mm),
+      noise_mm_(std::move(noise_mm)) {
   if (materials_.empty()) throw std::invalid_argument("an exemplar table needs at least one material");
   if (materials_.size() > kMaxMaterials) {
     throw std::invalid_argument("too many materials: " + std::to_string(materials_.size()) + " (limit " +
@@ -60,6 +61,19 @@ ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<Row
   if (!std::isfinite(quant_step_mm_) || quant_step_mm_ < 0.0) {
     throw std::invalid_argument("quantisation step must be finite and >= 0");
   }
+  if (!noise_mm_.empty() && noise_mm_.size() != materials_.size() * rows_.size()) {
+    throw std::invalid_argument("noise holds " + std::to_string(noise_mm_.size()) + " values, expected " +
+                                std::to_string(materials_.size() * rows_.size()) + " (materials x rows)");
+  }
+  for (float s : noise_mm_) {
+    if (!std::isnan(s) && !(std::isfinite(s) && s > 0.0f)) {
+      throw std::invalid_argument("a material's bin noise must be finite and > 0 mm, or NaN (not measured)");
+    }
+  }
+}
+
+ExemplarTable ExemplarTable::with_noise(std::vector<float> noise_mm) const {
+  return ExemplarTable(materials_, rows_, bins_, values_, quant_step_mm_, std::move(noise_mm));
 }
 
 std::size_t ExemplarTable::valid_count(std::size_t m) const {

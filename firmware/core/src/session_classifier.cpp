@@ -118,7 +118,14 @@ SessionClassifier::SessionClassifier(std::shared_ptr<const ExemplarTable> table,
   prior_.validate(table_->n_rows());
   candidates_ = candidate_indices(table_->n_materials(), std::move(candidates));
   const std::size_t size = table_->n_materials() * table_->n_rows();
-  if (noise_.empty()) noise_ = curve_roughness(*table_);
+  if (noise_.empty()) {
+    // The table's measured noise where it has one, the curve's roughness elsewhere.
+    noise_ = curve_roughness(*table_);
+    const auto& stored = table_->noise_mm();
+    for (std::size_t i = 0; i < stored.size(); ++i) {
+      if (!std::isnan(stored[i])) noise_[i] = stored[i];
+    }
+  }
   if (noise_.size() != size) {
     throw std::invalid_argument("noise_mm has " + std::to_string(noise_.size()) + " values, the table needs " +
                                 std::to_string(table_->n_materials()) + " x " + std::to_string(table_->n_rows()));

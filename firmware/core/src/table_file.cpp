@@ -54,7 +54,7 @@ std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
   ByteWriter w;
   w.bytes(std::string_view(kTableMagic, sizeof kTableMagic));
   w.u16(kTableVersionMajor);
-  w.u16(kTableVersionMinor);
+  w.u16(table.has_noise() ? std::uint16_t{1} : std::uint16_t{0});
   w.u32(static_cast<std::uint32_t>(table.n_materials()));
   w.u32(table.n_rows());
   w.u32(table.n_bins());
@@ -74,6 +74,7 @@ std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
         std::isnan(v) ? kTableMissing : static_cast<std::int16_t>(std::nearbyint(static_cast<double>(v) / step));
     w.u16(static_cast<std::uint16_t>(q));
   }
+  for (float s : table.noise_mm()) w.f32(s);  // 1.1's noise block
   const std::uint32_t crc = crc32_of(w.data().data(), w.data().size());
   w.u32(crc);
   return w.take();
@@ -87,7 +88,7 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
   }
   const std::uint16_t major = in.u16("version");
   const std::uint16_t minor = in.u16("version");
-  if (major != kTableVersionMajor || minor != kTableVersionMinor) {
+  if (major != kTableVersionMajor || minor > kTableVersionMinor) {
     fail("unsupported version " + std::to_string(major) + "." + std::to_string(minor) + " (this build reads " +
          std::to_string(kTableVersionMajor) + "." + std::to_string(kTableVersionMinor) + ")");
   }
@@ -121,15 +122,18 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
     const auto* p = in.take(len, "material name");
     name.assign(reinterpret_cast<const char*>(p), len);
   }
-  const std::size_t expected_rest = n_values * 2 + 4;
+  const std::size_t n_noise = minor >= 1 ? std::size_t{n_materials} * n_rows : 0;
+  const std::size_t expected_rest = n_values * 2 + n_noise * 4 + 4;
   if (in.remaining() < expected_rest) {
-    fail("truncated: " + std::to_string(in.remaining()) + " bytes left for values and checksum, need " +
+    fail("truncated: " + std::to_string(in.remaining()) + " bytes left for values, noise and checksum, need " +
          std::to_string(expected_rest));
   }
   if (in.remaining() > expected_rest) {
     fail(std::to_string(in.remaining() - expected_rest) + " unexpected trailing bytes");
   }
   const std::uint8_t* raw = in.take(n_values * 2, "values");
+  std::vector<float> noise(n_noise);
+  for (float& x : noise) x = in.f32("noise");
   const std::size_t crc_offset = in.offset();
   const std::uint32_t stored_crc = in.u32("checksum");
   const std::uint32_t actual_crc = crc32_of(bytes, crc_offset);
@@ -148,7 +152,7 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
     values[i] = static_cast<float>(v);
   }
   try {
-    return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step);
+    return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step, std::move(noise));
   } catch (const std::invalid_argument& e) {
     fail(std::string("inconsistent content: ") + e.what());
   }

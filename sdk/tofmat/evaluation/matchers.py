@@ -111,15 +111,21 @@ class SessionMatcher:
     name = "session (NumPy)"
 
     def __init__(self, table: ExemplarTable, params: SessionParams, noise_mm: F64 | None = None) -> None:
-        """``noise_mm`` (M, R): each candidate's bin noise; default its roughness measured from the
-        table (:func:`.sessions.roughness`)."""
+        """``noise_mm`` (M, R): each candidate's bin noise; default the table's stored noise where it
+        has a measured value, its roughness (:func:`.sessions.roughness`) elsewhere, as the C++ core."""
         self.table = table
         self.params = params
         self.curves = table.features.astype(np.float64)  # (M, R, B)
         m, r, b = self.curves.shape
         if len(params.offset_sd_mm) != r:
             raise ValueError(f"offset_sd_mm needs {r} values (one per row), got {len(params.offset_sd_mm)}")
-        sigma = roughness(self.curves) if noise_mm is None else np.asarray(noise_mm, dtype=np.float64)
+        if noise_mm is None:
+            sigma = roughness(self.curves)
+            stored = table.noise_mm
+            if stored is not None:
+                sigma = np.where(np.isnan(stored), sigma, stored)
+        else:
+            sigma = np.asarray(noise_mm, dtype=np.float64)
         if sigma.shape != (m, r):
             raise ValueError(f"noise_mm must be ({m}, {r}), got {sigma.shape}")
         fill = np.nanmedian(sigma) if np.isfinite(sigma).any() else 0.3

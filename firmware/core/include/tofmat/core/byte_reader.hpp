@@ -37,6 +37,12 @@ class ByteReader {
   std::uint16_t u16(std::string_view field) { return static_cast<std::uint16_t>(le(take(2, field), 2)); }
   std::uint32_t u32(std::string_view field) { return static_cast<std::uint32_t>(le(take(4, field), 4)); }
   std::uint64_t u64(std::string_view field) { return le(take(8, field), 8); }
+  float f32(std::string_view field) {
+    const std::uint32_t bits = u32(field);
+    float v;
+    std::memcpy(&v, &bits, sizeof v);
+    return v;
+  }
   double f64(std::string_view field) {
     const std::uint64_t bits = u64(field);
     double v;

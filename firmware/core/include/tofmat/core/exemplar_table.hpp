@@ -39,9 +39,12 @@ inline constexpr double kDatabaseBinStopMm = 1200.0;
 class ExemplarTable {
  public:
   // values: n_materials x n_rows x n_bins, C order, NaN = missing, everything
-  // else finite. Throws std::invalid_argument on any inconsistency.
+  // else finite. noise_mm: empty, or each material's bin noise per row
+  // (n_materials x n_rows, mm; NaN = not measured, else finite and > 0), the
+  // session matcher's per-material noise (session_classifier.hpp). Throws
+  // std::invalid_argument on any inconsistency.
   ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins, std::vector<float> values,
-                double quant_step_mm = 0.0);
+                double quant_step_mm = 0.0, std::vector<float> noise_mm = {});
 
   // A folder of <material>.npy files, each (n_rows, n_bins) float64 in mm,
   // all the same shape; a bin where every row is exactly 0.0 is missing (the
@@ -65,6 +68,12 @@ class ExemplarTable {
   double quant_step_mm() const { return quant_step_mm_; }
 
   const std::vector<float>& values() const { return values_; }
+  // Each material's bin noise per row (n_materials x n_rows, mm, NaN = not
+  // measured), or empty when the table carries none.
+  const std::vector<float>& noise_mm() const { return noise_mm_; }
+  bool has_noise() const { return !noise_mm_.empty(); }
+  // This table with `noise_mm` (as the constructor's; empty drops it).
+  ExemplarTable with_noise(std::vector<float> noise_mm) const;
   const float* material_values(std::size_t m) const { return values_.data() + m * elements_per_material(); }
   std::size_t valid_count(std::size_t m) const;
 
@@ -77,6 +86,7 @@ class ExemplarTable {
   BinSpec bins_;
   std::vector<float> values_;
   double quant_step_mm_;
+  std::vector<float> noise_mm_;
 };
 
 // The Kinect v2 database's rows: 16 vs 120 MHz, then 80 vs 120 MHz.

@@ -66,7 +66,8 @@ std::vector<double> curve_roughness(const ExemplarTable& table);
 
 class SessionClassifier {
  public:
-  // noise_mm: n_materials x n_rows bin noise (empty: curve_roughness(table));
+  // noise_mm: n_materials x n_rows bin noise (empty: the table's noise_mm()
+  // where it holds a measured value, curve_roughness(table) elsewhere);
   // a NaN or non-positive entry takes the median of the others. Throws
   // std::invalid_argument on a bad prior, a noise of the wrong size, or a
   // candidate index outside the table.
