@@ -5,11 +5,13 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <limits>
 #include <memory>
 #include <optional>
 
 #include "bindings.hpp"
 #include "tofmat/core/classifier.hpp"
+#include "tofmat/core/confidence.hpp"
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/session_classifier.hpp"
 
@@ -23,16 +25,24 @@ struct RankedMatch {
   std::uint32_t index;
   double distance;
   std::uint32_t valid;
+  double fit;
+  double probability;
 };
 
 struct Result {
   std::vector<RankedMatch> ranking;
+  bool unknown = false;
 };
 
-Result to_result(const ExemplarTable& table, const Classification& c) {
+Result to_result(const ExemplarTable& table, const Classification& c, const Calibration& calibration) {
+  const Verdict v = judge(c, table.n_rows(), calibration);
   Result r;
+  r.unknown = v.unknown;
   r.ranking.reserve(c.ranking.size());
-  for (const Match& m : c.ranking) r.ranking.push_back({table.materials()[m.index], m.index, m.distance, m.valid});
+  for (std::size_t i = 0; i < c.ranking.size(); ++i) {
+    const Match& m = c.ranking[i];
+    r.ranking.push_back({table.materials()[m.index], m.index, m.distance, m.valid, m.fit, v.probability[i]});
+  }
   return r;
 }
 
@@ -46,7 +56,8 @@ class Classifier {
  public:
   Classifier(std::shared_ptr<ExemplarTable> table, const std::string& backend,
              const std::optional<std::vector<std::string>>& materials, const std::string& method,
-             const std::optional<SessionPrior>& prior, const pyb::handle& noise_mm)
+             const std::optional<SessionPrior>& prior, const pyb::handle& noise_mm,
+             const std::optional<Calibration>& calibration)
       : table_(std::move(table)) {
     if (backend != "float" && backend != "fixed") {
       throw pyb::value_error("unknown backend '" + backend + "': available backends are 'fixed' and 'float'");
@@ -62,6 +73,7 @@ class Classifier {
     }
     backend_ = backend;
     method_ = method;
+    calibration_ = calibration ? *calibration : Calibration::tuned(method);
     std::vector<std::uint32_t> candidates;
     if (materials) {
       if (materials->empty()) throw pyb::value_error("materials: give at least one candidate, or None for all");
@@ -95,7 +107,7 @@ class Classifier {
       pyb::gil_scoped_release nogil;
       c = core_classify(q.data(), static_cast<std::size_t>(q.size()));
     }
-    return to_result(*table_, c);
+    return to_result(*table_, c, calibration_);
   }
 
   std::vector<Result> classify_batch(const pyb::handle& queries) const {
@@ -117,7 +129,7 @@ class Classifier {
     }
     std::vector<Result> out;
     out.reserve(n);
-    for (const auto& c : cs) out.push_back(to_result(*table_, c));
+    for (const auto& c : cs) out.push_back(to_result(*table_, c, calibration_));
     return out;
   }
 
@@ -140,6 +152,7 @@ class Classifier {
     return a;
   }
   std::shared_ptr<ExemplarTable> table() const { return table_; }
+  const Calibration& calibration() const { return calibration_; }
 
  private:
   std::vector<pyb::ssize_t> shape() const {
@@ -152,6 +165,7 @@ class Classifier {
 
   std::shared_ptr<ExemplarTable> table_;
   std::string backend_, method_;
+  Calibration calibration_;
   std::unique_ptr<FloatClassifier> float_;  // one of the three, by method and backend
   std::unique_ptr<FixedClassifier> fixed_;
   std::unique_ptr<SessionClassifier> session_;
@@ -166,15 +180,72 @@ void register_classifier(pyb::module_& m) {
       .def_readonly("distance", &RankedMatch::distance,
                     "Eq. (12) distance, mm^2; for method='session' the score (negative log-likelihood).")
       .def_readonly("valid", &RankedMatch::valid, "Elements valid in both the query and the exemplar.")
+      .def_readonly("fit", &RankedMatch::fit,
+                    "How well it explains the query under the session matcher's noise model, a standard normal "
+                    "deviate (large: worse than noise allows); NaN for method='eq12'.")
+      .def_readonly("probability", &RankedMatch::probability,
+                    "Calibrated probability that the query is this material, given that it is one of the "
+                    "candidates (softmax of the scores at the sweep length's temperature).")
       .def("__repr__", [](const RankedMatch& r) { return "RankedMatch(" + match_repr(r) + ")"; });
 
   pyb::class_<Result>(m, "ClassificationResult", "The label of a query and the full ranking, best first.")
-      .def_property_readonly("material", [](const Result& r) { return r.ranking.front().material; })
-      .def_property_readonly("index", [](const Result& r) { return r.ranking.front().index; })
+      .def_property_readonly(
+          "material",
+          [](const Result& r) { return r.unknown ? std::string(kUnknownLabel) : r.ranking.front().material; },
+          "The label: the best match's material, or 'unknown' when no candidate explains the query.")
+      .def_property_readonly(
+          "index", [](const Result& r) { return r.unknown ? std::int64_t{-1} : std::int64_t{r.ranking.front().index}; },
+          "Index of the label into table.materials; -1 when unknown.")
       .def_property_readonly("distance", [](const Result& r) { return r.ranking.front().distance; })
       .def_property_readonly("valid", [](const Result& r) { return r.ranking.front().valid; })
+      .def_property_readonly(
+          "fit", [](const Result& r) { return r.ranking.front().fit; }, "The best match's fit (RankedMatch.fit).")
+      .def_property_readonly(
+          "confidence", [](const Result& r) { return r.ranking.front().probability; },
+          "The best match's calibrated probability among the candidates.")
+      .def_readonly("unknown", &Result::unknown,
+                    "True when the best match's fit exceeds the calibration's threshold at the sweep's length "
+                    "(open set).")
+      .def_property_readonly(
+          "nearest", [](const Result& r) { return r.ranking.front().material; },
+          "The best match's material, even when the label is 'unknown'.")
       .def_readonly("ranking", &Result::ranking)
-      .def("__repr__", [](const Result& r) { return "ClassificationResult(" + match_repr(r.ranking.front()) + ")"; });
+      .def("__repr__", [](const Result& r) {
+        return "ClassificationResult(" + match_repr(r.ranking.front()) + (r.unknown ? ", unknown=True" : "") +
+               ", confidence=" + std::to_string(r.ranking.front().probability) + ")";
+      });
+
+  pyb::class_<Calibration>(m, "Calibration",
+                           "Confidence and open-set settings (docs/evaluation.md): temperatures by sweep length "
+                           "and the fit beyond which a label is 'unknown'.")
+      .def(pyb::init([](std::vector<std::pair<double, double>> temperatures,
+                        std::vector<std::pair<double, double>> unknown_fits) {
+             Calibration c;
+             c.temperatures = std::move(temperatures);
+             c.unknown_fits = std::move(unknown_fits);
+             c.validate();
+             return c;
+           }),
+           pyb::arg("temperatures"), pyb::arg("unknown_fits") = std::vector<std::pair<double, double>>{},
+           "temperatures: (sweep length in bins, T) knots, lengths increasing; unknown_fits: (sweep length in "
+           "bins, fit) knots of the open-set threshold (empty: never unknown). Both are interpolated linearly in "
+           "log length and held beyond the ends.")
+      .def_static("tuned", &Calibration::tuned, pyb::arg("method"),
+                  "What docs/evaluation.md fitted for 'eq12' or 'session'.")
+      .def_readonly("temperatures", &Calibration::temperatures)
+      .def_readonly("unknown_fits", &Calibration::unknown_fits)
+      .def("temperature", &Calibration::temperature, pyb::arg("bins"), "T at a sweep length in bins.")
+      .def("unknown_fit", &Calibration::unknown_fit, pyb::arg("bins"),
+           "The open-set threshold at a sweep length in bins (inf: never unknown).")
+      .def("__repr__", [](const Calibration& c) {
+        std::string t;
+        for (const auto& [b, v] : c.temperatures)
+          t += (t.empty() ? "(" : ", (") + std::to_string(b) + ", " + std::to_string(v) + ")";
+        std::string u;
+        for (const auto& [b, v] : c.unknown_fits)
+          u += (u.empty() ? "(" : ", (") + std::to_string(b) + ", " + std::to_string(v) + ")";
+        return "Calibration(temperatures=[" + t + "], unknown_fits=[" + u + "])";
+      });
 
   pyb::class_<SessionPrior>(m, "SessionPrior",
                             "Settings of the session-robust matcher (docs/evaluation.md): the priors of a row's "
@@ -229,9 +300,11 @@ void register_classifier(pyb::module_& m) {
                           "Nearest-neighbour classifier with partial matching: Eq. (12), or the session-robust "
                           "matcher (method='session', docs/evaluation.md).")
       .def(pyb::init<std::shared_ptr<ExemplarTable>, const std::string&, const std::optional<std::vector<std::string>>&,
-                     const std::string&, const std::optional<SessionPrior>&, const pyb::handle&>(),
+                     const std::string&, const std::optional<SessionPrior>&, const pyb::handle&,
+                     const std::optional<Calibration>&>(),
            pyb::arg("table"), pyb::arg("backend") = "float", pyb::arg("materials") = pyb::none(),
-           pyb::arg("method") = "eq12", pyb::arg("prior") = pyb::none(), pyb::arg("noise_mm") = pyb::none())
+           pyb::arg("method") = "eq12", pyb::arg("prior") = pyb::none(), pyb::arg("noise_mm") = pyb::none(),
+           pyb::arg("calibration") = pyb::none())
       .def("classify", &Classifier::classify, pyb::arg("query"),
            "query: float array (n_rows, n_bins), NaN = missing. Raises ValueError if no element is valid.")
       .def("classify_batch", &Classifier::classify_batch, pyb::arg("queries"),
@@ -242,6 +315,8 @@ void register_classifier(pyb::module_& m) {
       .def_property_readonly("prior", &Classifier::prior, "The session matcher's settings (None for eq12).")
       .def_property_readonly("noise_mm", &Classifier::noise_mm,
                              "The session matcher's noise per material and row, mm (None for eq12).")
+      .def_property_readonly("calibration", &Classifier::calibration,
+                             "Confidence and open-set settings (default: Calibration.tuned(method)).")
       .def_property_readonly("table", &Classifier::table);
 }
 

@@ -23,6 +23,7 @@ from ._extras import MissingExtraError
 from ._tofmat import (
     SPEED_OF_LIGHT_MM_PER_NS,
     BinSpec,
+    Calibration,
     ClassificationResult,
     Classifier,
     DepthBinAccumulator,
@@ -59,6 +60,7 @@ __all__ = [
     "SPEED_OF_LIGHT_MM_PER_NS",
     "AuthenticationError",
     "BinSpec",
+    "Calibration",
     "ClassificationResult",
     "Classifier",
     "Client",

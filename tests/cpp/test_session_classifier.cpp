@@ -147,6 +147,24 @@ TEST(SessionClassifier, UsesTheTablesNoiseWhereItHoldsOne) {
   EXPECT_EQ(given.noise_mm(), (std::vector<double>{0.5, 0.25}));
 }
 
+TEST(SessionClassifier, AFitIsTheChiSquaresDeviate) {
+  // Wilson-Hilferty: q = n gives (1 - (1 - a)) / sqrt(a), a = 2 / (9 n).
+  const double a = 2.0 / 900.0;
+  EXPECT_NEAR(chi_square_deviate(100.0, 100.0), a / std::sqrt(a), 1e-12);
+  EXPECT_LT(chi_square_deviate(0.0, 5.0), -3.0);
+  EXPECT_GT(chi_square_deviate(300.0, 100.0), 8.0);
+  // Offsets only, Gaussian, one row: Q = 2 (data + penalty) in closed form.
+  // Query = curve + c: with prior variance s^2 and noise v the posterior
+  // offset is c n s^2 / (v + n s^2), and Q = n c^2 / (v + n s^2).
+  const double s = 2.0, floor_mm = 0.5, v = floor_mm * floor_mm, c = 3.0;
+  const std::uint32_t n = 8;
+  auto t = table_of(std::vector<float>(n, 1.0f), 1, 1, n);
+  SessionClassifier clf(t, offset_only(s, floor_mm, std::numeric_limits<double>::infinity()));
+  std::vector<float> q(n, static_cast<float>(1.0 + c));
+  const double want_q = n * c * c / (v + n * s * s);
+  EXPECT_NEAR(clf.classify(q.data(), q.size()).best().fit, chi_square_deviate(want_q, n), 1e-9);
+}
+
 TEST(SessionClassifier, BadSettingsAndQueriesAreClearErrors) {
   auto t = table_of(std::vector<float>(2 * 4, 0.0f), 1, 2, 4);
   SessionPrior p = SessionPrior::tuned(*t);

@@ -219,6 +219,15 @@ def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
     assert len(acc["eq12"]) == 6 and len(acc["session"]) == 6  # five lengths and the ECE
     # The session-robust matcher well above Eq. (12) at 10 and 30 bins on new sessions.
     assert acc["session"][2] > acc["eq12"][2] + 15 and acc["session"][3] > acc["eq12"][3] + 15, acc
+    # The open set: a threshold per length, and its false rejects and accepts on the test split.
+    assert "Open set" in text
+    rows = {
+        name: [float(v) for v in re.findall(r"([\d.]+) %", m.group(1))]
+        for name in ("known rejected", "held-out accepted")
+        if (m := re.search(rf"^\| {name} [^|]*\| (.*) \|$", text, re.M)) is not None
+    }
+    assert len(rows["known rejected"]) == 5 and len(rows["held-out accepted"]) == 5
+    assert all(0 <= v <= 100 for v in rows["known rejected"] + rows["held-out accepted"])
     r = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--sessions", "0"])
     assert r.exit_code == 2 and "--sessions" in r.output
 
@@ -230,6 +239,14 @@ def test_a_small_simulator_run() -> None:
     assert {r.method for r in test} == {"eq12", "session"}
     assert all(sorted(r.accuracy) == [3, 30] and all(0 <= a <= 100 for a in r.accuracy.values()) for r in test)
     assert sum(test[0].queries.values()) > 0
+    # Open set: thresholds from the tuning split, applied unchanged to the test split.
+    tune_o, test_o = res.open_set
+    assert (tune_o.split, test_o.split) == ("tune", "test") and tune_o.thresholds == test_o.thresholds
+    assert sorted(test_o.false_accept) == [3, 30] and set(test_o.accepted_by_material[30]) == {
+        "wood",
+        "copper",
+        "fakeleather",
+    }
 
 
 def test_confidence_from_scores_with_a_known_temperature() -> None:

@@ -25,6 +25,8 @@ void validate_material_name(const std::string& name) {
       throw std::invalid_argument("material name must be printable ASCII without spaces: '" + name + "'");
     }
   }
+  // The label of a query that fits no material (confidence.hpp's kUnknownLabel).
+  if (name == "unknown") throw std::invalid_argument("material name 'unknown' is reserved for open-set rejection");
 }
 
 ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins,

@@ -111,6 +111,11 @@ std::vector<double> curve_roughness(const ExemplarTable& table) {
   return out;
 }
 
+double chi_square_deviate(double q, double n) {
+  const double a = 2.0 / (9.0 * n);
+  return (std::cbrt(std::max(q, 0.0) / n) - (1.0 - a)) / std::sqrt(a);
+}
+
 SessionClassifier::SessionClassifier(std::shared_ptr<const ExemplarTable> table, SessionPrior prior,
                                      std::vector<double> noise_mm, std::vector<std::uint32_t> candidates)
     : table_(std::move(table)), prior_(std::move(prior)), noise_(std::move(noise_mm)) {
@@ -182,7 +187,7 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
   out.ranking.reserve(candidates_.size());
   for (std::uint32_t p : candidates_) {
     const float* ex = table_->material_values(p);
-    double total = 0.0;
+    double total = 0.0, energy = 0.0;  // energy: Q / 2 (session_classifier.hpp)
     std::uint32_t compared = 0;
     for (std::uint32_t r = 0; r < rows; ++r) {
       const double sigma = prior_.noise_scale * noise_[p * rows + r];
@@ -237,12 +242,13 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
       for (std::size_t i = 0; i < nr; ++i) {
         data += huber && z[i] > hk ? hk * z[i] - 0.5 * hk * hk : 0.5 * z[i] * z[i];
       }
+      energy += data + penalty;
       const double log_norm = 0.5 * (kLog2Pi + std::log(v));
       total += data + static_cast<double>(nr) * log_norm + penalty + 0.5 * logdet +
                static_cast<double>(lacking) * (0.5 + log_norm);
     }
     if (compared == 0) continue;  // nothing in common: this candidate cannot be judged
-    out.ranking.push_back(Match{p, total, compared});
+    out.ranking.push_back(Match{p, total, compared, chi_square_deviate(2.0 * energy, compared)});
   }
   rank(out);
   return out;

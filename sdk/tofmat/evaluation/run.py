@@ -18,7 +18,8 @@ import numpy as np
 from .. import ExemplarTable
 from .._progress import Progress
 from .confidence import ECE_BINS, fit_temperatures, reliability
-from .matchers import CompiledSessionMatcher, Eq12Matcher, Matcher, SessionParams
+from .matchers import CompiledSessionMatcher, Eq12Matcher, Matcher, SessionParams, session_prior
+from .open_set import MAX_FALSE_REJECT, choose_thresholds, open_set_curves
 from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries
 
 LENGTHS = (1, 3, 10, 30, 100)
@@ -47,6 +48,19 @@ class Row:
     reliability: list[tuple[float, float, int]] = field(default_factory=list)  # (confidence, accuracy, queries)
 
 
+@dataclass(frozen=True)
+class OpenSetRow:
+    """The session matcher's open set on one split: per sweep length the thresholds (chosen on the
+    tuning split), the share of known queries rejected and of held-out materials' queries accepted,
+    and (test split, the longest... every length) each held-out material's accepted share."""
+
+    split: str
+    thresholds: dict[int, float]
+    false_reject: dict[int, float]
+    false_accept: dict[int, float]
+    accepted_by_material: dict[int, dict[str, float]]
+
+
 @dataclass
 class SourceResult:
     source: str
@@ -55,6 +69,7 @@ class SourceResult:
     rows: list[Row] = field(default_factory=list)
     tuned: SessionParams | None = None
     tuning: list[tuple[SessionParams, float]] = field(default_factory=list)  # each setting and its tuning score
+    open_set: list[OpenSetRow] = field(default_factory=list)
     seconds: float = 0.0
 
 
@@ -117,6 +132,26 @@ def evaluate_source(
                 temperature[m.name] = fit_temperatures(s, q.truth, q.lengths)
             ece, diagram = reliability(s, q.truth, q.lengths, temperature[m.name])
             res.rows.append(Row(source, m.name, split, acc, count, us, temperature[m.name], ece, diagram))
+    thresholds: dict[int, float] = {}
+    for split, q in (("tune", tune_q), ("test", test_q)):  # (the tuning split first: it chooses the thresholds)
+        if progress:
+            progress(0, 1, f"open set, {split} split")
+        curves = open_set_curves(table, session_prior(res.tuned), q)
+        if split == "tune":
+            thresholds = choose_thresholds(curves)
+        by_material = {
+            n: dict(
+                zip(
+                    table.materials,
+                    curves.accepted_by_material(thresholds, n, len(table.materials)).tolist(),
+                    strict=True,
+                )
+            )
+            for n in sorted(curves.novel)
+        }
+        res.open_set.append(
+            OpenSetRow(split, thresholds, curves.false_reject(thresholds), curves.false_accept(thresholds), by_material)
+        )
     res.seconds = time.perf_counter() - t0
     return res
 
@@ -211,6 +246,35 @@ def format_markdown(results: Sequence[SourceResult]) -> str:
                 )
                 + f"); ECE over {ECE_BINS} confidence bins, all lengths together."
             )
+        for o in r.open_set:
+            if o.split != "test":
+                continue
+            ns = sorted(o.thresholds)
+            lines += [
+                "",
+                f"Open set (session matcher; thresholds on the fit chosen on the tuning split to reject "
+                f"{100 * MAX_FALSE_REJECT:.0f} % of known queries at each length; test split):",
+                "",
+                "| | " + " | ".join(f"{n} bins" for n in ns) + " |",
+                "|---|" + "---:|" * len(ns),
+                "| threshold (fit) | " + " | ".join(f"{o.thresholds[n]:.2f}" for n in ns) + " |",
+                "| known rejected (false reject) | "
+                + " | ".join(f"{100 * o.false_reject[n]:.1f} %" for n in ns)
+                + " |",
+                "| held-out accepted (false accept) | "
+                + " | ".join(f"{100 * o.false_accept[n]:.1f} %" for n in ns)
+                + " |",
+            ]
+            longest = ns[-1]
+            caught = sorted(
+                ((1.0 - a, m) for m, a in o.accepted_by_material[longest].items() if a == a and a < 1.0), reverse=True
+            )
+            lines += [
+                "",
+                f"Held out at {longest} bins, the materials rejected at least once: "
+                + (", ".join(f"{m} {100 * c:.0f} %" for c, m in caught) or "none")
+                + ".",
+            ]
         if r.tuned is not None:
             t = r.tuned
             lines.append(

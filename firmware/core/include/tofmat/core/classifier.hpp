@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -17,6 +18,11 @@ struct Match {
   std::uint32_t index = 0;  // into ExemplarTable::materials()
   double distance = 0.0;    // Eq. (12), mm^2
   std::uint32_t valid = 0;  // N: elements valid in both query and exemplar
+  // How well the candidate explains the query under a noise model, as a
+  // standard normal deviate (0: as expected, large: fits worse than noise
+  // allows); NaN for a method without a noise model (Eq. (12)). The session
+  // matcher's (session_classifier.hpp) decides open-set rejection.
+  double fit = std::numeric_limits<double>::quiet_NaN();
 };
 
 // Candidates that share at least one valid element with the query, best

@@ -15,7 +15,14 @@
 //   sum_j rho(r_j / sqrt v) + n/2 log(2 pi v) + sum_k beta_k^2 / (2 s_k^2)
 //   + log det(S P) / 2,  S = diag(s_k^2), P the posterior precision,
 // summed over rows, plus (1/2 + log(2 pi v)/2) for each query element the
-// candidate lacks. Lower is better. The NumPy reference it must equal is
+// candidate lacks. Lower is better. Match::fit is how well the candidate
+// explains the query: Q = 2 (sum_j rho(r_j / sqrt v) + sum_k beta_k^2 / (2 s_k^2))
+// over the n compared elements is e' Sigma^-1 e, chi-square with n degrees
+// of freedom when the candidate is the truth (exactly so for the Gaussian
+// part), and fit = its Wilson-Hilferty normal deviate
+//   ((Q/n)^(1/3) - (1 - 2/(9n))) / sqrt(2/(9n)),
+// a length-free scale on which a threshold rejects a query that no candidate
+// explains (docs/evaluation.md, open set). The NumPy reference it must equal is
 // tofmat.evaluation.matchers.SessionMatcher (tests/python/test_session_classifier.py).
 #pragma once
 
@@ -63,6 +70,9 @@ struct SessionPrior {
 // over sqrt(6) (white noise of sd s has second differences of sd s sqrt(6);
 // a smooth trend almost none). NaN where a row has fewer than 5 elements.
 std::vector<double> curve_roughness(const ExemplarTable& table);
+
+// The Wilson-Hilferty normal deviate of a chi-square value q with n degrees of freedom (n >= 1).
+double chi_square_deviate(double q, double n);
 
 class SessionClassifier {
  public:

@@ -1,0 +1,61 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Calibrated confidence and open-set rejection of a classification
+// (docs/evaluation.md). A label's confidence is a probability over the
+// candidates, softmax(-score / T): a score sums over the sweep's elements, so
+// its scale grows with the sweep, and T depends on the sweep's length in bins
+// (fitted on the evaluation's tuning split by the Brier score). A best match
+// whose fit (Match::fit, the session matcher's chi-square deviate) exceeds a
+// threshold explains the query worse than the noise model allows: the label
+// is "unknown", not the nearest material.
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "tofmat/core/classifier.hpp"
+
+namespace tofmat {
+
+// The label an open-set rejection gives; a table may not name a material so.
+inline constexpr const char* kUnknownLabel = "unknown";
+
+struct Calibration {
+  // (sweep length in bins, temperature) knots, lengths strictly increasing;
+  // between knots T is interpolated linearly in log length, beyond the ends
+  // held at the end's value.
+  std::vector<std::pair<double, double>> temperatures;
+  // (sweep length in bins, fit) knots of the open-set threshold, interpolated
+  // as the temperatures: a best match whose fit exceeds it is unknown. Empty:
+  // never unknown. (A fit's spread under the truth grows with the sweep,
+  // where the session model explains less of a long sweep, so one threshold
+  // for all lengths would reject most long sweeps or accept all short ones.)
+  std::vector<std::pair<double, double>> unknown_fits;
+
+  // What docs/evaluation.md fitted on its tuning split for each method
+  // ("eq12", "session"): the temperatures at 1, 3, 10, 30 and 100 bins, and
+  // for the session matcher the open-set thresholds (Eq. (12) has no noise
+  // model: never unknown). Throws std::invalid_argument for another name.
+  static Calibration tuned(const std::string& method);
+  // Throws std::invalid_argument naming the bad setting: no temperature, a
+  // length not increasing or not > 0, a temperature not finite and > 0, a
+  // threshold NaN.
+  void validate() const;
+  double temperature(double bins) const;
+  double unknown_fit(double bins) const;  // +infinity without thresholds
+};
+
+struct Verdict {
+  std::vector<double> probability;  // one per ranking entry, summing to 1
+  bool unknown = false;             // the best match fits worse than Calibration::unknown_fit
+  double confidence() const { return probability.empty() ? 0.0 : probability.front(); }
+};
+
+// The probabilities of a classification's ranking and whether it is unknown;
+// the sweep's length is the best match's compared elements over the table's
+// rows. A fit of NaN (Eq. (12)) is never unknown.
+Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration);
+
+}  // namespace tofmat

@@ -1,0 +1,96 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Calibration: temperatures by sweep length, softmax probabilities over a ranking, open-set rejection.
+#include "tofmat/core/confidence.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace tofmat {
+
+namespace {
+
+using Knots = std::vector<std::pair<double, double>>;
+
+// Linear in log length between knots, held beyond the ends.
+double interpolate(const Knots& knots, double bins) {
+  if (bins <= knots.front().first) return knots.front().second;
+  if (bins >= knots.back().first) return knots.back().second;
+  const auto hi = std::upper_bound(knots.begin(), knots.end(), bins,
+                                   [](double b, const std::pair<double, double>& k) { return b < k.first; });
+  const auto lo = hi - 1;
+  const double u = std::log(bins / lo->first) / std::log(hi->first / lo->first);
+  return lo->second + u * (hi->second - lo->second);
+}
+
+void validate_lengths(const Knots& knots, const char* what) {
+  double last = 0.0;
+  for (const auto& k : knots) {
+    if (!(k.first > last) || !std::isfinite(k.first)) {
+      throw std::invalid_argument(std::string("calibration: ") + what + ": lengths must be finite, > 0 and increasing");
+    }
+    last = k.first;
+  }
+}
+
+}  // namespace
+
+Calibration Calibration::tuned(const std::string& method) {
+  // From `tofmat evaluate --source curves --json`, the tuning split's
+  // "temperature" of each method (tests/python/test_confidence.py fits them
+  // again and checks these), and the open-set threshold docs/evaluation.md
+  // chose from the tuning split's false-reject curve.
+  Calibration c;
+  if (method == "eq12") {
+    c.temperatures = {{1, 6.4428}, {3, 13.4846}, {10, 8.3733}, {30, 4.0522}, {100, 2.8403}};
+  } else if (method == "session") {
+    c.temperatures = {{1, 0.58761}, {3, 0.46185}, {10, 0.63629}, {30, 1.5047}, {100, 12.563}};
+    c.unknown_fits = {{1, 1.1329}, {3, 1.8806}, {10, 4.4808}, {30, 7.5325}, {100, 27.353}};
+  } else {
+    throw std::invalid_argument("calibration: unknown method '" + method + "': 'eq12' or 'session'");
+  }
+  return c;
+}
+
+void Calibration::validate() const {
+  if (temperatures.empty()) throw std::invalid_argument("calibration: give at least one (bins, temperature) knot");
+  validate_lengths(temperatures, "temperatures");
+  validate_lengths(unknown_fits, "unknown_fits");
+  for (const auto& k : temperatures) {
+    if (!(k.second > 0.0) || !std::isfinite(k.second)) {
+      throw std::invalid_argument("calibration: temperatures must be finite and > 0");
+    }
+  }
+  for (const auto& k : unknown_fits) {
+    if (std::isnan(k.second)) throw std::invalid_argument("calibration: an unknown_fits threshold is NaN");
+  }
+}
+
+double Calibration::temperature(double bins) const { return interpolate(temperatures, bins); }
+
+double Calibration::unknown_fit(double bins) const {
+  return unknown_fits.empty() ? std::numeric_limits<double>::infinity() : interpolate(unknown_fits, bins);
+}
+
+Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration) {
+  Verdict v;
+  if (c.ranking.empty()) return v;
+  const double bins = static_cast<double>(c.best().valid) / std::max<std::uint32_t>(n_rows, 1);
+  const double t = calibration.temperature(bins);
+  // softmax(-d / T), shifted by the best (lowest) score so that no term overflows.
+  const double best = c.best().distance;
+  double sum = 0.0;
+  v.probability.reserve(c.ranking.size());
+  for (const Match& m : c.ranking) {
+    const double e = std::exp(-(m.distance - best) / t);
+    v.probability.push_back(e);
+    sum += e;
+  }
+  for (double& p : v.probability) p /= sum;
+  v.unknown = c.best().fit > calibration.unknown_fit(bins);  // false for NaN
+  return v;
+}
+
+}  // namespace tofmat

@@ -1,0 +1,91 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// Calibrated confidence and open-set rejection (confidence.hpp) on cases
+// worked by hand: the temperature between knots, softmax probabilities, the
+// threshold by sweep length, and the reserved label.
+#include "tofmat/core/confidence.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "tofmat/core/exemplar_table.hpp"
+
+namespace {
+
+using namespace tofmat;
+
+Classification ranking(std::initializer_list<Match> matches) {
+  Classification c;
+  c.ranking = matches;
+  return c;
+}
+
+TEST(Calibration, InterpolatesInLogLengthAndHoldsBeyondTheEnds) {
+  Calibration c;
+  c.temperatures = {{1.0, 2.0}, {100.0, 6.0}};
+  c.validate();
+  EXPECT_DOUBLE_EQ(c.temperature(0.5), 2.0);
+  EXPECT_DOUBLE_EQ(c.temperature(1.0), 2.0);
+  EXPECT_DOUBLE_EQ(c.temperature(10.0), 4.0);  // half way in log length
+  EXPECT_DOUBLE_EQ(c.temperature(1000.0), 6.0);
+  EXPECT_EQ(c.unknown_fit(10.0), std::numeric_limits<double>::infinity());  // no thresholds: never
+  c.unknown_fits = {{1.0, 1.0}, {10.0, 3.0}};
+  EXPECT_DOUBLE_EQ(c.unknown_fit(std::sqrt(10.0)), 2.0);
+}
+
+TEST(Calibration, ProbabilitiesAreASoftmaxAtTheLengthsTemperature) {
+  Calibration c;
+  c.temperatures = {{1.0, 2.0}};
+  // Scores 0 and 2 ln 2 at T = 2: weights 1 and 1/2.
+  const auto v = judge(ranking({{0, 0.0, 4}, {1, 2.0 * std::log(2.0), 4}}), 2, c);
+  ASSERT_EQ(v.probability.size(), 2u);
+  EXPECT_NEAR(v.probability[0], 2.0 / 3.0, 1e-12);
+  EXPECT_NEAR(v.probability[1], 1.0 / 3.0, 1e-12);
+  EXPECT_NEAR(v.confidence(), 2.0 / 3.0, 1e-12);
+  EXPECT_FALSE(v.unknown);
+  // Scores far apart and far from zero neither overflow nor lose the best.
+  const auto far = judge(ranking({{0, -1e6, 4}, {1, 1e300, 4}}), 2, c);
+  EXPECT_EQ(far.probability[0], 1.0);
+  EXPECT_EQ(far.probability[1], 0.0);
+}
+
+TEST(Calibration, TheSweepsLengthChoosesTheThreshold) {
+  Calibration c;
+  c.temperatures = {{1.0, 1.0}};
+  c.unknown_fits = {{1.0, 1.0}, {100.0, 20.0}};
+  // One row: valid elements are bins. A fit of 5 is unknown at 1 bin, known at 100.
+  EXPECT_TRUE(judge(ranking({{0, 0.0, 1, 5.0}}), 1, c).unknown);
+  EXPECT_FALSE(judge(ranking({{0, 0.0, 100, 5.0}}), 1, c).unknown);
+  // Two rows: 200 elements are 100 bins.
+  EXPECT_FALSE(judge(ranking({{0, 0.0, 200, 5.0}}), 2, c).unknown);
+  // Eq. (12) has no fit (NaN): never unknown.
+  EXPECT_FALSE(judge(ranking({{0, 0.0, 1}}), 1, c).unknown);
+}
+
+TEST(Calibration, TunedSettingsAndBadOnesAreClearErrors) {
+  const auto eq12 = Calibration::tuned("eq12");
+  const auto session = Calibration::tuned("session");
+  eq12.validate();
+  session.validate();
+  EXPECT_TRUE(eq12.unknown_fits.empty());
+  EXPECT_EQ(session.unknown_fits.size(), 5u);
+  EXPECT_THROW(Calibration::tuned("onnx"), std::invalid_argument);
+  Calibration c;
+  EXPECT_THROW(c.validate(), std::invalid_argument);  // no temperature
+  c.temperatures = {{10.0, 1.0}, {3.0, 1.0}};
+  EXPECT_THROW(c.validate(), std::invalid_argument);  // not increasing
+  c.temperatures = {{1.0, 0.0}};
+  EXPECT_THROW(c.validate(), std::invalid_argument);  // T not > 0
+  c.temperatures = {{1.0, 1.0}};
+  c.unknown_fits = {{1.0, std::nan("")}};
+  EXPECT_THROW(c.validate(), std::invalid_argument);
+}
+
+TEST(Calibration, UnknownIsAReservedMaterialName) {
+  EXPECT_THROW(validate_material_name(kUnknownLabel), std::invalid_argument);
+  EXPECT_NO_THROW(validate_material_name("unknown2"));
+}
+
+}  // namespace

@@ -1,0 +1,91 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""Confidence and the open set in the SDK: the tuned calibration is what the evaluation fits on its
+tuning split (fitted again here), every result carries probabilities and a fit, a query unlike any
+material is ``unknown`` and a material's own sweep is not, and Eq. (12) is never unknown."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import tofmat
+from tofmat.evaluation.confidence import fit_temperatures
+from tofmat.evaluation.matchers import CompiledSessionMatcher, Eq12Matcher, SessionParams
+from tofmat.evaluation.open_set import choose_thresholds, open_set_curves
+from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, calibrated_json
+from tofmat.evaluation.sessions import CurveSessions, calibrated_model, draw_queries
+
+
+@pytest.fixture(scope="module")
+def tuning(real_table: tofmat.ExemplarTable):  # type: ignore[no-untyped-def]
+    library, device = calibrated_json()
+    model = calibrated_model(library, real_table)
+    cs = CurveSessions(real_table, model, device, library)
+    return model, draw_queries(cs, list(LENGTHS), 10, SPLIT_SEEDS["tune"])
+
+
+def test_the_tuned_calibration_is_what_the_tuning_split_fits(real_table: tofmat.ExemplarTable, tuning) -> None:  # type: ignore[no-untyped-def]
+    model, q = tuning
+    params = SessionParams(model.offsets_sd_mm, drift_sd_mm=(5.0, 3.0), floor_mm=0.5, huber_k=3.0)
+    for method, matcher in (("eq12", Eq12Matcher(real_table)), ("session", CompiledSessionMatcher(real_table, params))):
+        fitted = fit_temperatures(matcher.scores(q.queries), q.truth, q.lengths)
+        tuned = tofmat.Calibration.tuned(method)
+        assert [n for n, _ in tuned.temperatures] == list(LENGTHS)
+        for n, t in tuned.temperatures:
+            assert t == pytest.approx(fitted[int(n)], rel=1e-3), (method, n)
+    prior = tofmat.SessionPrior(list(model.offsets_sd_mm))
+    chosen = choose_thresholds(open_set_curves(real_table, prior, q))
+    tuned = tofmat.Calibration.tuned("session")
+    assert [n for n, _ in tuned.unknown_fits] == list(LENGTHS)
+    for n, f in tuned.unknown_fits:
+        assert f == pytest.approx(chosen[int(n)], rel=1e-3), n
+    assert tofmat.Calibration.tuned("eq12").unknown_fits == []
+
+
+def test_results_carry_probabilities_and_a_fit(real_table: tofmat.ExemplarTable, rng: np.random.Generator) -> None:
+    m = real_table.index_of("cork")
+    q = real_table.features[m].copy()
+    q[:, 60:90] += rng.normal(0.0, 0.2, (2, 30)).astype(np.float32)
+    q[:, :60] = np.nan
+    q[:, 90:] = np.nan
+    for method in ("eq12", "session"):
+        r = tofmat.Classifier(real_table, method=method).classify(q)  # type: ignore[arg-type]
+        p = np.array([x.probability for x in r.ranking])
+        assert p.sum() == pytest.approx(1.0) and np.all(np.diff(p) <= 0)
+        assert r.confidence == p[0] and 0.0 < r.confidence <= 1.0
+        assert r.material == "cork" and r.nearest == "cork" and not r.unknown and r.index == m
+        assert math.isnan(r.fit) if method == "eq12" else math.isfinite(r.fit)
+
+
+def test_a_query_unlike_any_material_is_unknown(real_table: tofmat.ExemplarTable) -> None:
+    # 30 bins of a curve no material has: 40 mm on the 16 MHz row, -40 on the 80 MHz row.
+    q = np.full((2, 200), np.nan, dtype=np.float32)
+    q[0, 50:80], q[1, 50:80] = 40.0, -40.0
+    session = tofmat.Classifier(real_table, method="session")
+    r = session.classify(q)
+    assert r.unknown and r.material == "unknown" and r.index == -1
+    assert r.fit > session.calibration.unknown_fit(30) and r.nearest in real_table.materials
+    assert "unknown=True" in repr(r)
+    # Eq. (12) has no noise model: it labels the nearest material.
+    e = tofmat.Classifier(real_table).classify(q)
+    assert not e.unknown and e.material == e.nearest
+    # A calibration without thresholds never rejects.
+    never = tofmat.Calibration([(1.0, 1.0)])
+    assert not tofmat.Classifier(real_table, method="session", calibration=never).classify(q).unknown
+
+
+def test_bad_calibrations_are_clear_errors() -> None:
+    with pytest.raises(ValueError, match="temperature"):
+        tofmat.Calibration([])
+    with pytest.raises(ValueError, match="increasing"):
+        tofmat.Calibration([(10.0, 1.0), (1.0, 1.0)])
+    with pytest.raises(ValueError, match="> 0"):
+        tofmat.Calibration([(1.0, -1.0)])
+    with pytest.raises(ValueError, match="NaN"):
+        tofmat.Calibration([(1.0, 1.0)], [(1.0, math.nan)])
+    with pytest.raises(ValueError, match="unknown method"):
+        tofmat.Calibration.tuned("onnx")
+    with pytest.raises(ValueError, match="reserved"):
+        tofmat.ExemplarTable(["unknown"], np.zeros((1, 1, 2)), tofmat.BinSpec(600, 3, 2), [(16, 120)])
