@@ -49,7 +49,7 @@ Profile = Literal["handheld", "segmentation", "sorting"]
 Backend = Literal["fixed", "float"]
 ClassifierMethod = Literal["eq12", "session"]
 DepthKind = Literal["80", "16", "120", "combined"]
-LabelState = Literal["tracking", "no_target", "final", "mixed"]
+LabelState = Literal["tracking", "no_target", "final", "mixed", "unknown"]
 DeviceState = Literal["opening", "streaming", "disconnected", "stopped", "failed"]
 Role = Literal["read", "control"]
 
@@ -125,8 +125,8 @@ class Label:
     timestamp_ns: int  # CLOCK_MONOTONIC when the daemon had the whole frame
     received_ns: int  # CLOCK_MONOTONIC when this client read it
     profile: Profile
-    state: LabelState  # "mixed": a sorting burst whose frames disagreed
-    material: str | None  # None when state is "no_target"
+    state: LabelState  # "mixed": a sorting burst whose frames disagreed; "unknown": no material fits
+    material: str | None  # None when state is "no_target" or "unknown" (the nearest: ranking[0])
     index: int
     distance: float
     valid: int
@@ -135,6 +135,10 @@ class Label:
     trigger: int | None
     truth: Truth | None
     simulated: bool  # the frame came from the simulated camera (or a recording of it), not a camera
+    # Minor 7 on (None before it, and when no_target): the best match's calibrated probability
+    # among the candidates, and its fit under the session matcher's noise model (None with eq12).
+    confidence: float | None = None
+    fit: float | None = None
 
     @property
     def latency_ms(self) -> float:
@@ -181,7 +185,7 @@ class SortDecision:
     """The sorting line's decision for one item (stream "sort"): once when its outlet is chosen
     (``state == "decided"``, ``fire_ns`` planned) and once when the pusher was driven
     (``state == "fired"``). ``reason`` is "sorted" or why it went to reject: too_close, camera_busy,
-    camera_lost, no_target, mixed, not_confident, no_outlet, late, full."""
+    camera_lost, no_target, mixed, unknown, not_confident, no_outlet, late, full."""
 
     state: str
     item: int
@@ -240,6 +244,8 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
             trigger=meta.get("trigger"),
             truth=Truth(truth["material"], truth["depth_mm"]) if truth else None,
             simulated=bool(meta.get("simulated", False)),
+            confidence=meta.get("confidence"),
+            fit=meta.get("fit"),
         )
     if name == "label_map":
         # (a copy: the user's to change; a frame's 217 KB is nothing next to the frame's own work)

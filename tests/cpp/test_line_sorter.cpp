@@ -199,15 +199,23 @@ TEST(Sorter, UnconfidentUnknownAndUnsortedMaterialsGoToReject) {
   BurstLabel mixed{104, "wood", true, 12.5, "wood"};
   mixed.mixed = true;
   l.sorter.label(mixed, l.now);
-  l.run_to(6000 * kMs);
-  EXPECT_EQ(l.bursts.size(), 4u);
+  l.item_at(3500 * kMs);
+  l.run_to(4000 * kMs);
+  // A burst no material explains (open set): its nearest has an outlet, but it is never sorted.
+  BurstLabel unknown{105, "wood", true, 12.5, "wood"};
+  unknown.unknown = true;
+  l.sorter.label(unknown, l.now);
+  l.run_to(7000 * kMs);
+  EXPECT_EQ(l.bursts.size(), 5u);
   EXPECT_EQ(l.of(1, "decided").at(0).reason, Reason::kNotConfident);
   EXPECT_EQ(l.of(2, "decided").at(0).reason, Reason::kNoOutlet);
   EXPECT_EQ(l.of(3, "decided").at(0).reason, Reason::kNoTarget);
   EXPECT_EQ(l.of(4, "decided").at(0).reason, Reason::kMixed);
   EXPECT_STREQ(reason_name(Reason::kMixed), "mixed");
-  for (std::uint64_t i = 1; i <= 4; ++i) EXPECT_EQ(l.of(i, "fired").at(0).outlet, "reject") << i;
-  EXPECT_EQ(l.sorter.counts().rejected, 4u);
+  EXPECT_EQ(l.of(5, "decided").at(0).reason, Reason::kUnknown);
+  EXPECT_STREQ(reason_name(Reason::kUnknown), "unknown");
+  for (std::uint64_t i = 1; i <= 5; ++i) EXPECT_EQ(l.of(i, "fired").at(0).outlet, "reject") << i;
+  EXPECT_EQ(l.sorter.counts().rejected, 5u);
   EXPECT_TRUE(l.alarms.empty()) << "no fault of the line";
   EXPECT_TRUE(l.faults.empty());
 }

@@ -370,6 +370,8 @@ void expect_same(const LabelEvent& a, const LabelEvent& b) {
     EXPECT_EQ(a.ranking[i].distance, b.ranking[i].distance);
   }
   EXPECT_EQ(a.trigger, b.trigger);
+  EXPECT_EQ(a.confidence, b.confidence);
+  EXPECT_EQ(a.fit, b.fit);
   ASSERT_EQ(a.truth.has_value(), b.truth.has_value());
   if (a.truth) {
     EXPECT_EQ(a.truth->material, b.truth->material);
@@ -392,6 +394,8 @@ LabelEvent full_label() {
     e.ranking.push_back({"m" + std::to_string(i), 1.0 / 3.0 * static_cast<double>(i) - 5e-300});
   e.trigger = 42;
   e.truth = Truth{"cork", 873.25000000000011};
+  e.confidence = 0.8125;
+  e.fit = -1.0 / 3.0;
   return e;
 }
 
@@ -481,6 +485,8 @@ TEST(Messages, LabelRoundTrip) {
   const Message n = through_reader(encode_label(none));
   EXPECT_FALSE(n.meta.contains("trigger"));
   EXPECT_FALSE(n.meta.contains("truth"));
+  EXPECT_FALSE(n.meta.contains("confidence"));  // absent, never null (minor 7)
+  EXPECT_FALSE(n.meta.contains("fit"));
   const LabelEvent d = decode_label(n);
   expect_same(d, none);
   EXPECT_EQ(d.index, -1);
@@ -696,6 +702,15 @@ TEST(Messages, LabelBounds) {
   j = good;
   j["index"] = -1;
   EXPECT_EQ(decode_label(event(j)).index, -1);
+  // A confidence is a probability; a fit any number.
+  for (const Json& bad : {Json(-0.01), Json(1.5), Json("0.5")}) {
+    j = good;
+    j["confidence"] = bad;
+    EXPECT_CONTAINS(err(j), "confidence");
+  }
+  j = good;
+  j["fit"] = "x";
+  EXPECT_CONTAINS(err(j), "fit");
   // Unsigned fields: negative, fractional, beyond their width.
   for (const char* key : {"frame", "timestamp_ns", "valid", "bins_covered", "trigger"}) {
     SCOPED_TRACE(key);

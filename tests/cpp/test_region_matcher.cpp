@@ -143,6 +143,41 @@ TEST_P(RegionMatcherBackends, TheSessionClassifierForgivesASessionsOffset) {
   EXPECT_EQ(e.material, "cork");
   EXPECT_EQ(e.distance, b->best().distance);
   EXPECT_EQ(e.ranking.size(), 3u);
+  // With its calibrated confidence and its fit; Eq. (12) has a confidence but no fit.
+  ASSERT_TRUE(e.confidence && e.fit);
+  EXPECT_GT(*e.confidence, 0.0);
+  EXPECT_LE(*e.confidence, 1.0);
+  EXPECT_EQ(*e.fit, b->best().fit);
+  EXPECT_FALSE(session.unknown(*b));
+  const LabelEvent f = eq12.label_event(*a, 3);
+  EXPECT_TRUE(f.confidence && !f.fit);
+}
+
+TEST_P(RegionMatcherBackends, ASweepNoMaterialExplainsIsUnknown) {
+  // Cork read 40 mm high on the 16 MHz row and 40 mm low on the 80 MHz row,
+  // far beyond any session's offset (sd 2.27 and 0.73 mm) and unlike every
+  // material's curve: the session matcher names none; Eq. (12) still does.
+  const auto table = real_table();
+  RegionMatcher eq12(table, {}, GetParam());
+  RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession);
+  FrameMaker maker;
+  for (std::uint32_t k = 0; k < 12; ++k) {
+    auto target = target_in_roi("cork", 40 + 8 * k);
+    target.depths.mm[1] += 40.0;  // the 16 MHz group: row 0
+    target.depths.mm[0] -= 40.0;  // the 80 MHz group: row 1 (d80 - d120)
+    const RawFrame& f = maker.draw(k, {target});
+    eq12.accumulate(eq12.decode(f, kCentreRoi));
+    session.accumulate(session.decode(f, kCentreRoi));
+  }
+  const auto a = eq12.classify(), b = session.classify();
+  ASSERT_TRUE(a && b);
+  EXPECT_TRUE(session.unknown(*b));
+  const LabelEvent e = session.label_event(*b, 3);
+  EXPECT_EQ(e.material, "");
+  EXPECT_EQ(e.index, -1);
+  EXPECT_EQ(e.ranking.size(), 3u);  // the nearest ones, still
+  EXPECT_FALSE(eq12.unknown(*a));
+  EXPECT_NE(eq12.label_event(*a, 3).material, "");
 }
 
 TEST_P(RegionMatcherBackends, ASweepOfAnOrdinaryMaterialIsToldFromItsNeighbours) {

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import os
 import re
 import shutil
@@ -97,6 +98,9 @@ def test_the_session_classifier_labels_the_sweeps(start: Callable[..., Daemon]) 
             assert label.truth is not None and label.material == label.truth.material
             distances = [r.distance for r in label.ranking]
             assert distances == sorted(distances) and label.distance == distances[0]
+            # Protocol 1.7: a calibrated confidence, and the session matcher's fit (known: no unknown).
+            assert label.confidence is not None and 0.0 < label.confidence <= 1.0
+            assert label.fit is not None and math.isfinite(label.fit)
 
 
 def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:

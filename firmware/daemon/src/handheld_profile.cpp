@@ -43,7 +43,7 @@ class HandheldProfile : public Profile {
     matcher_.accumulate(d);
     if (const auto c = matcher_.classify()) {
       auto e = matcher_.label_event(*c, config_.top_k);
-      e.state = "tracking";
+      e.state = matcher_.unknown(*c) ? "unknown" : "tracking";
       emit.label(stamp(e, frame));
     }
   }

@@ -24,6 +24,7 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
                              Backend backend, Method method)
     : table_(std::move(table)),
       backend_(backend),
+      calibration_(tofmat::Calibration::tuned(method == Method::kSession ? "session" : "eq12")),
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
   if (method == Method::kSession)
@@ -92,11 +93,16 @@ void RegionMatcher::reset() {
   float_acc_.reset();
 }
 
+bool RegionMatcher::unknown(const Classification& c) const { return judge(c, table_->n_rows(), calibration_).unknown; }
+
 protocol::LabelEvent RegionMatcher::label_event(const Classification& c, int top_k) const {
   protocol::LabelEvent e;
   const auto& names = table_->materials();
-  e.material = names[c.best().index];
-  e.index = static_cast<std::int32_t>(c.best().index);
+  const Verdict v = judge(c, table_->n_rows(), calibration_);
+  e.material = v.unknown ? "" : names[c.best().index];
+  e.index = v.unknown ? -1 : static_cast<std::int32_t>(c.best().index);
+  e.confidence = v.confidence();
+  if (std::isfinite(c.best().fit)) e.fit = c.best().fit;
   e.distance = c.best().distance;
   e.valid = c.best().valid;
   e.bins_covered = bins_covered();

@@ -159,7 +159,11 @@ void SortingLine::label(const protocol::LabelEvent& e) {
   if (!e.trigger || e.state == "tracking") return;
   line::BurstLabel l;
   l.trigger = *e.trigger;
-  l.material = e.state == "final" || e.state == "mixed" ? e.material : "";
+  l.unknown = e.state == "unknown";
+  // An unknown burst has no material; its nearest is the ranking's first.
+  l.material = e.state == "final" || e.state == "mixed" ? e.material
+               : l.unknown && !e.ranking.empty()        ? e.ranking.front().material
+                                                        : "";
   l.mixed = e.state == "mixed";
   l.distance = e.distance;
   l.confident = !l.material.empty() && (options_.max_distance <= 0 || e.distance <= options_.max_distance);

@@ -82,7 +82,7 @@ class SortingProfile : public Profile {
         if (!strict || f.label == majority) matcher_.accumulate(f.decoded);
       if (const auto c = matcher_.classify()) {
         e = matcher_.label_event(*c, config_.top_k);
-        e.state = strict && c->best().index == majority ? "final" : "mixed";
+        e.state = matcher_.unknown(*c) ? "unknown" : strict && c->best().index == majority ? "final" : "mixed";
       }
     }
     e.frame = last.sequence;

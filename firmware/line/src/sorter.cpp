@@ -17,6 +17,7 @@ const char* reason_name(Reason r) {
     case Reason::kCameraLost: return "camera_lost";
     case Reason::kNoTarget: return "no_target";
     case Reason::kMixed: return "mixed";
+    case Reason::kUnknown: return "unknown";
     case Reason::kNotConfident: return "not_confident";
     case Reason::kNoOutlet: return "no_outlet";
     case Reason::kLate: return "late";
@@ -151,6 +152,7 @@ void Sorter::label(const BurstLabel& l, std::uint64_t now_ns) {
   if (it == items_.end()) return;  // (its item was decided without it: late, or the camera was lost)
   if (l.material.empty()) return decide(*it, config_.reject, Reason::kNoTarget, &l, now_ns);
   if (l.mixed) return decide(*it, config_.reject, Reason::kMixed, &l, now_ns);
+  if (l.unknown) return decide(*it, config_.reject, Reason::kUnknown, &l, now_ns);
   if (!l.confident) return decide(*it, config_.reject, Reason::kNotConfident, &l, now_ns);
   const auto outlet = outlet_for(l.material);
   if (!outlet) return decide(*it, config_.reject, Reason::kNoOutlet, &l, now_ns);

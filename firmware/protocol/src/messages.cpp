@@ -192,6 +192,8 @@ Message encode_label(const LabelEvent& e) {
   if (e.trigger) m.meta["trigger"] = *e.trigger;
   if (e.truth) m.meta["truth"] = {{"material", e.truth->material}, {"depth_mm", e.truth->depth_mm}};
   if (e.simulated) m.meta["simulated"] = true;
+  if (e.confidence) m.meta["confidence"] = *e.confidence;
+  if (e.fit) m.meta["fit"] = *e.fit;
   return m;
 }
 
@@ -219,6 +221,11 @@ LabelEvent decode_label(const Message& m) {
     e.truth = Truth{get_string(t, "material", kMaxNameBytes), get_number(t, "depth_mm")};
   }
   e.simulated = j.contains("simulated") && get_bool(j, "simulated");
+  if (j.contains("confidence")) {
+    e.confidence = get_number(j, "confidence");
+    if (!(*e.confidence >= 0.0 && *e.confidence <= 1.0)) throw ProtocolError("field \"confidence\" must be 0..1");
+  }
+  if (j.contains("fit")) e.fit = get_number(j, "fit");
   return e;
 }
 

@@ -9,6 +9,7 @@
 #include <variant>
 
 #include "tofmat/core/classifier.hpp"
+#include "tofmat/core/confidence.hpp"
 #include "tofmat/core/depth_bins.hpp"
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/fixed_decode.hpp"
@@ -35,14 +36,19 @@ class RegionMatcher {
   std::optional<Classification> classify() const;
   std::uint32_t bins_covered() const;
   void reset();
-  // The label event of a classification (ranking cut to top_k).
+  // The label event of a classification (ranking cut to top_k), with its
+  // calibrated confidence and fit (confidence.hpp); when no candidate explains
+  // the query (unknown) its material is "" and index -1, the ranking kept.
   protocol::LabelEvent label_event(const Classification& c, int top_k) const;
+  // Whether the open set rejects the classification (the session matcher only).
+  bool unknown(const Classification& c) const;
   // Depth images of a decoded region for the subscribers that want them.
   static void emit_depths(const Decoded& d, const RawFrame& frame, const Emitter& emit);
 
  private:
   std::shared_ptr<const ExemplarTable> table_;
   Backend backend_;
+  tofmat::Calibration calibration_;  // (the confidence's, not the camera's)
   std::unique_ptr<FixedClassifier> fixed_;
   std::unique_ptr<FloatClassifier> float_;
   std::unique_ptr<SessionClassifier> session_;  // Method::kSession (on either backend's query)

@@ -57,6 +57,7 @@ enum class Reason {
   kCameraLost,
   kNoTarget,
   kMixed,
+  kUnknown,
   kNotConfident,
   kNoOutlet,
   kLate,
@@ -72,6 +73,7 @@ struct BurstLabel {
   double distance = 0;
   std::optional<std::string> truth;  // a simulated item's real material (passed on, never used)
   bool mixed = false;                // the burst's frames disagreed (another item in the ROI): never sorted
+  bool unknown = false;              // no material of the table explains it (open set): never sorted
 };
 
 struct SortEvent {

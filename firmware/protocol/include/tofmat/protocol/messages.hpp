@@ -74,8 +74,8 @@ struct LabelEvent {
   std::uint64_t frame = 0;         // the source's frame sequence number
   std::uint64_t timestamp_ns = 0;  // CLOCK_MONOTONIC when the frame was complete in the daemon
   std::string profile;
-  std::string state;                     // "tracking", "no_target", "final" or "mixed" (sorting burst)
-  std::string material;                  // "" when state is no_target
+  std::string state;                     // "tracking", "no_target", "final", "mixed" (sorting burst) or "unknown"
+  std::string material;                  // "" when state is no_target or unknown
   std::int32_t index = -1;               // into the daemon's table materials
   double distance = 0.0;                 // Eq. (12), mm^2
   std::uint32_t valid = 0;               // elements compared
@@ -84,6 +84,11 @@ struct LabelEvent {
   std::optional<std::uint64_t> trigger;  // sorting: the trigger this answers
   std::optional<Truth> truth;
   bool simulated = false;  // the frame came from a simulated camera (sent only when true)
+  // Minor 7: the best match's calibrated probability among the candidates
+  // (0..1), and its fit under the session matcher's noise model (a normal
+  // deviate; absent with Eq. (12)); both absent when no_target.
+  std::optional<double> confidence;
+  std::optional<double> fit;
 };
 Message encode_label(const LabelEvent& e);
 LabelEvent decode_label(const Message& m);
