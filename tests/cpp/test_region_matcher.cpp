@@ -117,6 +117,20 @@ TEST_P(RegionMatcherBackends, EachFrameAddsItsBinAndTheSweepMatchesItsMaterial) 
   EXPECT_EQ(m.bins_covered(), frames);
 }
 
+// A 12-frame sweep of cork whose 16 MHz group reads row0_mm high (row 0,
+// d16 - d120) and 80 MHz group row1_mm high (row 1, d80 - d120), as another
+// session's offsets would move them, accumulated into each matcher.
+void offset_cork_sweep(double row0_mm, double row1_mm, std::initializer_list<RegionMatcher*> matchers) {
+  FrameMaker maker;
+  for (std::uint32_t k = 0; k < 12; ++k) {
+    auto target = target_in_roi("cork", 40 + 8 * k);
+    target.depths.mm[1] += row0_mm;
+    target.depths.mm[0] += row1_mm;
+    const RawFrame& f = maker.draw(k, {target});
+    for (RegionMatcher* m : matchers) m->accumulate(m->decode(f, kCentreRoi));
+  }
+}
+
 TEST_P(RegionMatcherBackends, TheSessionClassifierForgivesASessionsOffset) {
   // A sweep of cork whose 16 MHz row reads 3 mm high (another session's
   // offset, added to the query as the camera would): Eq. (12) takes it for
@@ -124,14 +138,7 @@ TEST_P(RegionMatcherBackends, TheSessionClassifierForgivesASessionsOffset) {
   const auto table = real_table();
   RegionMatcher eq12(table, {}, GetParam());
   RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession);
-  FrameMaker maker;
-  for (std::uint32_t k = 0; k < 12; ++k) {
-    auto target = target_in_roi("cork", 40 + 8 * k);
-    target.depths.mm[1] += 3.0;  // the 16 MHz group: row 0 (d16 - d120) reads 3 mm high
-    const RawFrame& f = maker.draw(k, {target});
-    eq12.accumulate(eq12.decode(f, kCentreRoi));
-    session.accumulate(session.decode(f, kCentreRoi));
-  }
+  offset_cork_sweep(3.0, 0.0, {&eq12, &session});
   const auto a = eq12.classify(), b = session.classify();
   ASSERT_TRUE(a && b);
   EXPECT_NE(table->materials()[a->best().index], "cork");
@@ -160,15 +167,7 @@ TEST_P(RegionMatcherBackends, ASweepNoMaterialExplainsIsUnknown) {
   const auto table = real_table();
   RegionMatcher eq12(table, {}, GetParam());
   RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession);
-  FrameMaker maker;
-  for (std::uint32_t k = 0; k < 12; ++k) {
-    auto target = target_in_roi("cork", 40 + 8 * k);
-    target.depths.mm[1] += 40.0;  // the 16 MHz group: row 0
-    target.depths.mm[0] -= 40.0;  // the 80 MHz group: row 1 (d80 - d120)
-    const RawFrame& f = maker.draw(k, {target});
-    eq12.accumulate(eq12.decode(f, kCentreRoi));
-    session.accumulate(session.decode(f, kCentreRoi));
-  }
+  offset_cork_sweep(40.0, -40.0, {&eq12, &session});
   const auto a = eq12.classify(), b = session.classify();
   ASSERT_TRUE(a && b);
   EXPECT_TRUE(session.unknown(*b));
