@@ -389,6 +389,58 @@ def _connect(address: str, token_file: Path | None) -> Any:
         raise click.ClickException(str(e)) from e
 
 
+@table.command("add")
+@click.argument("name")
+@_client_options
+@click.option("--table", "table_path", required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              help="The table (.tmx) to add the material to.")  # fmt: skip
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table file to write (default: --table itself, replaced atomically).")  # fmt: skip
+@click.option("--passes", default=3, show_default=True, type=click.IntRange(1, 100),
+              help="Hand-held passes to average.")  # fmt: skip
+@click.option("--min-bins", default=10, show_default=True, type=click.IntRange(1, 65535),
+              help="A pass covering fewer depth bins is left out.")  # fmt: skip
+@click.option("--timeout", "timeout_s", default=300.0, show_default=True, type=FiniteFloat(1, 86400),
+              help="Seconds to wait for all the passes.")  # fmt: skip
+@click.option("--replace", is_flag=True, help="Capture a material the table already has again, in place of its curve.")
+def table_add(name: str, address: str, token_file: Path | None, table_path: Path, output: Path | None, passes: int,
+              min_bins: int, timeout_s: float, replace: bool) -> None:  # fmt: skip
+    """Capture a new material NAME with the box and add it to a table.
+
+    tofmatd (at --address, in its handheld profile, on whatever source it runs: the camera, the
+    simulator or a replay) watches the user sweep the material through the depth range, --passes
+    times; their mean is the curve and their spread its bin noise, written with the table (format
+    1.1). Then send tofmatd SIGHUP (systemctl reload tofmatd) to serve the new table.
+    """
+    from .tools.capture import CaptureError, capture_passes, combine_passes, with_material
+
+    table = ExemplarTable.load(table_path)
+    out = output or table_path
+    if name in table.materials and not replace:
+        raise click.BadParameter(
+            f"the table already has '{name}': give --replace to capture it again", param_hint="NAME"
+        )
+    try:  # the table's rules for a name, before anyone sweeps anything
+        ExemplarTable([name], np.zeros((1, table.n_rows, table.n_bins)), table.bins, table.rows)
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="NAME") from e
+    with _connect(address, token_file) as client:
+        click.echo(f"sweep {name} through the camera's region {passes} time(s), taking it away between passes")
+        try:
+            got = capture_passes(client, table, passes, min_bins, timeout_s, click.echo)
+            cap = combine_passes(got, table, name)
+            new = with_material(table, name, cap, replace)
+        except CaptureError as e:
+            raise Failure(str(e)) from e
+    new.save(out)
+    seen = int(np.isfinite(cap.curve).all(axis=0).sum())
+    noise = ", ".join("-" if np.isnan(v) else f"{v:.3f}" for v in cap.noise_mm)
+    click.echo(
+        f"wrote {out}: {name} ({seen} of {table.n_bins} bins, noise {noise} mm from the {cap.noise_from}), "
+        f"{len(new)} materials; send tofmatd SIGHUP to serve it"
+    )
+
+
 @main.command("sort")
 @_client_options
 @click.option("--gate", "gates", multiple=True, required=True,
