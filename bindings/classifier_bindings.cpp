@@ -13,6 +13,7 @@
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/confidence.hpp"
 #include "tofmat/core/fixed_classifier.hpp"
+#include "tofmat/core/fixed_session_classifier.hpp"
 #include "tofmat/core/session_classifier.hpp"
 
 namespace tofmat::py {
@@ -65,9 +66,6 @@ class Classifier {
     if (method != "eq12" && method != "session") {
       throw pyb::value_error("unknown method '" + method + "': available methods are 'eq12' and 'session'");
     }
-    if (method == "session" && backend == "fixed") {
-      throw pyb::value_error("method 'session' has no fixed-point backend yet: use backend='float'");
-    }
     if (method != "session" && (prior || !noise_mm.is_none())) {
       throw pyb::value_error("prior and noise_mm are settings of method='session'");
     }
@@ -91,8 +89,13 @@ class Classifier {
             "noise_mm");
         noise.assign(a.data(), a.data() + a.size());
       }
-      session_ = std::make_unique<SessionClassifier>(table_, prior ? *prior : SessionPrior::tuned(*table_),
-                                                     std::move(noise), std::move(candidates));
+      const SessionPrior chosen = prior ? *prior : SessionPrior::tuned(*table_);
+      if (backend == "fixed") {
+        fixed_session_ =
+            std::make_unique<FixedSessionClassifier>(table_, chosen, std::move(noise), std::move(candidates));
+      } else {
+        session_ = std::make_unique<SessionClassifier>(table_, chosen, std::move(noise), std::move(candidates));
+      }
     } else if (backend == "fixed") {
       fixed_ = std::make_unique<FixedClassifier>(table_, std::move(candidates));
     } else {
@@ -135,20 +138,28 @@ class Classifier {
 
   std::vector<std::string> materials() const {
     std::vector<std::string> out;
-    const auto& c = session_ ? session_->candidates() : fixed_ ? fixed_->candidates() : float_->candidates();
+    const auto& c = session_         ? session_->candidates()
+                    : fixed_session_ ? fixed_session_->candidates()
+                    : fixed_         ? fixed_->candidates()
+                                     : float_->candidates();
     for (auto i : c) out.push_back(table_->materials()[i]);
     return out;
   }
   const std::string& backend() const { return backend_; }
   const std::string& method() const { return method_; }
+  const SessionClassifier* session_reference() const {
+    return session_ ? session_.get() : fixed_session_ ? &fixed_session_->reference() : nullptr;
+  }
   std::optional<SessionPrior> prior() const {
-    return session_ ? std::optional<SessionPrior>(session_->prior()) : std::nullopt;
+    const auto* s = session_reference();
+    return s ? std::optional<SessionPrior>(s->prior()) : std::nullopt;
   }
   std::optional<pyb::array_t<double>> noise_mm() const {
-    if (!session_) return std::nullopt;
+    const auto* s = session_reference();
+    if (!s) return std::nullopt;
     pyb::array_t<double> a(
         {static_cast<pyb::ssize_t>(table_->n_materials()), static_cast<pyb::ssize_t>(table_->n_rows())});
-    std::copy(session_->noise_mm().begin(), session_->noise_mm().end(), a.mutable_data());
+    std::copy(s->noise_mm().begin(), s->noise_mm().end(), a.mutable_data());
     return a;
   }
   std::shared_ptr<ExemplarTable> table() const { return table_; }
@@ -160,15 +171,18 @@ class Classifier {
   }
 
   Classification core_classify(const float* q, std::size_t n) const {
-    return session_ ? session_->classify(q, n) : fixed_ ? fixed_->classify(q, n) : float_->classify(q, n);
+    if (session_) return session_->classify(q, n);
+    if (fixed_session_) return fixed_session_->classify(q, n);
+    return fixed_ ? fixed_->classify(q, n) : float_->classify(q, n);
   }
 
   std::shared_ptr<ExemplarTable> table_;
   std::string backend_, method_;
   Calibration calibration_;
-  std::unique_ptr<FloatClassifier> float_;  // one of the three, by method and backend
+  std::unique_ptr<FloatClassifier> float_;  // one of the four, by method and backend
   std::unique_ptr<FixedClassifier> fixed_;
   std::unique_ptr<SessionClassifier> session_;
+  std::unique_ptr<FixedSessionClassifier> fixed_session_;
 };
 
 }  // namespace

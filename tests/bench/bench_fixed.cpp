@@ -64,9 +64,11 @@
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/fixed_distance.hpp"
+#include "tofmat/core/fixed_session_classifier.hpp"
 #include "tofmat/core/frame_decode.hpp"
 #include "tofmat/core/pixel_classifier.hpp"
 #include "tofmat/core/raw_lut.hpp"
+#include "tofmat/core/session_classifier.hpp"
 #include "tofmat/kinect/constants.hpp"
 #include "tofmat/kinect/raw_unpack.hpp"
 
@@ -287,7 +289,8 @@ struct Options {
 [[noreturn]] void usage(const char* why) {
   std::fprintf(
       stderr,
-      "error: %s\nusage: tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]\n"
+      "error: %s\nusage: tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|session|frame|unpack|unpack_roi|\n"
+      "                          unpack_region]\n"
       "                          [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]\n",
       why);
   std::exit(2);
@@ -315,15 +318,15 @@ Options parse(int argc, char** argv) {
       usage(("unknown option " + a).c_str());
     }
   }
-  const std::vector<std::string> ops{"all",  "stiff", "decode", "roi",        "nn",
-                                     "dist", "frame", "unpack", "unpack_roi", "unpack_region"};
+  const std::vector<std::string> ops{"all",     "stiff", "decode", "roi",        "nn",           "dist",
+                                     "session", "frame", "unpack", "unpack_roi", "unpack_region"};
   if (std::find(ops.begin(), ops.end(), o.op) == ops.end()) usage("unknown --op");
   if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float" && o.kernel != "reference") {
     usage("unknown --kernel");
   }
   const bool unpack = o.op == "unpack" || o.op == "unpack_roi" || o.op == "unpack_region";
   if (o.kernel == "float" && (o.op == "dist" || o.op == "frame" || unpack))
-    usage("--kernel float is for decode, roi and nn");
+    usage("--kernel float is for decode, roi, nn and session");
   if (o.kernel == "reference" && o.op != "unpack" && o.op != "unpack_roi") {
     usage("--kernel reference is for unpack and unpack_roi");
   }
@@ -390,6 +393,25 @@ int run_single(const Options& o) {
             g_sink = g_sink + static_cast<std::int64_t>(sums[0].sum);
           }
         }
+      }
+    }
+  } else if (o.op == "session") {  // the session-robust matcher, tuned settings, a whole query
+    const auto table = load_table(o.db);
+    std::vector<Query> qs = make_queries(*table);
+    if (o.window != 0) {
+      qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != o.window; }), qs.end());
+    }
+    units = qs.size();
+    const SessionPrior prior = SessionPrior::tuned(*table);
+    if (o.kernel == "float") {
+      const SessionClassifier sc(table, prior);
+      for (long r = 0; r < reps; ++r) {
+        for (const auto& q : qs) g_sink = g_sink + sc.classify(q.v.data(), q.v.size()).best().index;
+      }
+    } else {  // (scalar only: best is the same code)
+      const FixedSessionClassifier fs(table, prior);
+      for (long r = 0; r < reps; ++r) {
+        for (const auto& q : qs) g_sink = g_sink + fs.classify(q.v.data(), q.v.size()).best().index;
       }
     }
   } else if (o.op == "frame") {

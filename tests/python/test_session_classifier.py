@@ -89,11 +89,25 @@ def test_the_tuned_prior_and_the_classifier_s_settings(real_table: tofmat.Exempl
     assert r.material == "cork" and [m.material for m in r.ranking] == ["cork", "wood"]
 
 
+def test_the_fixed_point_backend_follows_the_float_one(real_table: tofmat.ExemplarTable, queries: np.ndarray) -> None:
+    # (The exhaustive check against the float reference on the same quantised values:
+    # tests/cpp/test_fixed_session_classifier.cpp.) On the unquantised queries the labels agree but
+    # for near ties, and the settings and noise are shared.
+    fixed = tofmat.Classifier(real_table, backend="fixed", method="session")
+    flt = tofmat.Classifier(real_table, method="session")
+    assert fixed.backend == "fixed" and fixed.prior is not None and np.array_equal(fixed.noise_mm, flt.noise_mm)
+    a, b = fixed.classify_batch(queries), flt.classify_batch(queries)
+    same = np.mean([x.index == y.index for x, y in zip(a, b, strict=True)])
+    assert same >= 0.98, same
+    diff = [
+        abs(x.distance - y.distance) / (1 + abs(y.distance)) for x, y in zip(a, b, strict=True) if x.index == y.index
+    ]
+    assert max(diff) < 0.02, max(diff)
+
+
 def test_bad_settings_are_clear_errors(real_table: tofmat.ExemplarTable) -> None:
     with pytest.raises(ValueError, match="unknown method 'nearest'"):
         tofmat.Classifier(real_table, method="nearest")  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="no fixed-point backend yet"):
-        tofmat.Classifier(real_table, backend="fixed", method="session")
     with pytest.raises(ValueError, match="settings of method='session'"):
         tofmat.Classifier(real_table, prior=tofmat.SessionPrior([1.0, 1.0]))
     with pytest.raises(ValueError, match="noise_mm"):

@@ -3,6 +3,8 @@
 // double precision, candidate by candidate and row by row.
 #include "tofmat/core/session_classifier.hpp"
 
+#include "session_solve.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -14,7 +16,6 @@ namespace tofmat {
 namespace {
 
 constexpr double kLog2Pi = 1.8378770664093453;  // log(2 pi)
-constexpr int kMaxTerms = kSessionMaxTerms;
 
 // numpy.median: the mean of the two middle values for an even count.
 double median(std::vector<double> v) {
@@ -23,39 +24,6 @@ double median(std::vector<double> v) {
   const double hi = v[n / 2];
   if (n % 2 == 1) return hi;
   return 0.5 * (hi + *std::max_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(n / 2)));
-}
-
-// Solves the K x K symmetric positive definite system P beta = b (K <= 3) by
-// Cholesky; returns log det P.
-double cholesky_solve(std::array<std::array<double, kMaxTerms>, kMaxTerms> P, int k,
-                      const std::array<double, kMaxTerms>& b, std::array<double, kMaxTerms>& beta) {
-  std::array<std::array<double, kMaxTerms>, kMaxTerms> L{};
-  double logdet = 0.0;
-  for (int i = 0; i < k; ++i) {
-    for (int j = 0; j <= i; ++j) {
-      double s = P[i][j];
-      for (int m = 0; m < j; ++m) s -= L[i][m] * L[j][m];
-      if (i == j) {
-        // P = (prior precision, > 0) + a Gram matrix: positive definite.
-        L[i][i] = std::sqrt(s);
-        logdet += 2.0 * std::log(L[i][i]);
-      } else {
-        L[i][j] = s / L[j][j];
-      }
-    }
-  }
-  std::array<double, kMaxTerms> y{};
-  for (int i = 0; i < k; ++i) {
-    double s = b[i];
-    for (int m = 0; m < i; ++m) s -= L[i][m] * y[m];
-    y[i] = s / L[i][i];
-  }
-  for (int i = k - 1; i >= 0; --i) {
-    double s = y[i];
-    for (int m = i + 1; m < k; ++m) s -= L[m][i] * beta[m];
-    beta[i] = s / L[i][i];
-  }
-  return logdet;
 }
 
 }  // namespace
@@ -227,7 +195,7 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
             for (int t = 0; t < k; ++t) P[s][t] /= v;
             P[s][s] += 1.0 / prior_var_[r][s];
           }
-          logdet = cholesky_solve(P, k, b, beta) + log_det_prior_[r];
+          logdet = session_detail::cholesky_solve(P, k, b, beta) + log_det_prior_[r];
           for (std::size_t i = 0; i < nr; ++i) {
             double fit = 0.0;
             for (int s = 0; s < k; ++s) fit += beta[s] * basis[at[i]][s];

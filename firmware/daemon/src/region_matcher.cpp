@@ -27,7 +27,10 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
       calibration_(tofmat::Calibration::tuned(method == Method::kSession ? "session" : "eq12")),
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
-  if (method == Method::kSession)
+  if (method == Method::kSession && backend_ == Backend::kFixed)
+    fixed_session_ = std::make_unique<FixedSessionClassifier>(table_, SessionPrior::tuned(*table_),
+                                                              std::vector<double>{}, std::move(candidates));
+  else if (method == Method::kSession)
     session_ = std::make_unique<SessionClassifier>(table_, SessionPrior::tuned(*table_), std::vector<double>{},
                                                    std::move(candidates));
   else if (backend_ == Backend::kFixed)
@@ -78,6 +81,7 @@ std::optional<Classification> RegionMatcher::classify() const {
   if (std::none_of(q.begin(), q.end(), [](float v) { return std::isfinite(v); })) return std::nullopt;
   try {
     if (session_) return session_->classify(q.data(), q.size());
+    if (fixed_session_) return fixed_session_->classify(q.data(), q.size());
     return backend_ == Backend::kFixed ? fixed_->classify(q.data(), q.size()) : float_->classify(q.data(), q.size());
   } catch (const std::invalid_argument&) {
     return std::nullopt;  // no candidate shares an observed element yet

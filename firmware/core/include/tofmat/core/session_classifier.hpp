@@ -92,6 +92,13 @@ class SessionClassifier {
   const SessionPrior& prior() const { return prior_; }
   const std::vector<double>& noise_mm() const { return noise_; }
   const std::vector<std::uint32_t>& candidates() const { return candidates_; }
+  // The nuisance terms with a prior, as derived from the prior (the
+  // fixed-point path shares them): how many, each one's Legendre degree, per
+  // row their prior variances (mm^2) and the log of their product.
+  int terms() const { return terms_; }
+  int degree(int t) const { return degree_[static_cast<std::size_t>(t)]; }
+  const std::array<double, kSessionMaxTerms>& prior_var(std::uint32_t row) const { return prior_var_[row]; }
+  double log_det_prior(std::uint32_t row) const { return log_det_prior_[row]; }
 
  private:
   static constexpr int kMaxTerms = kSessionMaxTerms;

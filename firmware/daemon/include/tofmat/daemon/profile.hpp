@@ -27,8 +27,8 @@ enum class Backend { kFixed, kFloat };
 Backend parse_backend(const std::string& name);  // "fixed" | "float"; throws std::invalid_argument
 
 // How the handheld and sorting profiles match a region's query: Eq. (12), or
-// the session-robust matcher (session_classifier.hpp; docs/evaluation.md),
-// which runs in double precision on either backend's query. The segmentation
+// the session-robust matcher (docs/evaluation.md): FixedSessionClassifier on
+// the fixed-point backend, SessionClassifier (double) on the float one. The segmentation
 // profile's per-pixel labels are Eq. (12) whatever this says.
 enum class Method { kEq12, kSession };
 Method parse_method(const std::string& name);  // "eq12" | "session"; throws std::invalid_argument

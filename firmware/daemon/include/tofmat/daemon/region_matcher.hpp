@@ -14,6 +14,7 @@
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/fixed_depth_bins.hpp"
+#include "tofmat/core/fixed_session_classifier.hpp"
 #include "tofmat/core/session_classifier.hpp"
 #include "tofmat/daemon/profile.hpp"
 
@@ -51,7 +52,8 @@ class RegionMatcher {
   tofmat::Calibration calibration_;  // (the confidence's, not the camera's)
   std::unique_ptr<FixedClassifier> fixed_;
   std::unique_ptr<FloatClassifier> float_;
-  std::unique_ptr<SessionClassifier> session_;  // Method::kSession (on either backend's query)
+  std::unique_ptr<SessionClassifier> session_;             // Method::kSession, the float backend
+  std::unique_ptr<FixedSessionClassifier> fixed_session_;  // Method::kSession, the fixed-point backend
   FixedDepthBinAccumulator fixed_acc_;
   DepthBinAccumulator float_acc_;
 };
