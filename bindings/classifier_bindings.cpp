@@ -58,7 +58,7 @@ class Classifier {
   Classifier(std::shared_ptr<ExemplarTable> table, const std::string& backend,
              const std::optional<std::vector<std::string>>& materials, const std::string& method,
              const std::optional<SessionPrior>& prior, const pyb::handle& noise_mm,
-             const std::optional<Calibration>& calibration)
+             const std::optional<Calibration>& calibration, bool open_set)
       : table_(std::move(table)) {
     if (backend != "float" && backend != "fixed") {
       throw pyb::value_error("unknown backend '" + backend + "': available backends are 'fixed' and 'float'");
@@ -72,6 +72,10 @@ class Classifier {
     backend_ = backend;
     method_ = method;
     calibration_ = calibration ? *calibration : Calibration::tuned(method);
+    if (open_set && method != "session") {
+      throw pyb::value_error("open_set needs method='session': Eq. (12) has no noise model to judge a fit");
+    }
+    if (!open_set) calibration_.unknown_fits.clear();  // never unknown
     std::vector<std::uint32_t> candidates;
     if (materials) {
       if (materials->empty()) throw pyb::value_error("materials: give at least one candidate, or None for all");
@@ -218,8 +222,8 @@ void register_classifier(pyb::module_& m) {
           "confidence", [](const Result& r) { return r.ranking.front().probability; },
           "The best match's calibrated probability among the candidates.")
       .def_readonly("unknown", &Result::unknown,
-                    "True when the best match's fit exceeds the calibration's threshold at the sweep's length "
-                    "(open set).")
+                    "True when the classifier was made with open_set=True and the best match's fit exceeds "
+                    "the calibration's threshold at the sweep's length.")
       .def_property_readonly(
           "nearest", [](const Result& r) { return r.ranking.front().material; },
           "The best match's material, even when the label is 'unknown'.")
@@ -311,14 +315,15 @@ void register_classifier(pyb::module_& m) {
       "sqrt(6); NaN for a row of fewer than 5 elements.");
 
   pyb::class_<Classifier>(m, "Classifier",
-                          "Nearest-neighbour classifier with partial matching: Eq. (12), or the session-robust "
-                          "matcher (method='session', docs/evaluation.md).")
+                          "Nearest-neighbour classifier with partial matching: the session-robust matcher "
+                          "(method='session', the default: docs/evaluation.md), or the paper's Eq. (12) "
+                          "(method='eq12').")
       .def(pyb::init<std::shared_ptr<ExemplarTable>, const std::string&, const std::optional<std::vector<std::string>>&,
                      const std::string&, const std::optional<SessionPrior>&, const pyb::handle&,
-                     const std::optional<Calibration>&>(),
+                     const std::optional<Calibration>&, bool>(),
            pyb::arg("table"), pyb::arg("backend") = "float", pyb::arg("materials") = pyb::none(),
-           pyb::arg("method") = "eq12", pyb::arg("prior") = pyb::none(), pyb::arg("noise_mm") = pyb::none(),
-           pyb::arg("calibration") = pyb::none())
+           pyb::arg("method") = "session", pyb::arg("prior") = pyb::none(), pyb::arg("noise_mm") = pyb::none(),
+           pyb::arg("calibration") = pyb::none(), pyb::arg("open_set") = false)
       .def("classify", &Classifier::classify, pyb::arg("query"),
            "query: float array (n_rows, n_bins), NaN = missing. Raises ValueError if no element is valid.")
       .def("classify_batch", &Classifier::classify_batch, pyb::arg("queries"),
@@ -330,7 +335,8 @@ void register_classifier(pyb::module_& m) {
       .def_property_readonly("noise_mm", &Classifier::noise_mm,
                              "The session matcher's noise per material and row, mm (None for eq12).")
       .def_property_readonly("calibration", &Classifier::calibration,
-                             "Confidence and open-set settings (default: Calibration.tuned(method)).")
+                             "Confidence and open-set settings in effect (default: Calibration.tuned(method), its "
+                             "thresholds only with open_set=True).")
       .def_property_readonly("table", &Classifier::table);
 }
 

@@ -2,7 +2,8 @@
 """Classify a saved partial query against an exemplar table, without a daemon.
 
 A query is an .npy array of the table's shape (rows x depth bins, float32), NaN where nothing was
-observed; tofmat.Classifier matches it by Eq. (12) and ranks every material. --make-demo-query
+observed; tofmat.Classifier matches it (the session-robust matcher, or Eq. (12) with --method eq12)
+and ranks every material with its probability. --make-demo-query
 first writes such a query, cut from the table's own curve of --material over a few bins:
 
     python examples/classify_saved_query.py ../shared/data/tanaka2017_kinect2_db \\
@@ -52,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--material", help="the demo query's material (default: the table's first)")
     parser.add_argument("--bins", type=int, default=10, help="depth bins in the demo query (default %(default)s)")
     parser.add_argument("--top", type=int, default=5, help="ranking entries shown (default %(default)s)")
+    parser.add_argument("--method", choices=["session", "eq12"], default="session",
+                        help="the matcher (default %(default)s; eq12: the paper's distance, mm^2)")  # fmt: skip
     args = parser.parse_args(argv)
     if (args.query is None) == (args.make_demo_query is None):
         parser.error("give a query .npy or --make-demo-query OUT.npy")
@@ -73,14 +76,18 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"{args.query} is not an .npy array of numbers") from e
         observed = int(np.isfinite(query).sum()) if query.dtype.kind == "f" else query.size
         print(f"query {args.query}: {' x '.join(map(str, query.shape))} {query.dtype}, {observed} elements observed")
-        result = tofmat.Classifier(table, backend="float").classify(query)
+        result = tofmat.Classifier(table, backend="float", method=args.method).classify(query)
     except (OSError, ValueError) as e:  # a missing or unreadable file, a query of the wrong shape or dtype
         print(f"classify_saved_query.py: {e}", file=sys.stderr)
         return 1
 
-    print(f"{result.material}: distance {result.distance:.4f} mm^2 over {result.valid} elements")
+    unit = " mm^2" if args.method == "eq12" else ""  # the session matcher's score has none
+    print(
+        f"{result.material}: {'distance' if unit else 'score'} {result.distance:.4f}{unit} over {result.valid} "
+        f"elements, confidence {result.confidence:.2f}"
+    )
     for rank, m in enumerate(result.ranking[: args.top], start=1):
-        print(f"  {rank}. {m.material:<14s} {m.distance:10.4f} mm^2")
+        print(f"  {rank}. {m.material:<14s} {m.distance:10.4f}{unit}  p {m.probability:.3f}")
     return 0
 
 

@@ -6,7 +6,7 @@ Depth-Dependent Time-of-Flight Distortion" (CVPR 2017) on a C++ core:
 
 >>> import tofmat
 >>> table = tofmat.ExemplarTable.from_npy_dir("shared/data/tanaka2017_kinect2_db")
->>> clf = tofmat.Classifier(table, backend="float")
+>>> clf = tofmat.Classifier(table)  # the session-robust matcher; method="eq12": the paper's
 >>> clf.classify(table.features[0]).material
 'acryl'
 

@@ -161,10 +161,11 @@ class Classifier:
         table: ExemplarTable,
         backend: Literal["float", "fixed"] = "float",
         materials: Sequence[str] | None = None,
-        method: Literal["eq12", "session"] = "eq12",
+        method: Literal["eq12", "session"] = "session",
         prior: SessionPrior | None = None,
         noise_mm: npt.ArrayLike | None = None,
         calibration: Calibration | None = None,
+        open_set: bool = False,
     ) -> None: ...
     def classify(self, query: npt.ArrayLike) -> ClassificationResult: ...
     def classify_batch(self, queries: npt.ArrayLike) -> list[ClassificationResult]: ...

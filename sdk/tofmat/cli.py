@@ -142,16 +142,28 @@ def table_info(path: Path, as_json: bool) -> None:
 
 
 def result_dict(r: ClassificationResult, top: int) -> dict[str, Any]:
-    return {
+    out: dict[str, Any] = {
         "material": r.material,
         "index": r.index,
         "distance": r.distance,
         "valid": r.valid,
+        "confidence": r.confidence,
+        "unknown": r.unknown,
+        "nearest": r.nearest,
         "ranking": [
-            {"material": m.material, "index": m.index, "distance": m.distance, "valid": m.valid}
+            {
+                "material": m.material,
+                "index": m.index,
+                "distance": m.distance,
+                "valid": m.valid,
+                "probability": m.probability,
+            }
             for m in r.ranking[:top]
         ],
     }
+    if r.fit == r.fit:  # (NaN with eq12: left out, JSON has no NaN)
+        out["fit"] = r.fit
+    return out
 
 
 @main.command()
@@ -159,15 +171,22 @@ def result_dict(r: ClassificationResult, top: int) -> dict[str, Any]:
 @click.argument("query", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--materials", help="Comma-separated candidate materials (default: all).")
 @click.option("--top", default=5, show_default=True, type=click.IntRange(1, 255), help="Ranking entries to print.")
+@click.option("--method", type=click.Choice(["session", "eq12"]), default="session", show_default=True,
+              help="The session-robust matcher, or the paper's Eq. (12) (distance in mm^2).")  # fmt: skip
+@click.option("--open-set", is_flag=True, help="Label a query no material explains 'unknown' (--method session).")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def classify(table_path: Path, query: Path, materials: str | None, top: int, as_json: bool) -> None:
+def classify(
+    table_path: Path, query: Path, materials: str | None, top: int, method: str, open_set: bool, as_json: bool
+) -> None:
     """Classify QUERY.npy: (rows, bins) or a batch (n, rows, bins), NaN = missing."""
     t = open_table(table_path)
     try:
         q = np.load(query, allow_pickle=False)
     except (ValueError, EOFError) as e:
         raise ValueError(f"{query}: not a readable .npy array: {e}") from e
-    clf = Classifier(t, backend="float", materials=csv_list(materials))
+    if open_set and method != "session":
+        raise click.BadParameter("needs --method session (Eq. (12) has no noise model)", param_hint="--open-set")
+    clf = Classifier(t, backend="float", materials=csv_list(materials), method=cast(Any, method), open_set=open_set)
     single = q.ndim == 2
     results = [clf.classify(q)] if single else clf.classify_batch(q)
     if as_json:
@@ -176,9 +195,10 @@ def classify(table_path: Path, query: Path, materials: str | None, top: int, as_
         return
     for i, r in enumerate(results):
         prefix = "" if single else f"[{i}] "
-        click.echo(f"{prefix}{r.material}  distance {r.distance:.4f} mm^2  valid {r.valid}")
+        score = f"distance {r.distance:.4f} mm^2" if method == "eq12" else f"score {r.distance:.4f}"
+        click.echo(f"{prefix}{r.material}  {score}  valid {r.valid}  confidence {r.confidence:.3f}")
         for m in r.ranking[1:top]:
-            click.echo(f"{' ' * len(prefix)}  then {m.material:<14s} {m.distance:.4f}")
+            click.echo(f"{' ' * len(prefix)}  then {m.material:<14s} {m.distance:.4f}  p {m.probability:.3f}")
 
 
 @main.group()

@@ -166,10 +166,13 @@ TEST_P(RegionMatcherBackends, ASweepNoMaterialExplainsIsUnknown) {
   // material's curve: the session matcher names none; Eq. (12) still does.
   const auto table = real_table();
   RegionMatcher eq12(table, {}, GetParam());
-  RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession);
-  offset_cork_sweep(40.0, -40.0, {&eq12, &session});
-  const auto a = eq12.classify(), b = session.classify();
-  ASSERT_TRUE(a && b);
+  RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession, /*open_set=*/true);
+  RegionMatcher closed(table, {}, GetParam(), tofmat::daemon::Method::kSession);  // open set off: the default
+  offset_cork_sweep(40.0, -40.0, {&eq12, &session, &closed});
+  const auto a = eq12.classify(), b = session.classify(), c = closed.classify();
+  ASSERT_TRUE(a && b && c);
+  EXPECT_FALSE(closed.unknown(*c));
+  EXPECT_NE(closed.label_event(*c, 3).material, "");
   EXPECT_TRUE(session.unknown(*b));
   const LabelEvent e = session.label_event(*b, 3);
   EXPECT_EQ(e.material, "");

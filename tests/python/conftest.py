@@ -63,7 +63,7 @@ def real_table(db_dir: Path) -> tofmat.ExemplarTable:
 
 @pytest.fixture(scope="session")
 def real_clf(real_table: tofmat.ExemplarTable) -> tofmat.Classifier:
-    return tofmat.Classifier(real_table, backend="float")
+    return tofmat.Classifier(real_table, backend="float", method="eq12")
 
 
 @pytest.fixture(scope="session")

@@ -87,7 +87,7 @@ def test_classifier_properties(real_table, real_clf) -> None:
     assert real_clf.backend == "float"
     assert real_clf.materials == real_table.materials
     assert real_clf.table.materials == real_table.materials
-    sub = tofmat.Classifier(real_table, materials=["pvc", "epvc"])
+    sub = tofmat.Classifier(real_table, materials=["pvc", "epvc"], method="eq12")
     assert sorted(sub.materials) == ["epvc", "pvc"]
 
 
@@ -120,7 +120,7 @@ def test_classify_batch_names_the_bad_query(real_table, real_clf) -> None:
 
 
 def test_materials_restrict_the_ranking(real_table, rng) -> None:
-    clf = tofmat.Classifier(real_table, materials=["pvc", "epvc"])
+    clf = tofmat.Classifier(real_table, materials=["pvc", "epvc"], method="eq12")
     pvc, epvc = real_table.index_of("pvc"), real_table.index_of("epvc")
     for m in range(len(real_table)):
         q = real_table.features[m] + rng.normal(0, 0.3, (2, 200)).astype(np.float32)
@@ -133,25 +133,25 @@ def test_materials_restrict_the_ranking(real_table, rng) -> None:
 
 
 def test_duplicate_candidate_names_count_once(real_table) -> None:
-    clf = tofmat.Classifier(real_table, materials=["pvc", "pvc"])
+    clf = tofmat.Classifier(real_table, materials=["pvc", "pvc"], method="eq12")
     assert [m.material for m in clf.classify(real_table.features[0]).ranking] == ["pvc"]
 
 
 @pytest.mark.parametrize("materials", [["pvc", "granite"], ["granite"], ["PVC"], [""]])
 def test_unknown_material_is_value_error(real_table, materials) -> None:
     with pytest.raises(ValueError):
-        tofmat.Classifier(real_table, materials=materials)
+        tofmat.Classifier(real_table, materials=materials, method="eq12")
 
 
 def test_empty_candidate_list_is_value_error(real_table) -> None:
     with pytest.raises(ValueError):
-        tofmat.Classifier(real_table, materials=[])
+        tofmat.Classifier(real_table, materials=[], method="eq12")
 
 
 @pytest.mark.parametrize("backend", ["nope", "", "FLOAT", "fixed16", "Fixed"])
 def test_unknown_backend_is_value_error(real_table, backend) -> None:
     with pytest.raises(ValueError, match="backend"):
-        tofmat.Classifier(real_table, backend=backend)
+        tofmat.Classifier(real_table, backend=backend, method="eq12")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -359,7 +359,7 @@ def test_all_nan_material_never_in_any_ranking(rng) -> None:
     feats[2] = np.nan
     t = make_table(["a", "b", "gone", "d"], feats)
     assert t.valid_counts[2] == 0
-    clf = tofmat.Classifier(t)
+    clf = tofmat.Classifier(t, method="eq12")
     # Even a query identical to the would-be values (0) or of any shape of mask.
     for _ in range(50):
         q = rng.normal(0, 3, (2, 20))
@@ -372,7 +372,7 @@ def test_all_nan_material_never_in_any_ranking(rng) -> None:
         check_against_reference(r, q, t)
     # Restricting the candidates to it alone leaves nothing to compare with.
     with pytest.raises(ValueError, match="no valid element"):
-        tofmat.Classifier(t, materials=["gone"]).classify(np.zeros((2, 20), np.float32))
+        tofmat.Classifier(t, materials=["gone"], method="eq12").classify(np.zeros((2, 20), np.float32))
 
 
 def test_candidate_sharing_no_element_is_skipped_and_none_is_error() -> None:
@@ -382,7 +382,7 @@ def test_candidate_sharing_no_element_is_skipped_and_none_is_error() -> None:
     feats[1, 0, 4:8] = 2.0  # "right" only in bins 4..7
     feats[2, 0, 2:6] = 3.0  # "middle" in bins 2..5
     t = make_table(["left", "right", "middle"], feats, rows=[(16, 120)])
-    clf = tofmat.Classifier(t)
+    clf = tofmat.Classifier(t, method="eq12")
 
     q = np.full((1, n_bins), np.nan, np.float32)
     q[0, 6:8] = 2.5
@@ -405,7 +405,7 @@ def test_candidate_sharing_no_element_is_skipped_and_none_is_error() -> None:
     with pytest.raises(ValueError, match="shares no valid element"):
         clf.classify(q)
     with pytest.raises(ValueError, match="shares no valid element"):
-        tofmat.Classifier(t, materials=["left"]).classify(
+        tofmat.Classifier(t, materials=["left"], method="eq12").classify(
             np.where(np.arange(n_bins) >= 4, 1.0, np.nan)[None].astype(np.float32)
         )
 
@@ -417,7 +417,7 @@ def test_ties_are_broken_by_the_lower_index() -> None:
     feats[1] -= 1.0
     feats[2] += 1.0  # 1 and 2 are equally far from 0
     t = make_table(["w", "x", "y", "z"], feats, rows=[(16, 120)])
-    clf = tofmat.Classifier(t)
+    clf = tofmat.Classifier(t, method="eq12")
     r = clf.classify(np.zeros((1, 5), np.float32))
     assert [x.material for x in r.ranking] == ["x", "y", "w", "z"]
     assert [x.distance for x in r.ranking] == [1.0, 1.0, 4.0, 4.0]
@@ -456,7 +456,7 @@ def test_constructor_rejects_infinite_values_and_non_float() -> None:
 def test_classifier_keeps_its_table_alive(rng) -> None:
     feats = rng.normal(0, 1, (3, 2, 30)).astype(np.float32)
     t = make_table(["a", "b", "c"], feats)
-    clf = tofmat.Classifier(t)
+    clf = tofmat.Classifier(t, method="eq12")
     del t
     gc.collect()
     assert clf.classify(feats[1]).material == "b"
@@ -483,8 +483,8 @@ def test_concurrent_classify_is_consistent(real_table, real_clf, rng) -> None:
 def test_fixed_backend_agrees_with_float_on_noisy_windows(real_table, rng) -> None:
     """The fixed-point path (int16 table steps, integer Eq. (12)) labels noisy 10-bin windows
     of the real curves as the float path does, with distances within the quantisation bound."""
-    fixed = tofmat.Classifier(real_table, backend="fixed")
-    flt = tofmat.Classifier(real_table, backend="float")
+    fixed = tofmat.Classifier(real_table, backend="fixed", method="eq12")
+    flt = tofmat.Classifier(real_table, backend="float", method="eq12")
     assert fixed.backend == "fixed" and fixed.materials == real_table.materials
     feats = real_table.features
     n_bins = real_table.n_bins
@@ -504,7 +504,7 @@ def test_fixed_backend_agrees_with_float_on_noisy_windows(real_table, rng) -> No
 
 
 def test_fixed_backend_errors_and_candidates(real_table) -> None:
-    fixed = tofmat.Classifier(real_table, backend="fixed", materials=["pvc", "epvc"])
+    fixed = tofmat.Classifier(real_table, backend="fixed", materials=["pvc", "epvc"], method="eq12")
     assert sorted(fixed.materials) == ["epvc", "pvc"]
     q = np.full((real_table.n_rows, real_table.n_bins), np.nan, np.float32)
     with pytest.raises(ValueError, match="no valid element"):

@@ -125,9 +125,14 @@ def test_classify_single_query(cli_table: Path, real_table, tmp_path: Path, rng)
         assert len(out["ranking"]) == 5  # --top default
         d = [x["distance"] for x in out["ranking"]]
         assert d == sorted(d) and out["distance"] == d[0]
+        assert 0 < out["confidence"] <= 1 and out["unknown"] is False and "fit" in out  # the session matcher
     # Plain text output names the label.
     p = run("classify", "--table", cli_table, tmp_path / "pvc.npy")
-    assert p.stdout.split()[0] == "pvc"
+    assert p.stdout.split()[0] == "pvc" and "score" in p.stdout and "confidence" in p.stdout
+    # Eq. (12) by name: its distance in mm^2, no fit.
+    e = json.loads(run("classify", "--table", cli_table, tmp_path / "pvc.npy", "--json", "--method", "eq12").stdout)
+    assert e["material"] == "pvc" and "fit" not in e and e["distance"] < 1.0
+    assert "mm^2" in run("classify", "--table", cli_table, tmp_path / "pvc.npy", "--method", "eq12").stdout
 
 
 def test_classify_batch_query(cli_table: Path, real_table, tmp_path: Path, rng) -> None:
@@ -147,10 +152,18 @@ def test_classify_batch_query(cli_table: Path, real_table, tmp_path: Path, rng) 
 def test_classify_with_materials(cli_table: Path, real_table, tmp_path: Path) -> None:
     np.save(tmp_path / "q.npy", real_table.features[real_table.index_of("copper")])
     out = json.loads(
-        run("classify", "--table", cli_table, tmp_path / "q.npy", "--json", "--materials", "pvc,epvc").stdout
-    )
-    assert out["material"] in ("pvc", "epvc")
+        run("classify", "--table", cli_table, tmp_path / "q.npy", "--json", "--materials", "pvc,epvc",
+            "--open-set").stdout
+    )  # fmt: skip
+    # Copper is neither: with its open set the session matcher says unknown, and names the nearest.
+    assert out["material"] == "unknown" and out["unknown"] is True and out["index"] == -1
+    assert out["nearest"] in ("pvc", "epvc")
     assert {x["material"] for x in out["ranking"]} == {"pvc", "epvc"}
+    # Without it (the default), and with Eq. (12), the nearest is the label.
+    args = ("classify", "--table", cli_table, tmp_path / "q.npy", "--json", "--materials", "pvc,epvc")
+    assert json.loads(run(*args).stdout)["material"] in ("pvc", "epvc")
+    assert json.loads(run(*args, "--method", "eq12").stdout)["material"] in ("pvc", "epvc")
+    assert_clean_error(run(*args, "--method", "eq12", "--open-set", ok=False), "--method session")
     p = run("classify", "--table", cli_table, tmp_path / "q.npy", "--materials", "pvc,granite", ok=False)
     assert_clean_error(p, "granite")
 

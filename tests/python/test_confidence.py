@@ -63,17 +63,21 @@ def test_a_query_unlike_any_material_is_unknown(real_table: tofmat.ExemplarTable
     # 30 bins of a curve no material has: 40 mm on the 16 MHz row, -40 on the 80 MHz row.
     q = np.full((2, 200), np.nan, dtype=np.float32)
     q[0, 50:80], q[1, 50:80] = 40.0, -40.0
-    session = tofmat.Classifier(real_table, method="session")
+    session = tofmat.Classifier(real_table, method="session", open_set=True)
     r = session.classify(q)
     assert r.unknown and r.material == "unknown" and r.index == -1
     assert r.fit > session.calibration.unknown_fit(30) and r.nearest in real_table.materials
     assert "unknown=True" in repr(r)
     # Eq. (12) has no noise model: it labels the nearest material.
-    e = tofmat.Classifier(real_table).classify(q)
+    e = tofmat.Classifier(real_table, method="eq12").classify(q)
     assert not e.unknown and e.material == e.nearest
-    # A calibration without thresholds never rejects.
+    # Without open_set (the default), or with a calibration without thresholds, nothing is rejected.
+    assert not tofmat.Classifier(real_table).classify(q).unknown
+    assert tofmat.Classifier(real_table).calibration.unknown_fits == []
     never = tofmat.Calibration([(1.0, 1.0)])
-    assert not tofmat.Classifier(real_table, method="session", calibration=never).classify(q).unknown
+    assert not tofmat.Classifier(real_table, calibration=never, open_set=True).classify(q).unknown
+    with pytest.raises(ValueError, match="open_set needs method='session'"):
+        tofmat.Classifier(real_table, method="eq12", open_set=True)
 
 
 def test_bad_calibrations_are_clear_errors() -> None:

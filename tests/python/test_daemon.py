@@ -103,6 +103,33 @@ def test_the_session_classifier_labels_the_sweeps(start: Callable[..., Daemon]) 
             assert label.fit is not None and math.isfinite(label.fit)
 
 
+def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Callable[..., Daemon]) -> None:
+    # Copper swept against cork and paper only: whole sweeps end unknown (material none, index -1,
+    # the nearest still ranked); without --open-set (the default) the nearest is the label.
+    d = start(sweep(["copper"]), "--open-set", "--candidates", "cork,paper")
+    with d.client() as c:
+        assert c.status()["open_set"] is True
+        last: Label | None = None
+        finals: list[Label] = []
+        started = False
+        for label in c.labels(timeout=60):
+            if label.state == "no_target":
+                if started and last is not None:
+                    finals.append(last)
+                started, last = True, None
+                if len(finals) == 2:
+                    break
+            else:
+                last = label
+        for f in finals:
+            assert f.state == "unknown" and f.material is None and f.index == -1, f
+            assert {r.material for r in f.ranking} == {"cork", "paper"} and f.fit is not None and f.fit > 5
+    closed = start(sweep(["copper"]), "--candidates", "cork,paper", name="closed")
+    with closed.client() as c:
+        assert c.status()["open_set"] is False
+        assert all(label.state != "unknown" for label in itertools.islice(c.labels(timeout=60), 60))
+
+
 def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:
     d = start("sim:static,material=cork,depth=900,realtime=0")
     with d.client() as c:

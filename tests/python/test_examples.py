@@ -96,13 +96,17 @@ def test_sorting_trigger(start: Callable[..., Daemon]) -> None:
 @pytest.mark.parametrize("material", ["cork", "pvc"])
 def test_classify_saved_query(db_dir: Path, real_tmx: Path, tmp_path: Path, material: str) -> None:
     query = tmp_path / "q.npy"
-    out = ok(run("classify_saved_query.py", str(db_dir), "--make-demo-query", str(query), "--material", material))
-    assert re.search(rf"^  1\. {material} +0\.0000 mm\^2$", out, re.M), out  # its own curve: distance 0
+    out = ok(
+        run("classify_saved_query.py", str(db_dir), "--make-demo-query", str(query), "--material", material,
+            "--method", "eq12")
+    )  # fmt: skip
+    assert re.search(rf"^  1\. {material} +0\.0000 mm\^2  p ", out, re.M), out  # its own curve: distance 0
     q = np.load(query)
     assert q.shape == (2, 200) and np.isfinite(q).sum() == 20
     out = ok(run("classify_saved_query.py", str(real_tmx), str(query), "--top", "3"))  # the int16 table file
     ranking = re.findall(r"^  \d\. (\w+) ", out, re.M)
-    assert len(ranking) == 3 and ranking[0] == material, out
+    assert len(ranking) == 3 and ranking[0] == material, out  # the session matcher, the default
+    assert re.search(rf"^{material}: score .* confidence 0\.\d\d$", out, re.M), out
 
 
 @pytest.mark.parametrize("script", ["watch_labels.py", "segmentation_map.py", "sorting_trigger.py"])

@@ -9,6 +9,7 @@ by the simulated source's presses= key) resets the accumulation once per press a
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import subprocess
 import time
@@ -74,6 +75,12 @@ def test_the_view_says_label_confidence_rate_camera_and_resets() -> None:
     v.event(label("a-very-long-material-name-indeed", 1.0, 2.0, state="final"), 12 * SEC)
     top = v.lines(99 * SEC)
     assert len(top[0]) == COLUMNS and top[0].endswith("~") and top[1] == "d 1.0 next x2.0" and top[4] == ""
+    # The session matcher's labels: their confidence, and "unknown" with the nearest.
+    session = dataclasses.replace(label("cork", -3.5, 2.0), confidence=0.934, fit=0.4)
+    v.event(session, 13 * SEC)
+    assert v.lines(13 * SEC)[:2] == ["cork", "p 0.93 next wood"]
+    v.event(dataclasses.replace(session, state="unknown", material=None, index=-1), 14 * SEC)
+    assert v.lines(14 * SEC)[:2] == ["unknown", "near cork"]
 
 
 def test_the_panels_picture_is_the_text_pixel_for_pixel() -> None:
@@ -107,7 +114,7 @@ def test_the_panel_follows_tofmatd_and_the_button_resets_it(start: Callable[...,
     assert any(lines[4] == "reset by button" for lines in r.drawn)
     # The end: the label, its confidence, the rate, the camera; the reset note gone again.
     assert r.shown[0] == "acryl" and r.shown[3] == "camera streaming" and r.shown[4] == "simulated"
-    assert re.fullmatch(r"d \d+\.\d next x\d+\.\d", r.shown[1]), r.shown
+    assert re.fullmatch(r"p [01]\.\d\d next \w+", r.shown[1]), r.shown  # the session matcher's confidence
     assert re.fullmatch(r"handheld \d+ fps", r.shown[2]), r.shown
     assert np.array_equal(bus.frame(), render_text(r.shown))
 

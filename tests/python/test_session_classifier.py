@@ -80,7 +80,10 @@ def test_the_tuned_prior_and_the_classifier_s_settings(real_table: tofmat.Exempl
     assert (p.floor_mm, p.huber_k, p.iterations) == (0.5, 3.0, 3)
     clf = tofmat.Classifier(real_table, method="session")
     assert clf.method == "session" and clf.prior is not None and clf.prior.offset_sd_mm == [2.27, 0.73]
-    assert tofmat.Classifier(real_table).method == "eq12" and tofmat.Classifier(real_table).prior is None
+    # The default method is the session matcher; Eq. (12) by name, without its settings.
+    default = tofmat.Classifier(real_table)
+    assert default.method == "session" and default.backend == "float" and default.prior is not None
+    assert tofmat.Classifier(real_table, method="eq12").prior is None
     # Candidates and given noise levels.
     noise = np.full((29, 2), 0.25)
     c = tofmat.Classifier(real_table, method="session", materials=["wood", "cork"], noise_mm=noise)
@@ -109,7 +112,7 @@ def test_bad_settings_are_clear_errors(real_table: tofmat.ExemplarTable) -> None
     with pytest.raises(ValueError, match="unknown method 'nearest'"):
         tofmat.Classifier(real_table, method="nearest")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="settings of method='session'"):
-        tofmat.Classifier(real_table, prior=tofmat.SessionPrior([1.0, 1.0]))
+        tofmat.Classifier(real_table, method="eq12", prior=tofmat.SessionPrior([1.0, 1.0]))
     with pytest.raises(ValueError, match="noise_mm"):
         tofmat.Classifier(real_table, method="session", noise_mm=np.ones((29, 3)))
     with pytest.raises(ValueError, match="3 row offsets for a table of 2 rows"):

@@ -104,7 +104,7 @@ def test_round_trip_real_database(real_table, real_tmx) -> None:
 
 def test_loaded_table_classifies_like_the_original(real_table, real_tmx) -> None:
     t2 = tofmat.ExemplarTable.load(real_tmx)
-    clf = tofmat.Classifier(t2)
+    clf = tofmat.Classifier(t2, method="eq12")
     for i, name in enumerate(real_table.materials):
         r = clf.classify(real_table.features[i])
         assert r.material == name

@@ -133,7 +133,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   DaemonOptions& o = cl.daemon;
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
   o.source_options.sim_data_dir = installed_sim_data_dir();
-  std::string profile = o.profile.name, backend = "fixed", classifier = "eq12", roi, tcp, token_file,
+  std::string profile = o.profile.name, backend = "fixed", classifier = "session", roi, tcp, token_file,
               control_token_file, control_group, socket_mode = "0660";
   int idle_timeout_s = o.server.idle_timeout_ms / 1000;
   std::vector<std::string> candidates;
@@ -193,10 +193,12 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--backend", backend, "fixed (integer path, NEON on aarch64) | float (reference)")
       ->capture_default_str();
   app.add_option("--classifier", classifier,
-                 "eq12 (the paper's Eq. (12)) | session (the session-robust matcher, docs/evaluation.md): how the "
+                 "session (the session-robust matcher, docs/evaluation.md) | eq12 (the paper's Eq. (12)): how the "
                  "handheld and sorting profiles match a query")
       ->capture_default_str()
       ->check(CLI::IsMember({"eq12", "session"}));
+  app.add_flag("--open-set", o.profile.open_set,
+               "label a sweep no material explains 'unknown' (--classifier session; docs/evaluation.md)");
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
   app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
@@ -286,9 +288,13 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.profile.backend = parse_backend(backend);
     o.profile.method = parse_method(classifier);
     if (o.profile.method == Method::kSession && line.max_distance > 0)
-      throw CLI::ValidationError("--line-max-distance",
-                                 "it bounds an Eq. (12) distance (mm^2): the session classifier's score is no "
-                                 "distance; leave it 0 with --classifier session");
+      throw CLI::ValidationError(
+          "--line-max-distance",
+          "it bounds an Eq. (12) distance (mm^2): the session classifier's score is no "
+          "distance; leave it 0 with --classifier session (the default), or give --classifier eq12");
+    if (o.profile.open_set && o.profile.method != Method::kSession)
+      throw CLI::ValidationError("--open-set",
+                                 "needs --classifier session: Eq. (12) has no noise model to judge a fit");
     o.profile.candidates = candidates;
     if (!roi.empty()) o.profile.roi = parse_roi(roi);
     const bool line_options = !line.barrier.empty() || !line.outlets.empty() || line.speed_mm_s > 0 ||

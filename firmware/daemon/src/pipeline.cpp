@@ -147,6 +147,7 @@ nlohmann::json Pipeline::status() const {
   return {{"profile", config_.name},
           {"backend", config_.backend == Backend::kFixed ? "fixed" : "float"},
           {"classifier", method_name(config_.method)},
+          {"open_set", config_.open_set},
           {"roi", {r.x0, r.y0, r.x1, r.y1}},
           {"candidates", config_.candidates},
           {"table",

@@ -21,12 +21,13 @@ double median_of(std::vector<double>& v) {
 }  // namespace
 
 RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
-                             Backend backend, Method method)
+                             Backend backend, Method method, bool open_set)
     : table_(std::move(table)),
       backend_(backend),
       calibration_(tofmat::Calibration::tuned(method == Method::kSession ? "session" : "eq12")),
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
+  if (!open_set) calibration_.unknown_fits.clear();  // never unknown
   if (method == Method::kSession && backend_ == Backend::kFixed)
     fixed_session_ = std::make_unique<FixedSessionClassifier>(table_, SessionPrior::tuned(*table_),
                                                               std::vector<double>{}, std::move(candidates));

@@ -65,7 +65,7 @@ class Eq12Matcher(_ClassifierMatcher):
     name = "eq12"
 
     def __init__(self, table: ExemplarTable) -> None:
-        super().__init__(Classifier(table))
+        super().__init__(Classifier(table, method="eq12"))
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@
 
 The lines, top to bottom::
 
-    copper                  the label (or "no target", or why there is none)
-    d 4.1 next x3.2         its Eq. (12) distance, mm^2, and the runner-up's distance over it
+    copper                  the label (or "no target", "unknown", or why there is none)
+    p 0.93 next wood        its confidence (the session matcher) and the runner-up; with Eq. (12):
+                            "d 4.1 next x3.2", its distance, mm^2, and the runner-up's over it
     handheld 30 fps         the profile and the frame rate (from status)
     camera streaming        the camera's state (device events), or the daemon being away
     reset by button         for a few seconds after the accumulation was reset; "simulated"
@@ -92,13 +93,20 @@ class PanelView:
         e = self.label
         if e is None:
             return ("waiting" if self.device == "streaming" else "no camera"), ""
-        if e.state == "no_target" or not e.material:
+        if e.state == "unknown":  # no material explains it: the nearest, for the eye
+            top, detail = "unknown", (f"near {e.ranking[0].material}" if e.ranking else "")
+        elif e.state == "no_target" or not e.material:
             return "no target", ""
-        detail = f"d {e.distance:.1f}"
-        if len(e.ranking) > 1 and e.distance > 0:
-            detail += f" next x{e.ranking[1].distance / e.distance:.1f}"
-        elif len(e.ranking) > 1:
-            detail += " next x>99"
+        elif e.fit is not None and e.confidence is not None:  # the session matcher: its probability
+            top, detail = e.material, f"p {e.confidence:.2f}"
+            if len(e.ranking) > 1:
+                detail += f" next {e.ranking[1].material}"
+        else:  # Eq. (12): the distance and how much further the runner-up is
+            top, detail = e.material, f"d {e.distance:.1f}"
+            if len(e.ranking) > 1 and e.distance > 0:
+                detail += f" next x{e.ranking[1].distance / e.distance:.1f}"
+            elif len(e.ranking) > 1:
+                detail += " next x>99"
         if now_ns - self.label_ns > STALE_LABEL_NS and e.state != "final":
             detail += " old"
-        return e.material, detail
+        return top, detail

@@ -2,7 +2,7 @@
 """Numerical stability of the fixed-point path against the float reference, at its stiff cases.
 
 What the SDK exposes of the fixed-point path is the Eq. (12) classifier
-(``Classifier(table, backend="fixed")``), so that is what is computed here, in Python, on synthetic
+(``Classifier(table, backend="fixed", method="eq12")``), so that is what is computed here, in Python, on synthetic
 queries: each candidate's distance against the float classifier's, next to the bound of
 docs/numerics.md (each query element moves by at most half a table step ``s`` when quantised, so a
 mean squared distance moves by at most ``s * mean|q - e| + s^2 / 4``; two labels can differ only
@@ -135,8 +135,8 @@ class _Pair:
         self.step = float(table.quant_step_mm)
         if not self.step > 0.0:
             raise ValueError("the stability cases need a table with its .tmx step (load it from a .tmx file)")
-        self.float = Classifier(table, backend="float")
-        self.fixed = Classifier(table, backend="fixed")
+        self.float = Classifier(table, backend="float", method="eq12")
+        self.fixed = Classifier(table, backend="fixed", method="eq12")
         self.values = table.features.reshape(len(table), -1).astype(np.float64)
         self.valid = ~np.isnan(self.values)
         self.values0 = np.nan_to_num(self.values)
@@ -214,7 +214,7 @@ def _row(
 
 # ---------------------------------------------------------------- the cases
 
-STAGE = 'Eq. (12) classifier (`Classifier(table, backend="fixed")`)'
+STAGE = 'Eq. (12) classifier (`Classifier(table, backend="fixed", method="eq12")`)'
 WINDOWS = (1, 3, 10, 30, 100)
 
 

@@ -146,7 +146,7 @@ def leave_one_orientation_out(
         train = [feats[(m, o)] for m in materials for o in orientations if o != held]
         table = exemplar_table(train, names)
         queries = np.stack([feats[(m, held)] for m in materials])
-        results = Classifier(table).classify_batch(queries)
+        results = Classifier(table, method="eq12").classify_batch(queries)
         for truth, r in enumerate(results):
             conf[truth, materials.index(r.material.split("@")[0])] += 1
         if disagreements is None:
@@ -154,7 +154,7 @@ def leave_one_orientation_out(
         # (Exemplars are "material@orientation": a different orientation of the same material is
         # the same label.)
         for truth, (a, b) in enumerate(
-            zip(results, Classifier(table, backend="fixed").classify_batch(queries), strict=True)
+            zip(results, Classifier(table, backend="fixed", method="eq12").classify_batch(queries), strict=True)
         ):
             la, lb = a.material.split("@")[0], b.material.split("@")[0]
             if la != lb:

@@ -45,7 +45,7 @@ def bench_windows(
 ) -> list[BenchRow]:
     """Timings are the best of `repeats` passes: on a shared machine the
     slower passes measure the neighbours, not the code."""
-    clf = Classifier(table, backend=backend)
+    clf = Classifier(table, backend=backend, method="eq12")
     rows: list[BenchRow] = []
     for length in windows:
         rng = np.random.default_rng(seed + length)

@@ -55,7 +55,9 @@ class LineSetup:
     outlet_spacing_mm: float = 200.0
     jitter: float = 0.3
     seed: int = 1
-    max_distance: float = 50.0  # mm^2: a label further than this from its material goes to reject
+    # mm^2: a label further than this from its material goes to reject. An Eq. (12) bound: the line
+    # runs Eq. (12) (--classifier eq12) while it is set, the session matcher with its open set when 0.
+    max_distance: float = 50.0
     source_extra: str = ""  # more sim keys, e.g. "unplug_at=150,replug_ms=2000" (the camera lost a while)
 
     def outlets(self) -> list[tuple[str, float]]:
@@ -80,6 +82,8 @@ class LineSetup:
                 "--line-speed", f"{self.speed_mm_s:g}", "--line-camera-mm", f"{self.burst_start_mm():g}",
                 "--line-reject", "reject", "--line-alarm", "sim:alarm",
                 "--line-max-distance", f"{self.max_distance:g}"]  # fmt: skip
+        if self.max_distance > 0:
+            args += ["--classifier", "eq12"]
         for name, pos in self.outlets():
             materials = "" if name == "reject" else f",materials={name}"
             args += ["--outlet", f"{name}:position={pos:g},line=sim:push_{name}{materials}"]

@@ -79,9 +79,17 @@ def stop_daemon(daemon: subprocess.Popen[bytes]) -> int:
 
 
 def _describe(label: Label) -> str:
+    """One line: the label, its score (Eq. (12)'s distance in mm^2, or the session matcher's score
+    with its confidence) and the next two candidates."""
     others = ", ".join(f"{r.material} {r.distance:.2f}" for r in label.ranking[1:3])
     depth = f"{label.truth.depth_mm:6.0f} mm" if label.truth else ""
-    return f"frame {label.frame:5d} {depth} bins {label.bins_covered:3d}  {label.material:12s} {label.distance:6.2f} mm^2  ({others})"
+    # (unknown: no material explains the sweep; the nearest, for the eye)
+    name = label.material or (f"unknown ({label.ranking[0].material}?)" if label.ranking else "unknown")
+    if label.fit is None:  # Eq. (12)
+        score = f"{label.distance:6.2f} mm^2"
+    else:
+        score = f"score {label.distance:7.2f} p {label.confidence or 0.0:.2f}"
+    return f"frame {label.frame:5d} {depth} bins {label.bins_covered:3d}  {name:12s} {score}  ({others})"
 
 
 def run_live_demo(
@@ -110,13 +118,13 @@ def run_live_demo(
                             ok = last.material == last.truth.material
                             result.sweeps += 1
                             result.correct += ok
-                            echo(f"  => {last.material} after {last.bins_covered} bins; truth {last.truth.material}: "
-                                 f"{'correct' if ok else 'WRONG'}")  # fmt: skip
+                            echo(f"  => {last.material or 'unknown'} after {last.bins_covered} bins; "
+                                 f"truth {last.truth.material}: {'correct' if ok else 'WRONG'}")  # fmt: skip
                         last, shown = None, ""
                         if result.sweeps >= len(materials):
                             break
                         continue
-                    if label.state != "tracking" or label.truth is None or not label.truth.material:
+                    if label.state not in ("tracking", "unknown") or label.truth is None or not label.truth.material:
                         continue
                     if last is None:
                         echo(f"sweep {result.sweeps + 1}: {label.truth.material}")

@@ -22,8 +22,9 @@ namespace tofmat::daemon {
 
 class RegionMatcher {
  public:
+  // open_set: label a query no candidate explains "unknown" (the session matcher only).
   RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend,
-                Method method = Method::kEq12);
+                Method method = Method::kEq12, bool open_set = false);
 
   struct Decoded {
     std::variant<DecodedFrame, FixedDecodedFrame> frame;
