@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import tofmat
-from tofmat.client import daemon_binary, sim_data_dir
+from tofmat.client import Label, daemon_binary, sim_data_dir
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_DB_DIR = REPO.parent / "shared" / "data" / "tanaka2017_kinect2_db"
@@ -135,3 +135,20 @@ def start(tmp_path: Path, sim_table: Path) -> Iterator[Callable[..., Daemon]]:
     yield _start
     for d in started:
         assert d.stop() == 0, f"tofmatd did not stop cleanly:\n{d.log.read_text()}"
+
+
+def final_labels(client: tofmat.Client, sweeps: int, timeout: float = 60.0) -> list[Label]:
+    """The last label (tracking, or unknown) of each of the next `sweeps` complete sweeps."""
+    out: list[Label] = []
+    last: Label | None = None
+    started = False
+    for label in client.labels(timeout=timeout):
+        if label.state == "no_target":
+            if started and last is not None:
+                out.append(last)
+                if len(out) == sweeps:
+                    return out
+            started, last = True, None  # sweeps counted from the first gap: whole sweeps only
+        elif label.state in ("tracking", "unknown"):
+            last = label
+    raise AssertionError("unreachable")

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import pytest
 from conftest import SIM_TABLE_MATERIALS as MATERIALS
-from conftest import Daemon
+from conftest import Daemon, final_labels
 
 import tofmat
 from tofmat.client import DeviceEvent, Label, LabelMap, daemon_binary, sim_data_dir
@@ -36,23 +36,6 @@ from tofmat.client import DeviceEvent, Label, LabelMap, daemon_binary, sim_data_
 
 def sweep(materials: list[str], frames: int = 30, gap: int = 6, extra: str = "") -> str:
     return f"sim:sweep,materials={'+'.join(materials)},frames={frames},gap={gap},realtime=0{extra}"
-
-
-def final_labels(client: tofmat.Client, sweeps: int, timeout: float = 60.0) -> list[Label]:
-    """The last tracking label of each of the next `sweeps` complete sweeps."""
-    out: list[Label] = []
-    last: Label | None = None
-    started = False
-    for label in client.labels(timeout=timeout):
-        if label.state == "no_target":
-            if started and last is not None:
-                out.append(last)
-                if len(out) == sweeps:
-                    return out
-            started, last = True, None  # sweeps counted from the first gap: whole sweeps only
-        elif label.state == "tracking":
-            last = label
-    raise AssertionError("unreachable")
 
 
 # --- the main job --------------------------------------------------------------------------
@@ -106,25 +89,15 @@ def test_the_session_classifier_labels_the_sweeps(start: Callable[..., Daemon]) 
 def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Callable[..., Daemon]) -> None:
     # Copper swept against cork and paper only: whole sweeps end unknown (material none, index -1,
     # the nearest still ranked); without --open-set (the default) the nearest is the label.
-    d = start(sweep(["copper"]), "--open-set", "--candidates", "cork,paper")
+    # (tofmatd's default classifier is Eq. (12): the session matcher is asked for.)
+    d = start(sweep(["copper"]), "--classifier", "session", "--open-set", "--candidates", "cork,paper")
     with d.client() as c:
         assert c.status()["open_set"] is True
-        last: Label | None = None
-        finals: list[Label] = []
-        started = False
-        for label in c.labels(timeout=60):
-            if label.state == "no_target":
-                if started and last is not None:
-                    finals.append(last)
-                started, last = True, None
-                if len(finals) == 2:
-                    break
-            else:
-                last = label
+        finals = final_labels(c, 2)
         for f in finals:
             assert f.state == "unknown" and f.material is None and f.index == -1, f
             assert {r.material for r in f.ranking} == {"cork", "paper"} and f.fit is not None and f.fit > 5
-    closed = start(sweep(["copper"]), "--candidates", "cork,paper", name="closed")
+    closed = start(sweep(["copper"]), "--classifier", "session", "--candidates", "cork,paper", name="closed")
     with closed.client() as c:
         assert c.status()["open_set"] is False
         assert all(label.state != "unknown" for label in itertools.islice(c.labels(timeout=60), 60))

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import Daemon
+from conftest import Daemon, final_labels
 
 import tofmat
 from tofmat.cli import main
@@ -90,18 +90,7 @@ def test_a_new_material_captured_with_the_box_is_served_after_sighup(
             time.sleep(0.05)
         assert c.status()["table"]["materials"][-1] == "wax"
         # The next whole sweeps of wax are labelled wax.
-        finals = []
-        started = False
-        last = None
-        for label in c.labels(timeout=60):
-            if label.state == "no_target":
-                if started and last is not None:
-                    finals.append(last)
-                started, last = True, None
-                if len(finals) == 2:
-                    break
-            elif label.state == "tracking":
-                last = label
+        finals = final_labels(c, 2)
         assert [f.material for f in finals] == ["wax", "wax"]
 
 

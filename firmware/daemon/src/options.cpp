@@ -133,7 +133,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   DaemonOptions& o = cl.daemon;
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
   o.source_options.sim_data_dir = installed_sim_data_dir();
-  std::string profile = o.profile.name, backend = "fixed", classifier = "session", roi, tcp, token_file,
+  std::string profile = o.profile.name, backend = "fixed", classifier = "eq12", roi, tcp, token_file,
               control_token_file, control_group, socket_mode = "0660";
   int idle_timeout_s = o.server.idle_timeout_ms / 1000;
   std::vector<std::string> candidates;
@@ -193,7 +193,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--backend", backend, "fixed (integer path, NEON on aarch64) | float (reference)")
       ->capture_default_str();
   app.add_option("--classifier", classifier,
-                 "session (the session-robust matcher, docs/evaluation.md) | eq12 (the paper's Eq. (12)): how the "
+                 "eq12 (the paper's Eq. (12)) | session (the session-robust matcher, docs/evaluation.md): how the "
                  "handheld and sorting profiles match a query")
       ->capture_default_str()
       ->check(CLI::IsMember({"eq12", "session"}));
@@ -288,10 +288,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.profile.backend = parse_backend(backend);
     o.profile.method = parse_method(classifier);
     if (o.profile.method == Method::kSession && line.max_distance > 0)
-      throw CLI::ValidationError(
-          "--line-max-distance",
-          "it bounds an Eq. (12) distance (mm^2): the session classifier's score is no "
-          "distance; leave it 0 with --classifier session (the default), or give --classifier eq12");
+      throw CLI::ValidationError("--line-max-distance",
+                                 "it bounds an Eq. (12) distance (mm^2): the session classifier's score is no "
+                                 "distance; leave it 0 with --classifier session");
     if (o.profile.open_set && o.profile.method != Method::kSession)
       throw CLI::ValidationError("--open-set",
                                  "needs --classifier session: Eq. (12) has no noise model to judge a fit");
