@@ -165,10 +165,15 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
             res[i] = std::int64_t{e[i]} * (std::int64_t{1} << kFitBits) - rounded;
           }
           if (!huber) break;
+          // Every weight 1 before and after: the next pass would solve the same system again.
+          bool changed = false;
           for (std::size_t i = 0; i < nr; ++i) {
             const std::int64_t mag = std::llabs(res[i]);
+            const double was = out_w[i];
             out_w[i] = mag <= threshold ? 0.0 : static_cast<double>(threshold) / static_cast<double>(mag);
+            changed = changed || out_w[i] != was;
           }
+          if (!changed) break;
         }
         for (int s = 0; s < k; ++s) {
           penalty += 0.5 * beta[static_cast<std::size_t>(s)] * beta[static_cast<std::size_t>(s)] /

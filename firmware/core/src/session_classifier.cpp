@@ -202,7 +202,14 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
             z[i] = std::fabs(e[i] - fit) / sd;
           }
           if (!huber) break;
-          for (std::size_t i = 0; i < nr; ++i) w[i] = std::min(1.0, hk / std::max(z[i], 1e-12));
+          // The same weights again would solve the same system again (to the bit): stop.
+          bool changed = false;
+          for (std::size_t i = 0; i < nr; ++i) {
+            const double was = w[i];
+            w[i] = std::min(1.0, hk / std::max(z[i], 1e-12));
+            changed = changed || w[i] != was;
+          }
+          if (!changed) break;
         }
         for (int s = 0; s < k; ++s) penalty += 0.5 * beta[s] * beta[s] / prior_var_[r][s];
       }
