@@ -74,11 +74,23 @@ double Calibration::unknown_fit(double bins) const {
   return unknown_fits.empty() ? std::numeric_limits<double>::infinity() : interpolate(unknown_fits, bins);
 }
 
+namespace {
+
+// The sweep's length in bins: the best match's compared elements over the rows.
+double sweep_bins(const Classification& c, std::uint32_t n_rows) {
+  return static_cast<double>(c.best().valid) / std::max<std::uint32_t>(n_rows, 1);
+}
+
+}  // namespace
+
+bool rejected(const Classification& c, std::uint32_t n_rows, const Calibration& calibration) {
+  return !c.ranking.empty() && c.best().fit > calibration.unknown_fit(sweep_bins(c, n_rows));  // false for NaN
+}
+
 Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration) {
   Verdict v;
   if (c.ranking.empty()) return v;
-  const double bins = static_cast<double>(c.best().valid) / std::max<std::uint32_t>(n_rows, 1);
-  const double t = calibration.temperature(bins);
+  const double t = calibration.temperature(sweep_bins(c, n_rows));
   // softmax(-d / T), shifted by the best (lowest) score so that no term overflows.
   const double best = c.best().distance;
   double sum = 0.0;
@@ -89,7 +101,7 @@ Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& 
     sum += e;
   }
   for (double& p : v.probability) p /= sum;
-  v.unknown = c.best().fit > calibration.unknown_fit(bins);  // false for NaN
+  v.unknown = rejected(c, n_rows, calibration);
   return v;
 }
 

@@ -98,7 +98,7 @@ void RegionMatcher::reset() {
   float_acc_.reset();
 }
 
-bool RegionMatcher::unknown(const Classification& c) const { return judge(c, table_->n_rows(), calibration_).unknown; }
+bool RegionMatcher::unknown(const Classification& c) const { return rejected(c, table_->n_rows(), calibration_); }
 
 protocol::LabelEvent RegionMatcher::label_event(const Classification& c, int top_k) const {
   protocol::LabelEvent e;

@@ -57,5 +57,7 @@ struct Verdict {
 // the sweep's length is the best match's compared elements over the table's
 // rows. A fit of NaN (Eq. (12)) is never unknown.
 Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration);
+// judge()'s unknown alone, without the probabilities.
+bool rejected(const Classification& c, std::uint32_t n_rows, const Calibration& calibration);
 
 }  // namespace tofmat
