@@ -1,0 +1,76 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// OnnxClassifier's parts that do not touch onnxruntime: the query's checks
+// and the ranking. The session is in onnx_session.cpp (or onnx_unavailable.cpp
+// in a build without the C API's headers).
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "onnx_session.hpp"
+#include "tofmat/learn/onnx_classifier.hpp"
+
+namespace tofmat::learn {
+
+struct OnnxClassifier::Impl {
+  OnnxSession session;
+};
+
+OnnxClassifier::OnnxClassifier(std::shared_ptr<const ExemplarTable> table, const std::string& model_path,
+                               std::vector<std::uint32_t> candidates, const std::string& library)
+    : table_(std::move(table)), candidates_(std::move(candidates)) {
+  if (!table_) throw std::invalid_argument("OnnxClassifier: no table");
+  for (const auto c : candidates_)
+    if (c >= table_->n_materials())
+      throw std::invalid_argument("OnnxClassifier: candidate " + std::to_string(c) + " is not in the table");
+  if (candidates_.empty())
+    for (std::uint32_t i = 0; i < table_->n_materials(); ++i) candidates_.push_back(i);
+  impl_ = std::make_unique<Impl>(Impl{OnnxSession(model_path, library, table_->elements_per_material())});
+  check_table(impl_->session.contract(), *table_);
+}
+
+OnnxClassifier::~OnnxClassifier() = default;
+
+const ModelContract& OnnxClassifier::contract() const { return impl_->session.contract(); }
+
+std::vector<float> OnnxClassifier::probabilities(const float* query, std::size_t n) const {
+  if (n != table_->elements_per_material())
+    throw std::invalid_argument("OnnxClassifier: a query of " + std::to_string(n) + " elements, the table's have " +
+                                std::to_string(table_->elements_per_material()));
+  std::size_t valid = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (std::isinf(query[i])) throw std::invalid_argument("OnnxClassifier: an infinite query element");
+    if (!std::isnan(query[i])) ++valid;
+  }
+  if (valid == 0) throw std::invalid_argument("OnnxClassifier: the query has no valid element");
+  std::vector<float> p = impl_->session.run(query, n);
+  if (p.size() != table_->n_materials())
+    throw std::runtime_error("OnnxClassifier: the model gave " + std::to_string(p.size()) + " probabilities for " +
+                             std::to_string(table_->n_materials()) + " materials");
+  return p;
+}
+
+Classification OnnxClassifier::classify(const float* query, std::size_t n) const {
+  const std::vector<float> p = probabilities(query, n);
+  std::uint32_t valid = 0;
+  for (std::size_t i = 0; i < n; ++i) valid += std::isnan(query[i]) ? 0U : 1U;
+  double total = 0.0;
+  for (const auto c : candidates_) {
+    const double v = p[c];
+    if (!(v >= 0.0) || !std::isfinite(v))
+      throw std::runtime_error("OnnxClassifier: the model gave a probability not in [0, 1]");
+    total += v;
+  }
+  Classification out;
+  for (const auto c : candidates_) {
+    Match m;
+    m.index = c;
+    // -ln p over the candidates (a candidate given 0 gets +inf: ranked last).
+    m.distance = total > 0.0 ? -std::log(static_cast<double>(p[c]) / total) : std::log(double(candidates_.size()));
+    m.valid = valid;
+    out.ranking.push_back(m);
+  }
+  rank(out);
+  return out;
+}
+
+}  // namespace tofmat::learn
