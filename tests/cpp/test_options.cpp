@@ -215,6 +215,22 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   // An Eq. (12) distance bound means nothing to the session classifier's score.
   expect_usage_error({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
                       "--classifier", "session", "--line-max-distance", "2"});
+  // A learned model: onnx:FILE (the file is opened at start, not here), and its library.
+  {
+    const auto p = parse({"--table", "t", "--classifier", "onnx:models/m.onnx", "--onnxruntime-library", "/l.so"});
+    ASSERT_TRUE(p.cl.has_value());
+    EXPECT_EQ(p.cl->daemon.profile.method, tofmat::daemon::Method::kOnnx);
+    EXPECT_EQ(p.cl->daemon.profile.model.path, "models/m.onnx");
+    EXPECT_EQ(p.cl->daemon.profile.model.library, "/l.so");
+    const auto d = parse({"--table", "t"});
+    ASSERT_TRUE(d.cl.has_value());
+    EXPECT_EQ(d.cl->daemon.profile.model.library, "libonnxruntime.so.1");
+  }
+  expect_usage_error({"--table", "t", "--classifier", "onnx:"});                 // no file
+  expect_usage_error({"--table", "t", "--classifier", "onnx"});                  // no file
+  expect_usage_error({"--table", "t", "--classifier", "onnx:m", "--open-set"});  // no noise model
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
+                      "--classifier", "onnx:m.onnx", "--line-max-distance", "2"});
   expect_usage_error({"--table", "t", "--roi", "1,2,3"});                         // three numbers
   expect_usage_error({"--table", "t", "--roi", "1;2;3;4"});                       // wrong separators
   expect_usage_error({"--table", "t", "--socket-mode", "0999"});                  // not octal

@@ -15,7 +15,7 @@ class HandheldProfile : public Profile {
   HandheldProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
       : config_(c),
         table_(std::move(table)),
-        matcher_(table_, candidate_indices(*table_, c.candidates), c.backend, c.method, c.open_set) {}
+        matcher_(table_, candidate_indices(*table_, c.candidates), c.backend, c.method, c.open_set, c.model) {}
 
   std::optional<PixelRegion> input_region() const override { return config_.roi; }
 

@@ -193,10 +193,20 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--backend", backend, "fixed (integer path, NEON on aarch64) | float (reference)")
       ->capture_default_str();
   app.add_option("--classifier", classifier,
-                 "eq12 (the paper's Eq. (12)) | session (the session-robust matcher, docs/evaluation.md): how the "
-                 "handheld and sorting profiles match a query")
+                 "eq12 (the paper's Eq. (12)) | session (the session-robust matcher, docs/evaluation.md) | onnx:FILE "
+                 "(a learned model, tofmat train; docs/learned-models.md): how the handheld and sorting profiles "
+                 "match a query")
       ->capture_default_str()
-      ->check(CLI::IsMember({"eq12", "session"}));
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            if (text == "eq12" || text == "session") return std::string();
+            if (text.rfind("onnx:", 0) == 0 && text.size() > 5) return std::string();
+            return std::string("must be eq12, session or onnx:FILE");
+          },
+          "eq12|session|onnx:FILE"));
+  app.add_option("--onnxruntime-library", o.profile.model.library,
+                 "the onnxruntime shared library for --classifier onnx:FILE (a path, or a name the loader finds)")
+      ->capture_default_str();
   app.add_flag("--open-set", o.profile.open_set,
                "label a sweep no material explains 'unknown' (--classifier session; docs/evaluation.md)");
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
@@ -287,10 +297,15 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     o.profile.name = profile;
     o.profile.backend = parse_backend(backend);
     o.profile.method = parse_method(classifier);
-    if (o.profile.method == Method::kSession && line.max_distance > 0)
+    if (o.profile.method == Method::kOnnx) {
+      o.profile.model.path = classifier.substr(5);
+      if (!tofmat::learn::onnxruntime_built())
+        throw CLI::ValidationError("--classifier", tofmat::learn::unavailable_reason());
+    }
+    if (o.profile.method != Method::kEq12 && line.max_distance > 0)
       throw CLI::ValidationError("--line-max-distance",
-                                 "it bounds an Eq. (12) distance (mm^2): the session classifier's score is no "
-                                 "distance; leave it 0 with --classifier session");
+                                 "it bounds an Eq. (12) distance (mm^2): the session and learned classifiers' "
+                                 "scores are no distance; leave it 0 with --classifier session or onnx:FILE");
     if (o.profile.open_set && o.profile.method != Method::kSession)
       throw CLI::ValidationError("--open-set",
                                  "needs --classifier session: Eq. (12) has no noise model to judge a fit");

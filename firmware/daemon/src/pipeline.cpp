@@ -144,25 +144,27 @@ std::shared_ptr<const ExemplarTable> Pipeline::table() const {
 nlohmann::json Pipeline::status() const {
   std::lock_guard<std::mutex> lock(mutex_);
   const auto& r = config_.roi;
-  return {{"profile", config_.name},
-          {"backend", config_.backend == Backend::kFixed ? "fixed" : "float"},
-          {"classifier", method_name(config_.method)},
-          {"open_set", config_.open_set},
-          {"roi", {r.x0, r.y0, r.x1, r.y1}},
-          {"candidates", config_.candidates},
-          {"table",
-           {{"path", table_path_},
-            {"materials", table_->materials()},
-            {"bins", table_->n_bins()},
-            {"bin_start_mm", table_->bins().start_mm},
-            {"bin_width_mm", table_->bins().width_mm}}},
-          {"frames_processed", processed_},
-          {"frames_dropped", queue_.dropped()},
-          {"frames_skipped", skipped_},
-          {"processing_errors", errors_},
-          {"last_error", last_error_},
-          {"fps", static_cast<double>(recent_ns_.size())},
-          {"process_ms", process_ms_ewma_}};
+  nlohmann::json s = {{"profile", config_.name},
+                      {"backend", config_.backend == Backend::kFixed ? "fixed" : "float"},
+                      {"classifier", method_name(config_.method)},
+                      {"open_set", config_.open_set},
+                      {"roi", {r.x0, r.y0, r.x1, r.y1}},
+                      {"candidates", config_.candidates},
+                      {"table",
+                       {{"path", table_path_},
+                        {"materials", table_->materials()},
+                        {"bins", table_->n_bins()},
+                        {"bin_start_mm", table_->bins().start_mm},
+                        {"bin_width_mm", table_->bins().width_mm}}},
+                      {"frames_processed", processed_},
+                      {"frames_dropped", queue_.dropped()},
+                      {"frames_skipped", skipped_},
+                      {"processing_errors", errors_},
+                      {"last_error", last_error_},
+                      {"fps", static_cast<double>(recent_ns_.size())},
+                      {"process_ms", process_ms_ewma_}};
+  if (config_.method == Method::kOnnx) s["model"] = config_.model.path;  // (minor 8)
+  return s;
 }
 
 }  // namespace tofmat::daemon

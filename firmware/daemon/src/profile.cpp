@@ -21,10 +21,18 @@ Backend parse_backend(const std::string& name) {
 Method parse_method(const std::string& name) {
   if (name == "eq12") return Method::kEq12;
   if (name == "session") return Method::kSession;
-  throw std::invalid_argument("unknown classifier \"" + name + "\" (eq12, session)");
+  if (name.rfind("onnx:", 0) == 0 && name.size() > 5) return Method::kOnnx;
+  throw std::invalid_argument("unknown classifier \"" + name + "\" (eq12, session, onnx:FILE)");
 }
 
-const char* method_name(Method method) { return method == Method::kSession ? "session" : "eq12"; }
+const char* method_name(Method method) {
+  switch (method) {
+    case Method::kSession: return "session";
+    case Method::kOnnx: return "onnx";
+    case Method::kEq12: break;
+  }
+  return "eq12";
+}
 
 std::uint64_t Profile::trigger(int) { throw std::logic_error("only the sorting profile takes triggers"); }
 

@@ -21,14 +21,21 @@ double median_of(std::vector<double>& v) {
 }  // namespace
 
 RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
-                             Backend backend, Method method, bool open_set)
+                             Backend backend, Method method, bool open_set, const LearnedModel& model)
     : table_(std::move(table)),
       backend_(backend),
-      calibration_(tofmat::Calibration::tuned(method == Method::kSession ? "session" : "eq12")),
+      // A learned model's confidence is its probabilities under the
+      // temperatures its metadata holds (1 without them: the model's own);
+      // it has no noise model, so nothing is unknown.
+      calibration_(method == Method::kOnnx ? tofmat::Calibration{{{1.0, 1.0}}, {}}
+                                           : tofmat::Calibration::tuned(method_name(method))),
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
   if (!open_set) calibration_.unknown_fits.clear();  // never unknown
-  if (method == Method::kSession && backend_ == Backend::kFixed)
+  if (method == Method::kOnnx) {
+    onnx_ = std::make_unique<learn::OnnxClassifier>(table_, model.path, std::move(candidates), model.library);
+    if (!onnx_->contract().temperatures.empty()) calibration_.temperatures = onnx_->contract().temperatures;
+  } else if (method == Method::kSession && backend_ == Backend::kFixed)
     fixed_session_ = std::make_unique<FixedSessionClassifier>(table_, SessionPrior::tuned(*table_),
                                                               std::vector<double>{}, std::move(candidates));
   else if (method == Method::kSession)
@@ -83,6 +90,7 @@ std::optional<Classification> RegionMatcher::classify() const {
   try {
     if (session_) return session_->classify(q.data(), q.size());
     if (fixed_session_) return fixed_session_->classify(q.data(), q.size());
+    if (onnx_) return onnx_->classify(q.data(), q.size());
     return backend_ == Backend::kFixed ? fixed_->classify(q.data(), q.size()) : float_->classify(q.data(), q.size());
   } catch (const std::invalid_argument&) {
     return std::nullopt;  // no candidate shares an observed element yet

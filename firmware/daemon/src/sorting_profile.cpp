@@ -24,8 +24,8 @@ class SortingProfile : public Profile {
  public:
   SortingProfile(const ProfileConfig& c, const std::shared_ptr<const ExemplarTable>& table)
       : config_(c),
-        matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set),
-        frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set) {}
+        matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model),
+        frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model) {}
 
   std::uint64_t trigger(int burst) override {
     matcher_.reset();

@@ -19,6 +19,7 @@
 #include "tofmat/core/exemplar_table.hpp"
 #include "tofmat/core/frame_decode.hpp"
 #include "tofmat/daemon/frame.hpp"
+#include "tofmat/learn/onnx_classifier.hpp"
 #include "tofmat/protocol/messages.hpp"
 
 namespace tofmat::daemon {
@@ -26,13 +27,22 @@ namespace tofmat::daemon {
 enum class Backend { kFixed, kFloat };
 Backend parse_backend(const std::string& name);  // "fixed" | "float"; throws std::invalid_argument
 
-// How the handheld and sorting profiles match a region's query: Eq. (12), or
-// the session-robust matcher (docs/evaluation.md): FixedSessionClassifier on
-// the fixed-point backend, SessionClassifier (double) on the float one. The segmentation
-// profile's per-pixel labels are Eq. (12) whatever this says.
-enum class Method { kEq12, kSession };
-Method parse_method(const std::string& name);  // "eq12" | "session"; throws std::invalid_argument
-const char* method_name(Method method);
+// How the handheld and sorting profiles match a region's query: Eq. (12), the
+// session-robust matcher (docs/evaluation.md): FixedSessionClassifier on the
+// fixed-point backend, SessionClassifier (double) on the float one; or a
+// learned model through onnxruntime (docs/learned-models.md). The
+// segmentation profile's per-pixel labels are Eq. (12) whatever this says.
+enum class Method { kEq12, kSession, kOnnx };
+// "eq12" | "session" | "onnx:FILE" (the file is not checked here); throws
+// std::invalid_argument.
+Method parse_method(const std::string& name);
+const char* method_name(Method method);  // "eq12" | "session" | "onnx"
+
+// Method::kOnnx's model and the onnxruntime library that runs it.
+struct LearnedModel {
+  std::string path;  // the .onnx file (tofmat train)
+  std::string library = learn::kDefaultOnnxruntimeLibrary;
+};
 
 struct ProfileConfig {
   std::string name = "handheld";
@@ -46,6 +56,7 @@ struct ProfileConfig {
   // session model, which has no target angle: a table recorded at another
   // angle than the sweeps is called unknown.
   bool open_set = false;
+  LearnedModel model;                   // Method::kOnnx only
   PixelRegion roi{232, 188, 280, 236};  // 48 x 48 at the centre
   std::vector<std::string> candidates;  // empty: every material of the table
   int top_k = 5;                        // ranking entries in a label event

@@ -23,8 +23,10 @@ namespace tofmat::daemon {
 class RegionMatcher {
  public:
   // open_set: label a query no candidate explains "unknown" (the session matcher only).
+  // model: Method::kOnnx's (loaded and checked against the table here: throws
+  // std::runtime_error or std::invalid_argument saying why it cannot run).
   RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend,
-                Method method = Method::kEq12, bool open_set = false);
+                Method method = Method::kEq12, bool open_set = false, const LearnedModel& model = {});
 
   struct Decoded {
     std::variant<DecodedFrame, FixedDecodedFrame> frame;
@@ -55,6 +57,7 @@ class RegionMatcher {
   std::unique_ptr<FloatClassifier> float_;
   std::unique_ptr<SessionClassifier> session_;             // Method::kSession, the float backend
   std::unique_ptr<FixedSessionClassifier> fixed_session_;  // Method::kSession, the fixed-point backend
+  std::unique_ptr<learn::OnnxClassifier> onnx_;            // Method::kOnnx, either backend's query
   FixedDepthBinAccumulator fixed_acc_;
   DepthBinAccumulator float_acc_;
 };
