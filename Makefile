@@ -38,6 +38,7 @@ setup:
 	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $$missing >/dev/null; \
 	fi
 	$(PYTHON) -m pip install -q --disable-pip-version-check -r sdk/requirements.txt
+	mk/fetch-deps.sh onnxruntime
 
 # Idempotent: adds the arm64 architecture to dpkg once, installs what is missing.
 setup-cross:
@@ -112,12 +113,14 @@ fuzz: setup
 # CLI11), the core, the driver, the protocol, the simulator source, and
 # the GoogleTest suites (run under qemu-aarch64 by cross-test).
 cross: setup-cross
+	mk/fetch-deps.sh onnxruntime qemu10
 	cmake -S . -B $(CROSS) -G Ninja -DCMAKE_TOOLCHAIN_FILE=cmake/aarch64-linux-gnu.cmake -DCMAKE_BUILD_TYPE=Release \
 	  -DTOFMAT_DB_DIR=$(DB) >/dev/null
 	@cmake --build $(CROSS) -j$(JOBS) > $(CROSS)/build.log 2>&1; rc=$$?; tail -n 20 $(CROSS)/build.log; exit $$rc
 
 # The box's build under qemu-aarch64: its GoogleTest suites, then tofmatd end
-# to end. The tests marked `board` in tests/python/test_daemon.py start the
+# to end. Learned classifiers run under qemu 10 (mk/fetch-deps.sh qemu10):
+# onnxruntime crashes qemu 7.2 while it reads the CPU's features. The tests marked `board` in tests/python/test_daemon.py start the
 # aarch64 tofmatd (tests/cross/tofmatd-qemu) and talk to it with the host's
 # Python client; a replayed recording must give the x86 daemon's labels.
 # Two statistical suites of the simulator (DecodeNoise: 270 s, KinectSimFaults:
@@ -128,6 +131,9 @@ cross-test: cross check-db setup build-python
 	ctest --test-dir $(CROSS) --output-on-failure -j$(JOBS) -E '$(QEMU_SLOW_SUITES)'
 	TOFMAT_DAEMON=$(abspath tests/cross/tofmatd-qemu) TOFMAT_DAEMON_AARCH64=$(abspath $(CROSS)/firmware/daemon/tofmatd) \
 	  TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python/test_daemon.py -m board -q
+	QEMU_AARCH64=$(abspath build/deps/qemu10/qemu-aarch64) TOFMAT_DAEMON=$(abspath tests/cross/tofmatd-qemu) \
+	  TOFMAT_DAEMON_AARCH64=$(abspath $(CROSS)/firmware/daemon/tofmatd) \
+	  TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python/test_learn.py -m board -q
 
 cross-test-all: cross-test
 	ctest --test-dir $(CROSS) --output-on-failure -j$(JOBS) -R '$(QEMU_SLOW_SUITES)'

@@ -624,12 +624,14 @@ def devices(as_json: bool) -> None:
 
 def _register_sim() -> None:
     from .evaluation.cli import evaluate
+    from .learn.cli import train
     from .report.cli import report
     from .sim.cli import sim_cli
 
     main.add_command(sim_cli)
     main.add_command(report)
     main.add_command(evaluate)
+    main.add_command(train)
 
 
 _register_sim()

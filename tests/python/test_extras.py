@@ -34,11 +34,15 @@ from tofmat._extras import MissingExtraError, require
 
 REPO = Path(__file__).resolve().parents[2]
 SDK = REPO / "sdk"
-BLOCKED = ("scipy", "matplotlib", "smbus2", "PIL")  # import names
+BLOCKED = ("scipy", "matplotlib", "smbus2", "PIL", "sklearn", "onnx", "onnxruntime")  # import names
 CORE = ["numpy", "click"]  # the decided core dependencies (by name)
 EXTRAS = {"sim": {"scipy", "matplotlib"}, "plot": {"matplotlib"}, "hw": {"smbus2", "pillow"},
-          "all": {"scipy", "matplotlib", "smbus2", "pillow"}}  # fmt: skip
-DISTRIBUTION = {"PIL": "pillow"}  # import name -> the name pip installs it by, where they differ
+          "learn": {"scikit-learn", "onnx", "onnxruntime"},
+          "all": {"scipy", "matplotlib", "smbus2", "pillow", "scikit-learn", "onnx", "onnxruntime"}}  # fmt: skip
+DISTRIBUTION = {
+    "PIL": "pillow",
+    "sklearn": "scikit-learn",
+}  # import name -> the name pip installs it by, where they differ
 
 # Runs first in every subprocess: importing a blocked package (or a submodule) fails as if it were
 # not installed, and each attempt is appended to the file named by $TOFMAT_TEST_IMPORT_LOG.
@@ -280,6 +284,31 @@ def test_sim_calibrate_and_evaluate_need_the_sim_extra(blocked: Blocked, db_dir:
     assert blocked.attempts() == ["matplotlib"]
 
 
+def test_train_and_learned_models_need_the_learn_extra(blocked: Blocked, core_tmx: Path) -> None:
+    assert "--hidden" in ok(blocked.cli("train", "--help")).stdout
+    out = blocked.workdir / "model.onnx"
+    msg = one_line_error(blocked.cli("train", "--table", core_tmx, "-o", out))
+    assert msg == "Error: tofmat train needs sklearn: pip install 'tofmat[learn]'"
+    assert not out.exists()
+    assert blocked.attempts() == ["sklearn"]
+    model = REPO / "tests" / "cpp" / "data" / "onnx" / "tiny_mlp.onnx"
+    ok(blocked.python(
+        """
+        import sys
+        import tofmat
+        from tofmat.learn import LearnedClassifier
+
+        try:
+            LearnedClassifier(sys.argv[1])
+            raise SystemExit("LearnedClassifier did not raise")
+        except tofmat.MissingExtraError as e:
+            assert (e.module, e.extra) == ("onnxruntime", "learn"), (e.module, e.extra)
+        """,
+        model,
+    ))  # fmt: skip
+    assert blocked.attempts() == ["onnxruntime"]
+
+
 def test_library_functions_raise_missing_extra_error(blocked: Blocked, core_tmx: Path) -> None:
     ok(blocked.python(
         """
@@ -381,7 +410,7 @@ def test_pyproject_core_and_extras() -> None:
     assert [requirement_name(r) for r in project["dependencies"]] == CORE
     extras = {k: {requirement_name(r) for r in v} for k, v in project["optional-dependencies"].items()}
     assert extras == EXTRAS
-    assert extras["all"] == extras["sim"] | extras["plot"] | extras["hw"]
+    assert extras["all"] == extras["sim"] | extras["plot"] | extras["hw"] | extras["learn"]
     # The pinned dev/test set (make setup) still installs everything, extras included.
     pinned = {requirement_name(ln) for ln in (SDK / "requirements.txt").read_text().splitlines() if ln.strip()
               and not ln.startswith("#")}  # fmt: skip

@@ -41,6 +41,11 @@ from ..report.cli import resolve_table, table_option
 )
 @click.option("--sim-materials", help="Comma-separated materials for the simulator source (default: its library's).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), help="Also write the table to this file.")
+@click.option(
+    "--model",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    help="Also a learned model (tofmat train) for the real curves' table: its row is 'onnx'.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
     "--plot",
@@ -54,6 +59,7 @@ def evaluate(
     sim_sessions: int,
     sim_materials: str | None,
     out: Path | None,
+    model: Path | None,
     as_json: bool,
     plot: Path | None,
 ) -> None:
@@ -66,7 +72,16 @@ def evaluate(
     results = []
     with progress_bar("evaluate") as progress:
         if source in ("curves", "all"):
-            results.append(evaluate_curves(open_table(resolve_table(table_path)), sessions, progress=progress))
+            table = open_table(resolve_table(table_path))
+            learned = None
+            if model is not None:
+                from ..learn import LearnedClassifier
+
+                try:
+                    learned = LearnedClassifier(model, table)
+                except ValueError as e:  # not a model, or one for another table
+                    raise UserError(str(e)) from e
+            results.append(evaluate_curves(table, sessions, progress=progress, learned=learned))
         if source in ("sim", "all"):
             names = [m.strip() for m in sim_materials.split(",")] if sim_materials else None
             try:

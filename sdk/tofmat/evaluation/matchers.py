@@ -211,3 +211,21 @@ class SessionMatcher:
         scaled = P * root[None, None, :, :, None] * root[None, None, :, None, :]
         _, logdet = np.linalg.slogdet(scaled)
         return z, np.asarray(prior, dtype=np.float64), np.asarray(logdet, dtype=np.float64)
+
+
+class LearnedMatcher:
+    """A learned model (``tofmat train``) through onnxruntime: the score is -ln p. Queries run one
+    at a time, as tofmatd runs them, so that the cost per query compares with the other matchers'."""
+
+    name = "onnx"
+
+    def __init__(self, model: object) -> None:
+        """``model``: a :class:`tofmat.learn.LearnedClassifier`."""
+        from ..learn import LearnedClassifier
+
+        if not isinstance(model, LearnedClassifier):
+            raise TypeError("a LearnedClassifier is needed")
+        self.model = model
+
+    def scores(self, queries: F32) -> F64:
+        return np.concatenate([self.model.scores(q[None]) for q in queries]) if len(queries) else np.zeros((0, 0))

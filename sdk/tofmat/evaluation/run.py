@@ -17,8 +17,9 @@ import numpy as np
 
 from .. import ExemplarTable
 from .._progress import Progress
+from ..learn import LearnedClassifier
 from .confidence import ECE_BINS, fit_temperatures, reliability
-from .matchers import CompiledSessionMatcher, Eq12Matcher, Matcher, SessionParams, session_prior
+from .matchers import CompiledSessionMatcher, Eq12Matcher, LearnedMatcher, Matcher, SessionParams, session_prior
 from .open_set import MAX_FALSE_REJECT, choose_thresholds, open_set_curves
 from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries
 
@@ -114,15 +115,17 @@ def evaluate_source(
     model: SessionModel,
     draw: Callable[[int], Queries],
     progress: Progress | None = None,
+    learned: Sequence[Matcher] = (),
 ) -> SourceResult:
-    """``draw(seed)``: the queries of one split."""
+    """``draw(seed)``: the queries of one split. ``learned``: learned models' matchers, reported
+    beside the exemplar matchers."""
     t0 = time.perf_counter()
     res = SourceResult(source, description, len(table.materials))
     tune_q = draw(SPLIT_SEEDS["tune"])
     res.tuning = tune(table, model, tune_q, progress)
     res.tuned = res.tuning[0][0]
     test_q = draw(SPLIT_SEEDS["test"])
-    matchers: list[Matcher] = [Eq12Matcher(table), CompiledSessionMatcher(table, res.tuned)]
+    matchers: list[Matcher] = [Eq12Matcher(table), CompiledSessionMatcher(table, res.tuned), *learned]
     temperature: dict[str, dict[int, float]] = {}
     for split, q in (("tune", tune_q), ("test", test_q)):  # (the tuning split first: it fits T)
         for m in matchers:
@@ -157,9 +160,14 @@ def evaluate_source(
 
 
 def evaluate_curves(
-    table: ExemplarTable, sessions_per_material: int, lengths: Sequence[int] = LENGTHS, progress: Progress | None = None
+    table: ExemplarTable,
+    sessions_per_material: int,
+    lengths: Sequence[int] = LENGTHS,
+    progress: Progress | None = None,
+    learned: LearnedClassifier | None = None,
 ) -> SourceResult:
-    """The real curves in new sessions (:mod:`.sessions`), with the calibrated simulator's drift."""
+    """The real curves in new sessions (:mod:`.sessions`), with the calibrated simulator's drift;
+    ``learned``: also a learned model trained for this table (``tofmat train``)."""
     library, device = calibrated_json()
     model = calibrated_model(library, table)
     cs = CurveSessions(table, model, device, library)
@@ -170,6 +178,7 @@ def evaluate_curves(
         model,
         lambda seed: draw_queries(cs, list(lengths), sessions_per_material, seed),
         progress,
+        [LearnedMatcher(learned)] if learned is not None else [],
     )
 
 
