@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-// tofmat_bench_learn MODEL [LIBRARY] [RUNS]: a learned classifier's cost per
-// query as tofmatd runs it (OnnxClassifier::classify, one query at a time,
-// one thread), by sweep length, on windows of the real database's curves.
+// tofmat_bench_learn MODEL [LIBRARY] [RUNS] [TABLE]: a learned classifier's
+// cost per query as tofmatd runs it (OnnxClassifier::classify, one query at a
+// time, one thread), by sweep length, on windows of the table's curves (the
+// one the model was trained for: default the real database's folder).
 // Prints the median over RUNS (default 5) of each length's mean time per
 // query, in microseconds. A benchmark: it never fails on timing.
 #include <algorithm>
@@ -15,16 +16,17 @@
 #include <vector>
 
 #include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/core/table_file.hpp"
 #include "tofmat/learn/onnx_classifier.hpp"
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: %s MODEL [LIBRARY] [RUNS]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s MODEL [LIBRARY] [RUNS] [TABLE]\n", argv[0]);
     return 2;
   }
   try {
-    const auto table = std::make_shared<const tofmat::ExemplarTable>(
-        tofmat::ExemplarTable::from_npy_dir(TOFMAT_DB_DIR, tofmat::kDatabaseBinStartMm, tofmat::kDatabaseBinStopMm));
+    const std::string table_path = argc > 4 ? argv[4] : TOFMAT_DB_DIR;
+    const auto table = std::make_shared<const tofmat::ExemplarTable>(tofmat::load_table(table_path));
     const std::string library = argc > 2 ? argv[2] : tofmat::learn::kDefaultOnnxruntimeLibrary;
     const int runs = argc > 3 ? std::max(1, std::atoi(argv[3])) : 5;
     const tofmat::learn::OnnxClassifier clf(table, argv[1], {}, library);

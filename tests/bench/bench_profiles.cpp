@@ -119,6 +119,7 @@ struct Options {
   int threads = 1;  // segmentation: threads sharing each frame (one core unless told)
   bool truth = true;
   std::vector<std::string> candidates;
+  std::string classifier;  // empty: the daemon's default
 };
 
 const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting",    "sorting-idle",   "segmentation",
@@ -130,7 +131,8 @@ const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting"
       "error: %s\nusage: tofmat_bench_profiles [--profile "
       "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
       "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
-      "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c]\n",
+      "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c] [--classifier "
+      "eq12|session]\n",
       why);
   std::exit(2);
 }
@@ -176,6 +178,9 @@ Options parse(int argc, char** argv) {
       o.sim_data = v;
     } else if (a == "--candidates") {
       o.candidates = split(v);
+    } else if (a == "--classifier") {
+      o.classifier = v;
+      if (v != "eq12" && v != "session") usage("--classifier takes eq12 or session");
     } else {
       usage(("unknown option " + a).c_str());
     }
@@ -451,6 +456,7 @@ ProfileConfig config_of(const Options& o, const std::string& profile, Backend ba
   c.name = profile == "sorting-idle" ? "sorting" : profile;
   c.backend = backend;
   c.candidates = o.candidates;
+  if (!o.classifier.empty()) c.method = parse_method(o.classifier);
   if (o.smooth > 0) c.smooth = o.smooth;
   c.threads = o.threads;
   kernel_applied = set_profile_kernel(c, fixed_kernel(o.kernel));

@@ -129,6 +129,19 @@ TEST(ModelContract, ChecksTheTable) {
   auto shifted = c;
   shifted.bins.start_mm += 1.0;
   EXPECT_THROW(tofmat::learn::check_table(shifted, *table), std::invalid_argument);
+  // The curves' CRC: the table's own passes, another's is refused.
+  auto crc = c;
+  crc.curves_crc32 = tofmat::learn::curves_crc32(*table);
+  EXPECT_NO_THROW(tofmat::learn::check_table(crc, *table));
+  crc.curves_crc32 = *crc.curves_crc32 ^ 1U;
+  EXPECT_THROW(tofmat::learn::check_table(crc, *table), std::invalid_argument);
+  auto md = good_metadata();
+  md["tofmat.curves_crc32"] = "0a1b2c3d";
+  EXPECT_EQ(tofmat::learn::parse_contract(md).curves_crc32, 0x0a1b2c3dU);
+  for (const char* bad : {"0A1B2C3D", "a1b2c3d", "0a1b2c3d0", "0x1b2c3d", ""}) {
+    md["tofmat.curves_crc32"] = bad;
+    EXPECT_FALSE(refusal(md).empty()) << bad;
+  }
 }
 
 #ifdef TOFMAT_ONNXRUNTIME_LIBRARY
@@ -139,6 +152,8 @@ TEST(OnnxClassifier, MatchesTheReferenceNetwork) {
   ASSERT_TRUE(tofmat::learn::onnxruntime_built());
   const OnnxClassifier clf(real_table(), (kData / "tiny_mlp.onnx").string(), {}, kLibrary);
   EXPECT_EQ(clf.contract().materials, real_table()->materials());
+  // The SDK wrote the curves' CRC (tofmat.learn.model.curves_crc32): the same as this one's.
+  EXPECT_EQ(clf.contract().curves_crc32, tofmat::learn::curves_crc32(*real_table()));
   const auto q = tofmat::read_npy_file(kData / "queries.npy");
   const auto want = tofmat::read_npy_file(kData / "expected.npy");
   ASSERT_EQ(q.shape.size(), 2U);
@@ -211,6 +226,11 @@ TEST(OnnxClassifier, RefusesModelsThatDoNotFit) {
   const auto two = std::make_shared<const ExemplarTable>(std::vector<std::string>{t.materials()[0], t.materials()[1]},
                                                          t.rows(), t.bins(), values);
   EXPECT_THROW(OnnxClassifier(two, path, {}, kLibrary), std::invalid_argument);
+  // The same materials and bins with one value moved: other curves.
+  std::vector<float> moved = t.values();
+  moved[0] = std::isnan(moved[0]) ? 1.0F : moved[0] + 0.5F;
+  const auto other = std::make_shared<const ExemplarTable>(t.materials(), t.rows(), t.bins(), moved);
+  EXPECT_THROW(OnnxClassifier(other, path, {}, kLibrary), std::invalid_argument);
   EXPECT_THROW(OnnxClassifier(real_table(), path, {99}, kLibrary), std::invalid_argument);
   // Not a model; no file; a file over the size bound is refused before it is read.
   const auto tmp = std::filesystem::temp_directory_path() / "tofmat_not_a_model.onnx";

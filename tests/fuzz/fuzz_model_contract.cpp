@@ -2,9 +2,10 @@
 // libFuzzer target: a learned model's metadata (firmware/learn/model_contract.hpp),
 // what tofmat reads from a model file itself before onnxruntime runs it. The
 // input is split at NUL bytes into the values of tofmat.contract,
-// tofmat.materials, tofmat.rows, tofmat.bins and tofmat.temperatures (a
-// missing part is a missing key); any input ends in a contract or std::invalid_argument, and a contract
-// is checked against a small table the same way.
+// tofmat.materials, tofmat.rows, tofmat.bins, tofmat.temperatures and
+// tofmat.curves_crc32 (a missing part is a missing key); any input ends in a
+// contract or std::invalid_argument, and a contract is checked against a
+// small table the same way.
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -17,8 +18,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   static const auto table = std::make_shared<const tofmat::ExemplarTable>(
       std::vector<std::string>{"cork", "wood"}, std::vector<tofmat::RowSpec>{{80, 120}, {16, 120}},
       tofmat::BinSpec{600.0, 3.0, 4}, std::vector<float>(2 * 2 * 4, 1.0F));
-  static const char* const keys[] = {tofmat::learn::kKeyContract, tofmat::learn::kKeyMaterials, tofmat::learn::kKeyRows,
-                                     tofmat::learn::kKeyBins, tofmat::learn::kKeyTemperatures};
+  static const char* const keys[] = {tofmat::learn::kKeyContract,     tofmat::learn::kKeyMaterials,
+                                     tofmat::learn::kKeyRows,         tofmat::learn::kKeyBins,
+                                     tofmat::learn::kKeyTemperatures, tofmat::learn::kKeyCurves};
   std::map<std::string, std::string> metadata;
   const std::string text(reinterpret_cast<const char*>(data), size);
   std::size_t start = 0;

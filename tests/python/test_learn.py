@@ -26,7 +26,7 @@ from tofmat.client import Label, daemon_binary
 from tofmat.learn import LearnedClassifier, ModelContract
 from tofmat.learn.export import Network, to_onnx
 from tofmat.learn.features import features
-from tofmat.learn.train import check_export, train
+from tofmat.learn.train import check_export, train, training_set
 
 REPO = Path(__file__).resolve().parents[2]
 FIXTURE = REPO / "tests" / "cpp" / "data" / "onnx"
@@ -111,13 +111,27 @@ def test_train_exports_a_model_that_matches_the_network(
     assert [n for n, _ in model.contract.temperatures] == [1.0, 3.0, 10.0, 30.0, 100.0]
     assert all(0 < t < 1000 for _, t in model.contract.temperatures)
     # On queries it never saw (another seed), the export still equals the network.
-    from tofmat.learn.train import training_set
-
     queries, truth = training_set(real_table, 2, seed=99)
     assert check_export(t.onnx, t.network, queries, real_table) < 1e-4
     # A handful of training sessions already beats chance (1 in 29) on sessions it never saw.
     accuracy = float(np.mean(np.argmax(model.probabilities(queries), axis=1) == truth))
     assert accuracy > 2 / 29, accuracy  # twice chance (0.09 with these settings; 150 sessions give 0.5)
+
+
+def test_training_adds_simulator_sessions(real_table: tofmat.ExemplarTable) -> None:
+    names = ["cork", "paper", "wood"]
+    idx = [real_table.materials.index(n) for n in names]
+    three = tofmat.ExemplarTable(names, real_table.features[idx], real_table.bins, real_table.rows)
+    curves_only, truth_only = training_set(three, 1)
+    both, truth = training_set(three, 1, sim_sessions_per_material=1)
+    assert len(curves_only) == 3 * 15 and np.array_equal(both[: len(curves_only)], curves_only, equal_nan=True)
+    rendered = truth[len(truth_only) :]
+    # One rendered session per material, one sweep of each length (a sweep with no valid frame is none).
+    assert 3 * 12 <= len(rendered) <= 3 * 15 and set(rendered.tolist()) == {0, 1, 2}
+    assert all(np.isfinite(q).any() for q in both[len(curves_only) :])
+    odd = tofmat.ExemplarTable(["cork", "unobtainium"], real_table.features[idx[:2]], real_table.bins, real_table.rows)
+    with pytest.raises(ValueError, match="no material unobtainium"):
+        training_set(odd, 1, sim_sessions_per_material=1)
 
 
 def test_a_model_runs_only_with_its_table(small_model: tuple[Path, Any], real_table: tofmat.ExemplarTable,
@@ -127,6 +141,10 @@ def test_a_model_runs_only_with_its_table(small_model: tuple[Path, Any], real_ta
     two = tofmat.ExemplarTable(names[:2], real_table.features[:2], real_table.bins, real_table.rows)
     with pytest.raises(ValueError, match="trained for the materials"):
         LearnedClassifier(path, two)
+    moved = real_table.features.copy()
+    moved[3, 0, 100] += 0.25
+    with pytest.raises(ValueError, match="curves are not the ones"):
+        LearnedClassifier(path, tofmat.ExemplarTable(names, moved, real_table.bins, real_table.rows))
     with pytest.raises(ValueError, match="not an ONNX model"):
         (tmp_path / "junk.onnx").write_bytes(b"not a model")
         LearnedClassifier(tmp_path / "junk.onnx")

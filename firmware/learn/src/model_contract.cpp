@@ -3,8 +3,11 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <sstream>
 #include <stdexcept>
+
+#include <zlib.h>
 
 #include "tofmat/core/confidence.hpp"
 
@@ -72,6 +75,13 @@ ModelContract parse_contract(const std::map<std::string, std::string>& metadata)
     throw std::invalid_argument(std::string("model metadata: \"tofmat.bins\": ") + e.what());
   }
 
+  if (metadata.count(kKeyCurves)) {
+    const std::string& hex = value_of(metadata, kKeyCurves);
+    if (hex.size() != 8 || hex.find_first_not_of("0123456789abcdef") != std::string::npos)
+      throw std::invalid_argument("model metadata: \"tofmat.curves_crc32\" is not 8 lowercase hex digits");
+    c.curves_crc32 = static_cast<std::uint32_t>(std::stoul(hex, nullptr, 16));
+  }
+
   if (metadata.count(kKeyTemperatures)) {
     std::istringstream knots(value_of(metadata, kKeyTemperatures));
     for (std::string knot; knots >> knot;) {
@@ -111,6 +121,7 @@ void check_table(const ModelContract& contract, const ExemplarTable& table) {
   if (!close(contract.bins.start_mm, table.bins().start_mm) || !close(contract.bins.width_mm, table.bins().width_mm))
     throw std::invalid_argument("the model's depth bins are not the table's");
   const auto& names = table.materials();
+  const auto curves_differ = [&] { return contract.curves_crc32 && *contract.curves_crc32 != curves_crc32(table); };
   if (contract.materials.size() != names.size())
     throw std::invalid_argument("the model knows " + std::to_string(contract.materials.size()) +
                                 " materials, the table " + std::to_string(names.size()));
@@ -118,6 +129,22 @@ void check_table(const ModelContract& contract, const ExemplarTable& table) {
     if (contract.materials[i] != names[i])
       throw std::invalid_argument("the model's material " + std::to_string(i) + " is \"" + contract.materials[i] +
                                   "\", the table's \"" + names[i] + "\" (train the model on this table)");
+  if (curves_differ())
+    throw std::invalid_argument(
+        "the table's curves are not the ones the model was trained on (same materials and bins, other values: "
+        "train the model on this table)");
+}
+
+std::uint32_t curves_crc32(const ExemplarTable& table) {
+  uLong crc = crc32(0L, Z_NULL, 0);
+  std::uint8_t bytes[4];
+  for (const float v : table.values()) {
+    std::uint32_t bits = 0x7fc00000U;
+    if (!std::isnan(v)) std::memcpy(&bits, &v, sizeof bits);
+    for (int i = 0; i < 4; ++i) bytes[i] = static_cast<std::uint8_t>(bits >> (8 * i));
+    crc = crc32(crc, bytes, 4);
+  }
+  return static_cast<std::uint32_t>(crc);
 }
 
 }  // namespace tofmat::learn

@@ -124,7 +124,7 @@ struct OnnxSession::State {
     std::map<std::string, std::string> out;
     try {
       check(api->GetAllocatorWithDefaultOptions(&alloc), "allocator");
-      for (const char* key : {kKeyContract, kKeyMaterials, kKeyRows, kKeyBins, kKeyTemperatures}) {
+      for (const char* key : {kKeyContract, kKeyMaterials, kKeyRows, kKeyBins, kKeyTemperatures, kKeyCurves}) {
         char* value = nullptr;
         check(api->ModelMetadataLookupCustomMetadataMap(md, alloc, key, &value), "the model's metadata");
         if (value) {

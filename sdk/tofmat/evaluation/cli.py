@@ -44,7 +44,7 @@ from ..report.cli import resolve_table, table_option
 @click.option(
     "--model",
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Also a learned model (tofmat train) for the real curves' table: its row is 'onnx'.",
+    help="Also a learned model (tofmat train) for the real curves' table: its row is 'onnx' (the curves source).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
@@ -69,6 +69,8 @@ def evaluate(
     from ..tools.tables import open_table
     from .run import evaluate_curves, evaluate_sim, format_markdown
 
+    if model is not None and source == "sim":
+        raise UserError("--model is evaluated on the real curves' source (--source curves or all)")
     results = []
     with progress_bar("evaluate") as progress:
         if source in ("curves", "all"):

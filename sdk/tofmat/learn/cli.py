@@ -37,11 +37,26 @@ def _hidden(text: str) -> tuple[int, ...]:
     show_default=True,
     help="New sessions per material to train on (tuning side), each with one sweep of 15 lengths from 1 to 100 bins.",
 )
+@click.option(
+    "--sim-sessions",
+    type=click.IntRange(0, 200),
+    default=0,
+    show_default=True,
+    help="Also simulator sweeps rendered in this many new sessions per material (target angles the curves' "
+    "session model lacks; about 20 s a session for 29 materials).",
+)
 @click.option("--hidden", default="256,256", show_default=True, help="Hidden layer sizes, comma-separated.")
 @click.option("--epochs", type=click.IntRange(1, 10000), default=200, show_default=True, help="At most this many.")
 @click.option("--seed", type=int, default=None, help="Seed of the training draws and the network (default: 3003).")
 def train(
-    table_path: Path | None, out: Path, force: bool, sessions: int, hidden: str, epochs: int, seed: int | None
+    table_path: Path | None,
+    out: Path,
+    force: bool,
+    sessions: int,
+    sim_sessions: int,
+    hidden: str,
+    epochs: int,
+    seed: int | None,
 ) -> None:
     """Train an MLP on new capture sessions of the table's curves (the session model of
     docs/evaluation.md, tuning side only), export it to ONNX with the tofmat model contract, and
@@ -58,7 +73,10 @@ def train(
         raise UserError(f"{out.parent} is not a folder")
     table = open_table(resolve_table(table_path))
     with progress_bar("train") as progress:
-        t = fit(table, sessions, sizes, TRAIN_SEED if seed is None else seed, epochs, progress)
+        try:
+            t = fit(table, sessions, sizes, TRAIN_SEED if seed is None else seed, epochs, progress, sim_sessions)
+        except ValueError as e:  # a material the simulator does not have
+            raise UserError(str(e)) from e
     if t.check_max_abs > 1e-4:
         raise UserError(
             f"the exported model differs from the network by {t.check_max_abs:.3g} (over 1e-4): not written"

@@ -11,6 +11,7 @@ output ``probabilities``, float32 [batch, M]; metadata ``tofmat.contract`` ("1.0
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,8 @@ class ModelContract:
     # (sweep length in bins, temperature) knots of the confidence (tofmat.Calibration); empty:
     # the model's own probabilities
     temperatures: tuple[tuple[float, float], ...] = ()
+    # the CRC-32 of the curves trained on (curves_crc32()); None: not checked
+    curves_crc32: int | None = None
 
     def metadata(self) -> dict[str, str]:
         start, width, count = self.bins
@@ -54,12 +57,19 @@ class ModelContract:
         }
         if self.temperatures:
             out["tofmat.temperatures"] = " ".join(f"{n!r}:{t!r}" for n, t in self.temperatures)
+        if self.curves_crc32 is not None:
+            out["tofmat.curves_crc32"] = f"{self.curves_crc32:08x}"
         return out
 
     @classmethod
     def of_table(cls, table: Table) -> ModelContract:
         b = table.bins
-        return cls(tuple(table.materials), table.n_rows, (float(b.start_mm), float(b.width_mm), int(b.count)))
+        return cls(
+            tuple(table.materials),
+            table.n_rows,
+            (float(b.start_mm), float(b.width_mm), int(b.count)),
+            curves_crc32=curves_crc32(table),
+        )
 
     @classmethod
     def from_metadata(cls, meta: Mapping[str, str]) -> ModelContract:
@@ -75,13 +85,19 @@ class ModelContract:
             temperatures = tuple((float(n), float(t)) for n, t in knots)
             if temperatures:
                 Calibration(list(temperatures))  # validates them
+            crc_text = meta.get("tofmat.curves_crc32")
+            crc = None
+            if crc_text is not None:
+                if len(crc_text) != 8 or crc_text.strip("0123456789abcdef"):
+                    raise ValueError(f"tofmat.curves_crc32 {crc_text!r} is not 8 lowercase hex digits")
+                crc = int(crc_text, 16)
         except KeyError as e:
             raise ValueError(f"not a tofmat model: its metadata has no {e.args[0]!r} (docs/learned-models.md)") from e
         except ValueError as e:
             raise ValueError(f"a tofmat model with malformed metadata: {e}") from e
         if version.partition(".")[0] != CONTRACT.partition(".")[0]:
             raise ValueError(f"model contract {version}: this SDK runs {CONTRACT.partition('.')[0]}.x models")
-        return cls(tuple(names.split("\n")), rows, bins, version, temperatures)
+        return cls(tuple(names.split("\n")), rows, bins, version, temperatures, crc)
 
     def check_table(self, table: Table) -> None:
         """Raises ValueError saying how the table differs from the one the model was trained for."""
@@ -98,6 +114,19 @@ class ModelContract:
             raise ValueError(
                 f"the model was trained for the materials {list(self.materials)}, the table has {list(other.materials)}"
             )
+        if self.curves_crc32 is not None and self.curves_crc32 != other.curves_crc32:
+            raise ValueError(
+                "the table's curves are not the ones the model was trained on (same materials and bins, other "
+                "values: train the model on this table)"
+            )
+
+
+def curves_crc32(table: Table) -> int:
+    """zlib's CRC-32 of the table's curves as little-endian float32, NaN as 0x7fc00000 (tofmatd's
+    curves_crc32())."""
+    bits = np.ascontiguousarray(table.features, dtype="<f4").view("<u4").copy()
+    bits[np.isnan(table.features)] = 0x7FC00000
+    return zlib.crc32(bits.astype("<u4").tobytes()) & 0xFFFFFFFF
 
 
 class LearnedClassifier:

@@ -39,16 +39,41 @@ class Trained:
 
 
 def training_set(
-    table: ExemplarTable, sessions_per_material: int, seed: int = TRAIN_SEED
+    table: ExemplarTable,
+    sessions_per_material: int,
+    seed: int = TRAIN_SEED,
+    sim_sessions_per_material: int = 0,
+    progress: Progress | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(queries (N, R, B) float32, truth (N,)) of the session model on the tuning side."""
+    """(queries (N, R, B) float32, truth (N,)) on the tuning side: the table's curves in new
+    sessions of the session model, and ``sim_sessions_per_material`` simulator sweeps rendered in
+    new sessions (:mod:`..evaluation.sim_sessions`: other target angles than the table's, which the
+    curves' session model lacks), against this table."""
     from ..evaluation.run import calibrated_json
 
     library, device = calibrated_json()
     cs = CurveSessions(table, calibrated_model(library, table), device, library)
     lengths = [n for n in TRAIN_LENGTHS if n <= table.n_bins]
     q = draw_queries(cs, lengths, sessions_per_material, seed)
-    return q.queries, q.truth
+    if sim_sessions_per_material == 0:
+        return q.queries, q.truth
+    from ..evaluation.sessions import SessionModel
+    from ..evaluation.sim_sessions import SimSessions
+    from ..sim.evaluate import session_offset_spread, session_state_spread
+
+    unknown = sorted(set(table.materials) - set(load_library_names()))
+    if unknown:
+        raise ValueError(f"--sim-sessions: the simulator has no material {', '.join(unknown)}")
+    model = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
+    ss = SimSessions(list(table.materials), model, progress=progress)
+    sim = ss.draw(lengths, sim_sessions_per_material, seed, progress)
+    return np.concatenate([q.queries, sim.queries]), np.concatenate([q.truth, sim.truth])
+
+
+def load_library_names() -> list[str]:
+    from ..sim import load_library
+
+    return list(load_library().names)
 
 
 def train(
@@ -58,6 +83,7 @@ def train(
     seed: int = TRAIN_SEED,
     max_epochs: int = 200,
     progress: Progress | None = None,
+    sim_sessions_per_material: int = 0,
 ) -> Trained:
     """Fits an MLP (scikit-learn, Adam, early stopping on a tenth of the draws) and exports it."""
     require("sklearn", extra="learn", feature="tofmat train")
@@ -66,7 +92,7 @@ def train(
     t0 = time.perf_counter()
     if progress:
         progress(0, 4, "drawing training sessions")
-    queries, truth = training_set(table, sessions_per_material, seed)
+    queries, truth = training_set(table, sessions_per_material, seed, sim_sessions_per_material, progress)
     exemplars = table.features.astype(np.float32)
     x = features(queries, exemplars).astype(np.float64)
     mean = x.mean(axis=0)

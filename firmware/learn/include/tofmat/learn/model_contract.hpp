@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -32,6 +33,10 @@ inline constexpr const char* kKeyBins = "tofmat.bins";            // "start_mm w
 // Optional: the confidence's temperature by sweep length, fitted by tofmat
 // train on tuning-side sessions: "bins:T bins:T ..." (confidence.hpp).
 inline constexpr const char* kKeyTemperatures = "tofmat.temperatures";
+// Optional: the CRC-32 of the curves the model was trained on (curves_crc32()),
+// 8 hex digits: a table with the same materials and bins but other curves (a
+// simulated table, a material re-captured) is refused.
+inline constexpr const char* kKeyCurves = "tofmat.curves_crc32";
 inline constexpr std::size_t kMaxTemperatureKnots = 64;
 // Bounds on what the metadata may hold (checked before anything is parsed).
 inline constexpr std::size_t kMaxMetadataValue = 64 * 1024;
@@ -46,7 +51,12 @@ struct ModelContract {
   // (sweep length in bins, temperature) knots; empty: temperature 1 (the
   // model's own probabilities).
   std::vector<std::pair<double, double>> temperatures;
+  std::optional<std::uint32_t> curves_crc32;
 };
+
+// zlib's CRC-32 of the table's values as little-endian float32, NaN as
+// 0x7fc00000 (what tofmat.learn.ModelContract.of_table computes too).
+std::uint32_t curves_crc32(const ExemplarTable& table);
 
 // Parses the contract from the model's metadata. Throws std::invalid_argument
 // naming the key that is missing, too long or malformed, or a major version
