@@ -225,9 +225,10 @@ def test_tofmat_train_writes_a_checked_model(real_tmx: Path, tmp_path: Path) -> 
     assert list(tmp_path.iterdir()) == [out]  # no temporary file left behind
 
 
-def test_tofmat_evaluate_reports_the_model(small_model: tuple[Path, Any], real_tmx: Path, tmp_path: Path) -> None:
+def test_tofmat_evaluate_reports_the_model(small_model: tuple[Path, Any], db_dir: Path, tmp_path: Path) -> None:
+    # (small_model was trained on the database's folder: its unquantised curves are the model's table)
     path, _ = small_model
-    p = run_cli("evaluate", "--source", "curves", "--table", real_tmx, "--sessions", "1", "--model", path, "--json")
+    p = run_cli("evaluate", "--source", "curves", "--table", db_dir, "--sessions", "1", "--model", path, "--json")
     assert p.returncode == 0, p.stderr
     import json
 
@@ -238,8 +239,10 @@ def test_tofmat_evaluate_reports_the_model(small_model: tuple[Path, Any], real_t
         assert set(r["accuracy"]) == {"1", "3", "10", "30", "100"} and r["us_per_query"] > 0
     junk = tmp_path / "junk.onnx"
     junk.write_bytes(b"junk")
-    p = run_cli("evaluate", "--source", "curves", "--table", real_tmx, "--sessions", "1", "--model", junk)
+    p = run_cli("evaluate", "--source", "curves", "--table", db_dir, "--sessions", "1", "--model", junk)
     assert p.returncode == 2 and "not an ONNX model" in p.stderr
+    p = run_cli("evaluate", "--source", "sim", "--model", path)
+    assert p.returncode == 2 and "--model is evaluated on the real curves" in p.stderr
 
 
 # --- tofmatd ---------------------------------------------------------------------------------------
@@ -250,9 +253,10 @@ def onnx_flags(model: Path = FIXTURE / "tiny_mlp.onnx") -> list[str]:
 
 
 @pytest.mark.board
-def test_tofmatd_labels_with_a_model(start: Callable[..., Daemon], real_tmx: Path) -> None:
-    d = start("sim:sweep,materials=cork+wood,frames=10,gap=3", *onnx_flags(), table=real_tmx)
-    materials = tofmat.ExemplarTable.load(real_tmx).materials
+def test_tofmatd_labels_with_a_model(start: Callable[..., Daemon], db_dir: Path) -> None:
+    # The fixture was written for the database's folder (tofmatd reads it as a table too).
+    d = start("sim:sweep,materials=cork+wood,frames=10,gap=3", *onnx_flags(), table=db_dir)
+    materials = sorted(p.stem for p in db_dir.glob("*.npy"))
     with d.client() as c:
         s = c.status()
         assert s["classifier"] == "onnx" and s["model"] == str(FIXTURE / "tiny_mlp.onnx") and not s["open_set"]
@@ -296,7 +300,7 @@ def _replay_labels(binary: Path, library: Path, recording: Path, table: Path, tm
 
 
 @pytest.mark.board
-def test_a_replay_through_a_model_gives_the_x86_labels(tmp_path: Path, real_tmx: Path) -> None:
+def test_a_replay_through_a_model_gives_the_x86_labels(tmp_path: Path, db_dir: Path) -> None:
     # Under `make cross-test` daemon_binary() is the aarch64 tofmatd (under qemu 10) with aarch64's
     # onnxruntime, the reference the x86 one with x86's: the same recorded frames must give the same
     # labels, and probabilities equal to float32 rounding (the two libraries' kernels differ).
@@ -305,8 +309,8 @@ def test_a_replay_through_a_model_gives_the_x86_labels(tmp_path: Path, real_tmx:
                 "--frames", "20")  # fmt: skip
     assert p.returncode == 0, p.stderr
     reference = Path(tofmat.client.__file__).parent / "bin" / "tofmatd"
-    ours = _replay_labels(daemon_binary(), the_daemons_library(), rec, real_tmx, tmp_path / "ours")
-    theirs = _replay_labels(reference, onnxruntime_library(), rec, real_tmx, tmp_path / "theirs")
+    ours = _replay_labels(daemon_binary(), the_daemons_library(), rec, db_dir, tmp_path / "ours")
+    theirs = _replay_labels(reference, onnxruntime_library(), rec, db_dir, tmp_path / "theirs")
     assert len(ours) == len(theirs) == 16 + 2
     for a, b in zip(ours, theirs, strict=True):
         assert a[:5] == b[:5]
@@ -315,24 +319,33 @@ def test_a_replay_through_a_model_gives_the_x86_labels(tmp_path: Path, real_tmx:
         assert all(math.isclose(x, y, rel_tol=1e-4, abs_tol=1e-4) for (_, x), (_, y) in zip(a[6], b[6], strict=True))
 
 
-def test_a_table_the_model_does_not_fit_is_refused_on_reload(start: Callable[..., Daemon], real_tmx: Path,
+def test_a_table_the_model_does_not_fit_is_refused_on_reload(start: Callable[..., Daemon], db_dir: Path,
                                                             tmp_path: Path) -> None:  # fmt: skip
-    table = tmp_path / "served.tmx"
-    shutil.copy(real_tmx, table)
-    d = start("sim:sweep,materials=cork+wood,frames=10,gap=3", *onnx_flags(), table=table)
+    served = tmp_path / "db"
+    shutil.copytree(db_dir, served)
+    d = start("sim:sweep,materials=cork+wood,frames=10,gap=3", *onnx_flags(), table=served)
     with d.client() as c:
         assert len(c.status()["table"]["materials"]) == 29
-        t = tofmat.ExemplarTable.load(real_tmx)
-        tofmat.ExemplarTable(t.materials[:2], t.features[:2], t.bins, t.rows).save(table)
+        for npy in served.glob("*.npy"):
+            if npy.stem not in ("cork", "wood"):
+                npy.unlink()
         d.proc.send_signal(signal.SIGHUP)
         deadline = time.monotonic() + 30
-        while "last_reload" not in (s := c.status()):
+        while (s := c.status()).get("last_reload") is None:
             assert time.monotonic() < deadline, "no reload reported"
             time.sleep(0.1)
         assert s["last_reload"]["ok"] is False
         assert "the model knows 29 materials, the table 2" in s["last_reload"]["error"]
         assert s["classifier"] == "onnx" and len(s["table"]["materials"]) == 29  # the old table serves
         assert any(e.state == "tracking" for _, e in zip(range(60), c.labels(timeout=60), strict=False))
+
+
+def test_tofmatd_refuses_a_table_with_other_curves(tmp_path: Path, real_tmx: Path) -> None:
+    # The fixture was trained on the database's folder; the imported .tmx holds its curves quantised.
+    sock = tmp_path / "s.sock"
+    cmd = [str(daemon_binary()), "--source", "sim", "--socket", str(sock), "--table", str(real_tmx), *onnx_flags()]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert p.returncode != 0 and "curves are not the ones the model was trained on" in p.stdout + p.stderr
 
 
 def test_tofmatd_refuses_a_model_it_cannot_run(tmp_path: Path, real_tmx: Path, db_dir: Path) -> None:
