@@ -205,6 +205,24 @@ TEST(OnnxClassifier, RenormalisesOverTheCandidates) {
   EXPECT_NEAR(sum, 1.0, 1e-9);
 }
 
+TEST(OnnxClassifier, AProbabilityOfZeroIsAFiniteDistance) {
+  // saturated.onnx gives material 0 everything: float32's softmax leaves the others exactly 0.
+  const OnnxClassifier clf(real_table(), (kData / "saturated.onnx").string(), {}, kLibrary);
+  const auto q = tofmat::read_npy_file(kData / "queries.npy");
+  std::vector<float> query(q.shape[1]);
+  for (std::size_t k = 0; k < query.size(); ++k) query[k] = static_cast<float>(q.data[k]);
+  const auto p = clf.probabilities(query.data(), query.size());
+  EXPECT_EQ(p[0], 1.0F);
+  EXPECT_EQ(p[1], 0.0F);
+  const auto c = clf.classify(query.data(), query.size());
+  EXPECT_EQ(c.best().index, 0U);
+  EXPECT_NEAR(c.best().distance, 0.0, 1e-9);
+  for (std::size_t j = 1; j < c.ranking.size(); ++j) {
+    EXPECT_NEAR(c.ranking[j].distance, 103.28, 0.01);  // -ln 2^-149
+    EXPECT_EQ(c.ranking[j].index, j);                  // ties: the lower index first
+  }
+}
+
 TEST(OnnxClassifier, RefusesBadQueries) {
   const OnnxClassifier clf(real_table(), (kData / "tiny_mlp.onnx").string(), {}, kLibrary);
   const std::size_t n = real_table()->elements_per_material();

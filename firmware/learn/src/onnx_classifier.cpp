@@ -10,6 +10,9 @@
 #include "tofmat/learn/onnx_classifier.hpp"
 
 namespace tofmat::learn {
+namespace {
+constexpr double kSmallestShare = 1.401298464324817e-45;  // the smallest float32 (2^-149)
+}  // namespace
 
 struct OnnxClassifier::Impl {
   OnnxSession session;
@@ -64,8 +67,12 @@ Classification OnnxClassifier::classify(const float* query, std::size_t n) const
   for (const auto c : candidates_) {
     Match m;
     m.index = c;
-    // -ln p over the candidates (a candidate given 0 gets +inf: ranked last).
-    m.distance = total > 0.0 ? -std::log(static_cast<double>(p[c]) / total) : std::log(double(candidates_.size()));
+    // -ln p over the candidates. A probability of 0 (float32's softmax underflows past e^-103)
+    // counts as the smallest float32, so that every distance is finite (the protocol's numbers
+    // are): ln(2^-149) = -103.3.
+    const double share =
+        total > 0.0 ? static_cast<double>(p[c]) / total : 1.0 / static_cast<double>(candidates_.size());
+    m.distance = -std::log(std::max(share, kSmallestShare));
     m.valid = valid;
     out.ranking.push_back(m);
   }

@@ -6,7 +6,9 @@
   exported by tofmat.learn.export (its predictions mean nothing; the test checks that tofmatd's
   onnxruntime path computes what the NumPy reference does);
 - queries.npy: (8, 400) float32 queries: windows of real curves of 1 to 200 bins, NaN elsewhere;
-- expected.npy: (8, 29) float64, the reference network's probabilities for them.
+- expected.npy: (8, 29) float64, the reference network's probabilities for them;
+- saturated.onnx: a network whose softmax gives material 0 everything (float32's exp underflows
+  to 0 for the others), for the distances' bound.
 
 Usage: python3 make_fixture.py DB_DIR [OUT_DIR]. Deterministic: tests/python/test_learn.py checks
 that it gives the committed files again.
@@ -52,6 +54,11 @@ def main(db: str, out: Path) -> None:
     (out / "tiny_mlp.onnx").write_bytes(to_onnx(net, ModelContract.of_table(table), doc="tofmat test fixture"))
     np.save(out / "queries.npy", qs)
     np.save(out / "expected.npy", net.probabilities(qs))
+    m = len(table.materials)
+    bias = np.zeros(m)
+    bias[0] = 200.0
+    saturated = Network(net.exemplars, net.mean, net.scale, [np.zeros((f, 4)), np.zeros((4, m))], [np.zeros(4), bias])
+    (out / "saturated.onnx").write_bytes(to_onnx(saturated, ModelContract.of_table(table), doc="tofmat test fixture"))
 
 
 if __name__ == "__main__":

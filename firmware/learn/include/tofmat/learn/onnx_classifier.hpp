@@ -49,7 +49,8 @@ class OnnxClassifier {
   std::vector<float> probabilities(const float* query, std::size_t n) const;
 
   // The candidates ranked by the model's probability, renormalised over them:
-  // Match::distance is -ln p (lower is better, as every matcher's), valid the
+  // Match::distance is -ln p (lower is better, as every matcher's; at most
+  // 103.3, where float32's probability is 0), valid the
   // query's valid elements, fit NaN (no noise model: never unknown). Ties go
   // to the lower table index.
   Classification classify(const float* query, std::size_t n) const;
