@@ -230,6 +230,10 @@ TEST(OnnxClassifier, RefusesBadQueries) {
   EXPECT_THROW(clf.classify(q.data(), n), std::invalid_argument);  // nothing observed
   q[5] = std::numeric_limits<float>::infinity();
   EXPECT_THROW(clf.classify(q.data(), n), std::invalid_argument);
+  q[5] = -3e38F;  // finite, but it would make the model's probabilities NaN
+  EXPECT_THROW(clf.classify(q.data(), n), std::invalid_argument);
+  q[5] = 1e6F;  // the bound itself: every probability finite
+  for (const float p : clf.probabilities(q.data(), n)) EXPECT_TRUE(std::isfinite(p));
   q[5] = 3.0F;
   EXPECT_NO_THROW(clf.classify(q.data(), n));
   EXPECT_THROW(clf.classify(q.data(), n - 1), std::invalid_argument);

@@ -160,6 +160,14 @@ def test_a_model_runs_only_with_its_table(small_model: tuple[Path, Any], real_ta
         LearnedClassifier(path).probabilities(np.zeros(7, dtype=np.float32))
     with pytest.raises(ValueError, match="infinite"):
         LearnedClassifier(path).probabilities(np.full(400, np.inf, dtype=np.float32))
+    # Stiff: a finite element so large that float32's squares overflow is refused; at the bound
+    # every probability is finite.
+    q = np.full(400, np.nan, dtype=np.float32)
+    q[[10, 210]] = -3e38
+    with pytest.raises(ValueError, match="beyond"):
+        LearnedClassifier(path).probabilities(q)
+    q[[10, 210]] = 1e6
+    assert np.isfinite(LearnedClassifier(path).probabilities(q)).all()
 
 
 def test_the_contract_refuses_another_major_version() -> None:

@@ -41,7 +41,8 @@ std::vector<float> OnnxClassifier::probabilities(const float* query, std::size_t
                                 std::to_string(table_->elements_per_material()));
   std::size_t valid = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    if (std::isinf(query[i])) throw std::invalid_argument("OnnxClassifier: an infinite query element");
+    if (std::fabs(query[i]) > kMaxQueryMm)  // (NaN compares false: a missing element)
+      throw std::invalid_argument("OnnxClassifier: a query element beyond +-1e6 mm (" + std::to_string(query[i]) + ")");
     if (!std::isnan(query[i])) ++valid;
   }
   if (valid == 0) throw std::invalid_argument("OnnxClassifier: the query has no valid element");

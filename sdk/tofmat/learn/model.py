@@ -28,6 +28,9 @@ CONTRACT = "1.0"
 INPUT = "query"
 OUTPUT = "probabilities"
 MAX_MODEL_BYTES = 64 << 20  # tofmatd refuses larger files (kMaxModelBytes)
+# A query element beyond this (mm) is refused, as tofmatd does (kMaxQueryMm): past about 1e19 the
+# features' squares overflow float32 and the probabilities become NaN.
+MAX_QUERY_MM = 1e6
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -169,8 +172,8 @@ class LearnedClassifier:
                 f"queries of {elements} elements ({self.contract.rows} x {self.contract.bins[2]}) expected"
             )
         q = q.reshape(q.size // elements, elements)
-        if np.isinf(q).any():
-            raise ValueError("a query element is infinite")
+        if (np.abs(q[np.isfinite(q) | np.isinf(q)]) > MAX_QUERY_MM).any():
+            raise ValueError(f"a query element is beyond +-{MAX_QUERY_MM:g} mm (or infinite)")
         out = self.session.run([OUTPUT], {INPUT: q})[0]
         return np.asarray(out, dtype=np.float32)
 

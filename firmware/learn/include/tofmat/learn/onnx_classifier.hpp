@@ -23,6 +23,10 @@ namespace tofmat::learn {
 inline constexpr const char* kDefaultOnnxruntimeLibrary = "libonnxruntime.so.1";
 // A model file larger than this is refused before it is read.
 inline constexpr std::size_t kMaxModelBytes = std::size_t{64} << 20;
+// A query element beyond +-this (mm) is refused: a row of the table is a few
+// hundred mm at most, and past about 1e19 the features' squares overflow
+// float32 and the model's probabilities become NaN.
+inline constexpr double kMaxQueryMm = 1e6;
 
 // Whether this build can run ONNX models at all; when not, why
 // (unavailable_reason() is empty when it can).
@@ -45,7 +49,8 @@ class OnnxClassifier {
 
   // The model's probability for every material of the table, for one query
   // (n_rows x n_bins, C order, NaN = missing). Throws std::invalid_argument on
-  // a wrong size, an infinite element or a query with no valid element.
+  // a wrong size, an element beyond +-kMaxQueryMm (infinite ones too) or a
+  // query with no valid element.
   std::vector<float> probabilities(const float* query, std::size_t n) const;
 
   // The candidates ranked by the model's probability, renormalised over them:
