@@ -250,7 +250,27 @@ def test_tofmat_evaluate_reports_the_model(small_model: tuple[Path, Any], db_dir
     p = run_cli("evaluate", "--source", "curves", "--table", db_dir, "--sessions", "1", "--model", junk)
     assert p.returncode == 2 and "not an ONNX model" in p.stderr
     p = run_cli("evaluate", "--source", "sim", "--model", path)
-    assert p.returncode == 2 and "--model is evaluated on the real curves" in p.stderr
+    assert p.returncode == 2 and "trained for none of the evaluated tables" in p.stderr
+
+
+def test_tofmat_evaluate_reports_a_model_on_the_simulators_table(tmp_path: Path) -> None:
+    # A simulated table of three materials, a model trained for it on simulator sweeps too, and the
+    # simulator source evaluated against that table.
+    table, model = tmp_path / "sim3.tmx", tmp_path / "sim3.onnx"
+    assert run_cli("sim", "table", "--materials", "cork,paper,wood", "-o", table).returncode == 0
+    p = run_cli("train", "--table", table, "-o", model, "--sessions", "3", "--sim-sessions", "1", "--hidden", "16",
+                "--epochs", "10")  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    p = run_cli("evaluate", "--source", "sim", "--sim-table", table, "--sim-sessions", "1", "--model", model,
+                "--json")  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    import json
+
+    (result,) = json.loads(p.stdout)
+    assert result["materials"] == 3
+    assert {(r["method"], r["split"]) for r in result["rows"]} >= {("onnx", "tune"), ("onnx", "test")}
+    p = run_cli("evaluate", "--source", "sim", "--sim-table", table, "--sim-materials", "cork", "--model", model)
+    assert p.returncode == 2 and "leave out --sim-materials" in p.stderr
 
 
 # --- tofmatd ---------------------------------------------------------------------------------------

@@ -40,11 +40,17 @@ from ..report.cli import resolve_table, table_option
     help="New sessions per material of the simulator, per split (rendered: about 5 s each for 29 materials).",
 )
 @click.option("--sim-materials", help="Comma-separated materials for the simulator source (default: its library's).")
+@click.option(
+    "--sim-table",
+    type=click.Path(exists=True, path_type=Path),
+    help="The simulator source's table (e.g. tofmat sim table's file) instead of one recorded here.",
+)
 @click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), help="Also write the table to this file.")
 @click.option(
     "--model",
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Also a learned model (tofmat train) for the real curves' table: its row is 'onnx' (the curves source).",
+    help="Also a learned model (tofmat train): its row 'onnx' is reported for the source whose table it was "
+    "trained for (the real curves', or with --sim-table the simulator's).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
@@ -58,6 +64,7 @@ def evaluate(
     sessions: int,
     sim_sessions: int,
     sim_materials: str | None,
+    sim_table: Path | None,
     out: Path | None,
     model: Path | None,
     as_json: bool,
@@ -69,25 +76,43 @@ def evaluate(
     from ..tools.tables import open_table
     from .run import evaluate_curves, evaluate_sim, format_markdown
 
-    if model is not None and source == "sim":
-        raise UserError("--model is evaluated on the real curves' source (--source curves or all)")
+    if sim_table is not None and sim_materials:
+        raise UserError("--sim-table gives the simulator source's materials: leave out --sim-materials")
+    # The sources' tables, and the learned model where it was trained for one (its contract).
+    curves = open_table(resolve_table(table_path)) if source in ("curves", "all") else None
+    sim = open_table(sim_table) if sim_table is not None and source in ("sim", "all") else None
+    learned: dict[str, Any] = {}
+    if model is not None:
+        from ..learn import LearnedClassifier
+
+        try:
+            m = LearnedClassifier(model)
+        except ValueError as e:  # not a tofmat model
+            raise UserError(str(e)) from e
+        why = []
+        for name, t in (("curves", curves), ("sim", sim)):
+            if t is None:
+                continue
+            try:
+                m.contract.check_table(t)
+                learned[name] = m
+            except ValueError as e:
+                why.append(f"{name}: {e}")
+        if not learned:
+            raise UserError(
+                f"{model} was trained for none of the evaluated tables (the simulator's needs --sim-table): "
+                + "; ".join(why)
+            )
     results = []
     with progress_bar("evaluate") as progress:
-        if source in ("curves", "all"):
-            table = open_table(resolve_table(table_path))
-            learned = None
-            if model is not None:
-                from ..learn import LearnedClassifier
-
-                try:
-                    learned = LearnedClassifier(model, table)
-                except ValueError as e:  # not a model, or one for another table
-                    raise UserError(str(e)) from e
-            results.append(evaluate_curves(table, sessions, progress=progress, learned=learned))
+        if curves is not None:
+            results.append(evaluate_curves(curves, sessions, progress=progress, learned=learned.get("curves")))
         if source in ("sim", "all"):
             names = [m.strip() for m in sim_materials.split(",")] if sim_materials else None
             try:
-                results.append(evaluate_sim(names, sim_sessions, progress=progress))
+                results.append(
+                    evaluate_sim(names, sim_sessions, progress=progress, table=sim, learned=learned.get("sim"))
+                )
             except ValueError as e:  # an unknown material name
                 raise UserError(str(e)) from e
     text = (

@@ -187,8 +187,12 @@ def evaluate_sim(
     sessions_per_material: int,
     lengths: Sequence[int] = LENGTHS,
     progress: Progress | None = None,
+    table: ExemplarTable | None = None,
+    learned: LearnedClassifier | None = None,
 ) -> SourceResult:
-    """Simulator captures in new sessions against a table the simulated camera recorded (:mod:`.sim_sessions`)."""
+    """Simulator captures in new sessions against a table the simulated camera recorded
+    (:mod:`.sim_sessions`): ``table`` (e.g. ``tofmat sim table``'s), or one recorded here.
+    ``learned``: also a learned model trained for that table."""
     from .sim_sessions import SimSessions
 
     library, _ = calibrated_json()
@@ -196,7 +200,7 @@ def evaluate_sim(
     from ..sim.evaluate import session_offset_spread, session_state_spread
 
     model = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
-    ss = SimSessions(materials, model, progress=progress)
+    ss = SimSessions(materials, model, progress=progress, table=table)
     return evaluate_source(
         "sim",
         _describe(
@@ -206,6 +210,7 @@ def evaluate_sim(
         model,
         lambda seed: ss.draw(list(lengths), sessions_per_material, seed, progress),
         progress,
+        [LearnedMatcher(learned)] if learned is not None else [],
     )
 
 

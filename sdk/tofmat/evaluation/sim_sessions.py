@@ -27,14 +27,29 @@ class SimSessions:
     """Records the table once; :meth:`draw` renders queries in new sessions."""
 
     def __init__(
-        self, materials: list[str] | None, model: SessionModel, seed: int = 7, progress: Progress | None = None
+        self,
+        materials: list[str] | None,
+        model: SessionModel,
+        seed: int = 7,
+        progress: Progress | None = None,
+        table: ExemplarTable | None = None,
     ) -> None:
+        """``table``: the table to draw against (its materials; e.g. ``tofmat sim table``'s file),
+        instead of recording one of ``materials``. Raises ValueError naming a material the
+        simulator does not have."""
         self.device = load_device()
         self.library = load_library()
         self.renderer = Renderer(self.device, self.library, 0)
         self.model = model
-        names = materials if materials is not None else list(self.library.names)
-        self.table: ExemplarTable = simulated_table(self.renderer, names, database_bins(), seed=seed, progress=progress)
+        names = list(table.materials) if table is not None else materials or list(self.library.names)
+        unknown = sorted(set(names) - set(self.library.names))
+        if unknown:
+            raise ValueError(f"the simulator has no material {', '.join(unknown)}")
+        self.table: ExemplarTable = (
+            table
+            if table is not None
+            else simulated_table(self.renderer, names, database_bins(), seed=seed, progress=progress)
+        )
 
     def _sweep(self, renderer: Renderer, m: int, start: int, length: int, yaw: float, seed: int) -> np.ndarray:
         bins = self.table.bins

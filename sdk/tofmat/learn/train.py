@@ -61,19 +61,10 @@ def training_set(
     from ..evaluation.sim_sessions import SimSessions
     from ..sim.evaluate import session_offset_spread, session_state_spread
 
-    unknown = sorted(set(table.materials) - set(load_library_names()))
-    if unknown:
-        raise ValueError(f"--sim-sessions: the simulator has no material {', '.join(unknown)}")
     model = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
-    ss = SimSessions(list(table.materials), model, progress=progress)
+    ss = SimSessions(None, model, progress=progress, table=table)
     sim = ss.draw(lengths, sim_sessions_per_material, seed, progress)
     return np.concatenate([q.queries, sim.queries]), np.concatenate([q.truth, sim.truth])
-
-
-def load_library_names() -> list[str]:
-    from ..sim import load_library
-
-    return list(load_library().names)
 
 
 def train(
