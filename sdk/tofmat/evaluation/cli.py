@@ -48,9 +48,11 @@ from ..report.cli import resolve_table, table_option
 @click.option("-o", "--out", type=click.Path(dir_okay=False, path_type=Path), help="Also write the table to this file.")
 @click.option(
     "--model",
+    "models",
+    multiple=True,
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Also a learned model (tofmat train): its row 'onnx' is reported for the source whose table it was "
-    "trained for (the real curves', or with --sim-table the simulator's).",
+    help="Also a learned model (tofmat train; repeat for one per source): its row 'onnx' is reported for the "
+    "source whose table it was trained for (the real curves', or with --sim-table the simulator's).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
@@ -66,7 +68,7 @@ def evaluate(
     sim_materials: str | None,
     sim_table: Path | None,
     out: Path | None,
-    model: Path | None,
+    models: tuple[Path, ...],
     as_json: bool,
     plot: Path | None,
 ) -> None:
@@ -82,27 +84,31 @@ def evaluate(
     curves = open_table(resolve_table(table_path)) if source in ("curves", "all") else None
     sim = open_table(sim_table) if sim_table is not None and source in ("sim", "all") else None
     learned: dict[str, Any] = {}
-    if model is not None:
+    for model in models:
         from ..learn import LearnedClassifier
 
         try:
             m = LearnedClassifier(model)
         except ValueError as e:  # not a tofmat model
-            raise UserError(str(e)) from e
-        why = []
+            raise UserError(f"{model}: {e}") from e
+        why, fits = [], []
         for name, t in (("curves", curves), ("sim", sim)):
             if t is None:
                 continue
             try:
                 m.contract.check_table(t)
-                learned[name] = m
+                fits.append(name)
             except ValueError as e:
                 why.append(f"{name}: {e}")
-        if not learned:
+        if not fits:
             raise UserError(
                 f"{model} was trained for none of the evaluated tables (the simulator's needs --sim-table): "
                 + "; ".join(why)
             )
+        for name in fits:
+            if name in learned:
+                raise UserError(f"two models for the {name} source's table: give one")
+            learned[name] = m
     results = []
     with progress_bar("evaluate") as progress:
         if curves is not None:

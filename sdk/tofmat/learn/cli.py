@@ -47,7 +47,12 @@ def _hidden(text: str) -> tuple[int, ...]:
 )
 @click.option("--hidden", default="256,256", show_default=True, help="Hidden layer sizes, comma-separated.")
 @click.option("--epochs", type=click.IntRange(1, 10000), default=200, show_default=True, help="At most this many.")
-@click.option("--seed", type=int, default=None, help="Seed of the training draws and the network (default: 3003).")
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**32 - 1),
+    default=None,
+    help="Seed of the training draws and the network (default: 3003).",
+)
 def train(
     table_path: Path | None,
     out: Path,
