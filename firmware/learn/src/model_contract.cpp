@@ -121,7 +121,6 @@ void check_table(const ModelContract& contract, const ExemplarTable& table) {
   if (!close(contract.bins.start_mm, table.bins().start_mm) || !close(contract.bins.width_mm, table.bins().width_mm))
     throw std::invalid_argument("the model's depth bins are not the table's");
   const auto& names = table.materials();
-  const auto curves_differ = [&] { return contract.curves_crc32 && *contract.curves_crc32 != curves_crc32(table); };
   if (contract.materials.size() != names.size())
     throw std::invalid_argument("the model knows " + std::to_string(contract.materials.size()) +
                                 " materials, the table " + std::to_string(names.size()));
@@ -129,7 +128,7 @@ void check_table(const ModelContract& contract, const ExemplarTable& table) {
     if (contract.materials[i] != names[i])
       throw std::invalid_argument("the model's material " + std::to_string(i) + " is \"" + contract.materials[i] +
                                   "\", the table's \"" + names[i] + "\" (train the model on this table)");
-  if (curves_differ())
+  if (contract.curves_crc32 && *contract.curves_crc32 != curves_crc32(table))
     throw std::invalid_argument(
         "the table's curves are not the ones the model was trained on (same materials and bins, other values: "
         "train the model on this table)");

@@ -36,10 +36,15 @@ OnnxClassifier::~OnnxClassifier() = default;
 const ModelContract& OnnxClassifier::contract() const { return impl_->session.contract(); }
 
 std::vector<float> OnnxClassifier::probabilities(const float* query, std::size_t n) const {
+  std::uint32_t valid = 0;
+  return run(query, n, valid);
+}
+
+std::vector<float> OnnxClassifier::run(const float* query, std::size_t n, std::uint32_t& valid) const {
   if (n != table_->elements_per_material())
     throw std::invalid_argument("OnnxClassifier: a query of " + std::to_string(n) + " elements, the table's have " +
                                 std::to_string(table_->elements_per_material()));
-  std::size_t valid = 0;
+  valid = 0;
   for (std::size_t i = 0; i < n; ++i) {
     if (std::fabs(query[i]) > kMaxQueryMm)  // (NaN compares false: a missing element)
       throw std::invalid_argument("OnnxClassifier: a query element beyond +-1e6 mm (" + std::to_string(query[i]) + ")");
@@ -54,9 +59,8 @@ std::vector<float> OnnxClassifier::probabilities(const float* query, std::size_t
 }
 
 Classification OnnxClassifier::classify(const float* query, std::size_t n) const {
-  const std::vector<float> p = probabilities(query, n);
   std::uint32_t valid = 0;
-  for (std::size_t i = 0; i < n; ++i) valid += std::isnan(query[i]) ? 0U : 1U;
+  const std::vector<float> p = run(query, n, valid);
   double total = 0.0;
   for (const auto c : candidates_) {
     const double v = p[c];

@@ -69,7 +69,6 @@ struct OnnxSession::State {
   OrtSession* session = nullptr;
   OrtMemoryInfo* memory = nullptr;
   std::size_t elements = 0;
-  std::size_t outputs = 0;
 
   ~State() {
     if (memory) api->ReleaseMemoryInfo(memory);
@@ -97,24 +96,21 @@ struct OnnxSession::State {
     OrtTypeInfo* info = nullptr;
     check(input ? api->SessionGetInputTypeInfo(session, i, &info) : api->SessionGetOutputTypeInfo(session, i, &info),
           "the model's types");
-    std::unique_ptr<OrtTypeInfo, void (*)(OrtTypeInfo*)> keep(info, [](OrtTypeInfo*) {});
+    struct Release {  // the type info, however this returns
+      const OrtApi* api;
+      OrtTypeInfo* info;
+      ~Release() { api->ReleaseTypeInfo(info); }
+    } release{api, info};
     const OrtTensorTypeAndShapeInfo* tensor = nullptr;
     ONNXTensorElementDataType type = ONNX_TENSOR_ELEMENT_DATA_TYPE_UNDEFINED;
-    std::vector<std::int64_t> dims;
-    try {
-      check(api->CastTypeInfoToTensorInfo(info, &tensor), "the model's types");
-      if (!tensor) throw std::invalid_argument("the model's input and output must be tensors");
-      check(api->GetTensorElementType(tensor, &type), "the model's types");
-      std::size_t n = 0;
-      check(api->GetDimensionsCount(tensor, &n), "the model's types");
-      if (n > 8) throw std::invalid_argument("the model's tensors have too many dimensions");
-      dims.resize(n);
-      check(api->GetDimensions(tensor, dims.data(), n), "the model's types");
-    } catch (...) {
-      api->ReleaseTypeInfo(info);
-      throw;
-    }
-    api->ReleaseTypeInfo(info);
+    check(api->CastTypeInfoToTensorInfo(info, &tensor), "the model's types");
+    if (!tensor) throw std::invalid_argument("the model's input and output must be tensors");
+    check(api->GetTensorElementType(tensor, &type), "the model's types");
+    std::size_t n = 0;
+    check(api->GetDimensionsCount(tensor, &n), "the model's types");
+    if (n > 8) throw std::invalid_argument("the model's tensors have too many dimensions");
+    std::vector<std::int64_t> dims(n);
+    check(api->GetDimensions(tensor, dims.data(), n), "the model's types");
     return {type, dims};
   }
   std::map<std::string, std::string> metadata() const {
@@ -168,11 +164,12 @@ OnnxSession::OnnxSession(const std::string& model_path, const std::string& libra
   contract_ = parse_contract(s.metadata());
   std::size_t inputs = 0;
   s.check(s.api->SessionGetInputCount(s.session, &inputs), "the model's inputs");
-  s.check(s.api->SessionGetOutputCount(s.session, &s.outputs), "the model's outputs");
+  std::size_t outputs = 0;
+  s.check(s.api->SessionGetOutputCount(s.session, &outputs), "the model's outputs");
   if (inputs != 1 || s.name(true, 0) != kInputName)
     throw std::invalid_argument(model_path + ": the model must have one input, \"" + std::string(kInputName) + "\"");
   bool has_output = false;
-  for (std::size_t i = 0; i < s.outputs; ++i) has_output |= s.name(false, i) == kOutputName;
+  for (std::size_t i = 0; i < outputs; ++i) has_output |= s.name(false, i) == kOutputName;
   if (!has_output) throw std::invalid_argument(model_path + ": the model has no output \"" + kOutputName + "\"");
   const auto [in_type, in_dims] = s.shape(true, 0);
   if (in_type != ONNX_TENSOR_ELEMENT_DATA_TYPE_FLOAT || in_dims.size() != 2 ||

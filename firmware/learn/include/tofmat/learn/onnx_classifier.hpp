@@ -64,6 +64,9 @@ class OnnxClassifier {
   const ExemplarTable& table() const { return *table_; }
 
  private:
+  // The query's checks (probabilities()'s), its valid elements, and the model's output.
+  std::vector<float> run(const float* query, std::size_t n, std::uint32_t& valid) const;
+
   struct Impl;
   std::shared_ptr<const ExemplarTable> table_;
   std::vector<std::uint32_t> candidates_;
