@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import Classifier, ExemplarTable, SessionPrior
+from ..learn import LearnedClassifier
 from .sessions import roughness
 
 F64 = npt.NDArray[np.float64]
@@ -219,12 +220,7 @@ class LearnedMatcher:
 
     name = "onnx"
 
-    def __init__(self, model: object) -> None:
-        """``model``: a :class:`tofmat.learn.LearnedClassifier`."""
-        from ..learn import LearnedClassifier
-
-        if not isinstance(model, LearnedClassifier):
-            raise TypeError("a LearnedClassifier is needed")
+    def __init__(self, model: LearnedClassifier) -> None:
         self.model = model
 
     def scores(self, queries: F32) -> F64:

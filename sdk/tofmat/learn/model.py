@@ -31,6 +31,7 @@ MAX_MODEL_BYTES = 64 << 20  # tofmatd refuses larger files (kMaxModelBytes)
 # A query element beyond this (mm) is refused, as tofmatd does (kMaxQueryMm): past about 1e19 the
 # features' squares overflow float32 and the probabilities become NaN.
 MAX_QUERY_MM = 1e6
+SMALLEST_SHARE = 2.0**-149  # a probability of 0 counts as the smallest float32, as in tofmatd
 
 F32 = npt.NDArray[np.float32]
 F64 = npt.NDArray[np.float64]
@@ -129,7 +130,7 @@ def curves_crc32(table: Table) -> int:
     curves_crc32())."""
     bits = np.ascontiguousarray(table.features, dtype="<f4").view("<u4").copy()
     bits[np.isnan(table.features)] = 0x7FC00000
-    return zlib.crc32(bits.astype("<u4").tobytes()) & 0xFFFFFFFF
+    return zlib.crc32(bits.tobytes())
 
 
 class LearnedClassifier:
@@ -158,6 +159,8 @@ class LearnedClassifier:
         if table is not None:
             self.contract.check_table(table)
         self.path = p
+        temperatures = list(self.contract.temperatures) or [(1.0, 1.0)]
+        self.calibration = Calibration(temperatures)  # the confidence's (tofmatd's RegionMatcher's)
 
     @property
     def materials(self) -> tuple[str, ...]:
@@ -172,7 +175,7 @@ class LearnedClassifier:
                 f"queries of {elements} elements ({self.contract.rows} x {self.contract.bins[2]}) expected"
             )
         q = q.reshape(q.size // elements, elements)
-        if (np.abs(q[np.isfinite(q) | np.isinf(q)]) > MAX_QUERY_MM).any():
+        if (np.abs(q[~np.isnan(q)]) > MAX_QUERY_MM).any():
             raise ValueError(f"a query element is beyond +-{MAX_QUERY_MM:g} mm (or infinite)")
         out = self.session.run([OUTPUT], {INPUT: q})[0]
         return np.asarray(out, dtype=np.float32)
@@ -184,9 +187,13 @@ class LearnedClassifier:
             return np.asarray(-np.log(p), dtype=np.float64)
 
     def classify(self, query: npt.ArrayLike, candidates: Sequence[str] | None = None) -> list[tuple[str, float]]:
-        """One query's ranking: (material, confidence) best first. The confidence is tofmatd's: the
-        model's probabilities over ``candidates`` (default: every material), under the temperature
-        its metadata gives for the sweep's length (observed elements / rows), softmax(ln p / T)."""
+        """One query's ranking: (material, confidence) best first, as tofmatd computes it: the
+        distance -ln p of the model's probabilities renormalised over ``candidates`` (default: every
+        material; a probability of 0 counts as 2^-149), and the confidence softmax(-distance / T)
+        with the temperature the model's metadata gives for the sweep's length (observed elements
+        over rows)."""
+        from ..evaluation.confidence import probabilities
+
         q = np.asarray(query, dtype=np.float32)
         p = self.probabilities(q[None])[0].astype(np.float64)
         names = list(self.materials)
@@ -194,14 +201,10 @@ class LearnedClassifier:
             if c not in names:
                 raise ValueError(f"{c!r} is not a material of the model")
         keep = list(range(len(names))) if candidates is None else [names.index(c) for c in candidates]
-        t = 1.0
-        if self.contract.temperatures:
-            t = Calibration(list(self.contract.temperatures)).temperature(
-                float(np.isfinite(q).sum()) / self.contract.rows
-            )
-        with np.errstate(divide="ignore"):
-            logit = np.log(p[keep]) / t
-        w = np.exp(logit - logit.max()) if np.isfinite(logit.max()) else np.ones(len(keep))
-        conf = w / w.sum()
-        order = sorted(range(len(keep)), key=lambda k: (-conf[k], keep[k]))
+        total = float(p[keep].sum())
+        share = p[keep] / total if total > 0 else np.full(len(keep), 1.0 / len(keep))
+        distance = -np.log(np.maximum(share, SMALLEST_SHARE))
+        t = self.calibration.temperature(float(np.isfinite(q).sum()) / self.contract.rows)
+        conf = probabilities(distance[None], t)[0]
+        order = sorted(range(len(keep)), key=lambda k: (distance[k], keep[k]))
         return [(names[keep[k]], float(conf[k])) for k in order]
