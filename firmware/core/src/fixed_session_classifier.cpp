@@ -9,16 +9,20 @@
 #include <cstdlib>
 #include <limits>
 
+#include "fixed_session_kernel.hpp"
 #include "session_solve.hpp"
 
 namespace tofmat {
 
 namespace {
 
+using session_detail::kBasisBits;
+using session_detail::kFitBits;
+using session_detail::SessionElements;
+using session_detail::SessionPassSums;
+
 constexpr double kLog2Pi = 1.8378770664093453;  // log(2 pi)
 constexpr int kMaxTerms = kSessionMaxTerms;
-constexpr int kBasisBits = 14;                                   // basis values in Q14: |a| <= 2^14
-constexpr int kFitBits = 16;                                     // nuisance coefficients and residuals in Q16 steps
 constexpr std::int64_t kMaxCoefficient = std::int64_t{1} << 40;  // |beta| <= 2^24 steps: far beyond any fit
 constexpr std::int64_t kMaxThreshold = std::int64_t{1} << 60;    // beyond every residual: no outlier
 
@@ -35,11 +39,21 @@ std::int64_t clamp_round(double x, std::int64_t limit) {
   return static_cast<std::int64_t>(std::nearbyint(x));
 }
 
-// a + b, held at UINT64_MAX instead of wrapping: a sum that large only says
-// the candidate explains nothing.
-std::uint64_t add_saturating(std::uint64_t a, std::uint64_t b) {
-  return b > std::numeric_limits<std::uint64_t>::max() - a ? std::numeric_limits<std::uint64_t>::max() : a + b;
-}
+using Gram = std::array<std::array<std::int64_t, kMaxTerms>, kMaxTerms>;  // lower triangle used
+
+// A row's bins that the query holds, their basis values and Gram matrix
+// (|a a| <= 2^28 over at most 2^16 elements: within 2^44).
+struct QueryRow {
+  std::vector<std::uint32_t> bins;
+  std::array<std::vector<std::int32_t>, kMaxTerms> a;
+  Gram gram{};
+};
+
+// One outlier of a pass: its element and robust weight T / |r| (never 0).
+struct Outlier {
+  std::uint32_t i;
+  double w;
+};
 
 }  // namespace
 
@@ -47,15 +61,38 @@ FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const Exemp
                                                std::vector<double> noise_mm, std::vector<std::uint32_t> candidates)
     : reference_(table, std::move(prior), std::move(noise_mm), std::move(candidates)),
       eq12_(table, reference_.candidates(), FixedKernel::kScalar) {
-  const std::uint32_t bins = table->n_bins();
-  basis_.resize(bins);
+  const std::uint32_t bins = table->n_bins(), rows = table->n_rows();
+  const int k = reference_.terms();
+  for (int t = 0; t < k; ++t) basis_[static_cast<std::size_t>(t)].resize(bins);
   for (std::uint32_t j = 0; j < bins; ++j) {
     const double x = 2.0 * ((j + 0.5) / bins - 0.5);
     const double legendre[3] = {1.0, x, 0.5 * (3.0 * x * x - 1.0)};
-    for (int t = 0; t < reference_.terms(); ++t) {
-      basis_[j][static_cast<std::size_t>(t)] =
+    for (int t = 0; t < k; ++t) {
+      basis_[static_cast<std::size_t>(t)][j] =
           static_cast<std::int32_t>(std::lround(std::ldexp(legendre[reference_.degree(t)], kBasisBits)));
     }
+  }
+  const SessionPrior& p = reference_.prior();
+  const double step = eq12_.compact().step_mm(), step2 = step * step;
+  const bool huber = std::isfinite(p.huber_k);
+  for (const std::uint32_t index : reference_.candidates()) {
+    for (std::uint32_t r = 0; r < rows; ++r) {
+      const double sigma = p.noise_scale * reference_.noise_mm()[index * rows + r];
+      const double v_mm = sigma * sigma + p.floor_mm * p.floor_mm;
+      RowNoise n;
+      n.v = v_mm / step2;
+      n.sd = std::sqrt(n.v);
+      n.log_norm = 0.5 * (kLog2Pi + std::log(v_mm));
+      n.threshold = huber ? clamp_round(p.huber_k * n.sd * kFitScale, kMaxThreshold) : kMaxThreshold;
+      noise_.push_back(n);
+    }
+  }
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    std::array<double, kMaxTerms> pv{};
+    for (int t = 0; t < k; ++t)
+      pv[static_cast<std::size_t>(t)] = reference_.prior_var(r)[static_cast<std::size_t>(t)] / step2;
+    prior_var_steps_.push_back(pv);
+    log_det_prior_steps_.push_back(reference_.log_det_prior(r) - k * std::log(step2));
   }
 }
 
@@ -67,15 +104,33 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
   const std::uint32_t rows = ct.n_rows();
   const std::size_t pb = ct.padded_bins();
   const int k = reference_.terms();
-  const double step = ct.step_mm(), step2 = step * step;
+  const auto K = static_cast<std::size_t>(k);
   const bool huber = std::isfinite(prior.huber_k);
   const double hk = prior.huber_k;
   const auto has = [](const std::uint8_t* bits, std::size_t i) { return ((bits[i / 8] >> (i % 8)) & 1u) != 0; };
 
-  std::vector<std::uint32_t> at;  // the bins compared in a row
-  std::vector<std::int32_t> e;    // query - candidate, steps: |e| <= 65534
-  std::vector<std::int64_t> res;  // residuals, Q16 steps
-  std::vector<double> out_w;      // outliers' robust weights (0: an inlier)
+  // What does not depend on the candidate: per row the query's bins, their basis and Gram matrix.
+  std::vector<QueryRow> qrows(rows);
+  for (std::uint32_t r = 0; r < rows; ++r) {
+    QueryRow& qr = qrows[r];
+    const std::size_t lo = p.first[r] * kCompactBlock, hi = p.last[r] * kCompactBlock;
+    for (std::size_t b = lo; b < hi && b < table.n_bins(); ++b) {
+      if (has(p.mask.data(), static_cast<std::size_t>(r) * pb + b)) qr.bins.push_back(static_cast<std::uint32_t>(b));
+    }
+    for (std::size_t t = 0; t < K; ++t) {
+      qr.a[t].reserve(qr.bins.size());
+      for (const std::uint32_t b : qr.bins) qr.a[t].push_back(basis_[t][b]);
+    }
+    for (std::size_t j = 0; j < qr.bins.size(); ++j)
+      for (std::size_t s = 0; s < K; ++s)
+        for (std::size_t t = 0; t <= s; ++t) qr.gram[s][t] += std::int64_t{qr.a[s][j]} * qr.a[t][j];
+  }
+
+  std::vector<std::int32_t> e;                              // query - candidate, steps: |e| <= 65534
+  std::array<std::vector<std::int32_t>, kMaxTerms> a_held;  // the basis of the compared bins when some are missing
+  std::vector<std::uint32_t> idx;                           // a pass's outliers
+  std::vector<std::int64_t> mag;                            // and their |r|
+  std::vector<Outlier> was, now;                            // the outliers weighted in the last pass and the next
   Classification out;
   out.ranking.reserve(ct.n_candidates());
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
@@ -85,121 +140,111 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
     double total = 0.0, energy = 0.0;
     std::uint32_t compared = 0;
     for (std::uint32_t r = 0; r < rows; ++r) {
-      const double sigma = prior.noise_scale * reference_.noise_mm()[index * rows + r];
-      const double v_mm = sigma * sigma + prior.floor_mm * prior.floor_mm;
-      const double v = v_mm / step2, sd = std::sqrt(v);  // in steps
-      at.clear();
+      const QueryRow& qr = qrows[r];
+      const RowNoise& noise = noise_[c * rows + r];
+      const double v = noise.v;
+      const std::size_t asked = qr.bins.size();
+      const std::size_t base = static_cast<std::size_t>(r) * pb;
+      // The compared elements: the query's bins the candidate holds. A bin it
+      // lacks leaves the Gram matrix (exact: integers).
       e.clear();
-      std::size_t asked = 0;
-      const std::size_t lo = p.first[r] * kCompactBlock, hi = p.last[r] * kCompactBlock;
-      for (std::size_t b = lo; b < hi && b < table.n_bins(); ++b) {
-        const std::size_t i = static_cast<std::size_t>(r) * pb + b;
-        if (!has(p.mask.data(), i)) continue;
-        ++asked;
-        if (valid != nullptr && !has(valid, i)) continue;
-        at.push_back(static_cast<std::uint32_t>(b));
+      Gram gram = qr.gram;
+      SessionElements x;
+      bool holes = false;
+      for (std::size_t j = 0; j < asked; ++j) {
+        const std::size_t i = base + qr.bins[j];
+        if (valid != nullptr && !has(valid, i)) {
+          holes = true;
+          for (std::size_t s = 0; s < K; ++s)
+            for (std::size_t t = 0; t <= s; ++t) gram[s][t] -= std::int64_t{qr.a[s][j]} * qr.a[t][j];
+          continue;
+        }
         e.push_back(std::int32_t{p.q[i]} - std::int32_t{values[i]});
       }
-      const std::size_t nr = e.size();
+      for (std::size_t t = 0; t < K; ++t) {
+        if (holes) {
+          a_held[t].clear();
+          for (std::size_t j = 0; j < asked; ++j)
+            if (has(valid, base + qr.bins[j])) a_held[t].push_back(qr.a[t][j]);
+        }
+        x.a[t] = holes ? a_held[t].data() : qr.a[t].data();
+      }
+      x.e = e.data();
+      x.n = e.size();
+      const std::size_t nr = x.n;
       compared += static_cast<std::uint32_t>(nr);
-      res.resize(nr);
-      for (std::size_t i = 0; i < nr; ++i) res[i] = std::int64_t{e[i]} * (std::int64_t{1} << kFitBits);
-      const std::int64_t threshold = huber ? clamp_round(hk * sd * kFitScale, kMaxThreshold) : kMaxThreshold;
+      // |e a| <= 2^30 over 2^16 elements: within 2^46.
+      std::array<std::int64_t, kMaxTerms> h_all{};
+      for (std::size_t t = 0; t < K; ++t)
+        for (std::size_t i = 0; i < nr; ++i) h_all[t] += std::int64_t{x.e[i]} * x.a[t][i];
+
+      std::array<std::int64_t, kMaxTerms> B{};
+      SessionPassSums sums;
       double penalty = 0.0, logdet = 0.0;
       if (k > 0) {
-        // Per term, its prior variance and the log of their product in steps^2.
-        std::array<double, kMaxTerms> pv{};
-        for (int t = 0; t < k; ++t)
-          pv[static_cast<std::size_t>(t)] = reference_.prior_var(r)[static_cast<std::size_t>(t)] / step2;
-        const double log_det_prior = reference_.log_det_prior(r) - k * std::log(step2);
-        out_w.assign(nr, 0.0);  // 0: an inlier (weight 1); else an outlier's Huber weight
-        std::array<double, kMaxTerms> beta{};
+        const auto& pv = prior_var_steps_[r];
+        std::array<double, kMaxTerms> beta{}, diagonal{};
+        was.clear();
         for (int it = 0; it < prior.iterations; ++it) {
-          // The normal equations' sums. Inliers (weight 1) in int64: |a a| <= 2^28 and |e a| <= 2^30,
-          // over 2^16 elements within 2^44 and 2^46. Outliers, rare, in double with their weight
-          // T / |r| (a weight quantised to a few bits would move the fit of a far outlier).
-          std::int64_t G[kMaxTerms][kMaxTerms] = {}, h[kMaxTerms] = {};
+          // The normal equations: inliers (weight 1) exactly in int64 as all
+          // elements less the outliers; outliers, rare, in double with their
+          // weight T / |r| (a weight quantised to a few bits would move the
+          // fit of a far outlier), in the elements' order.
+          Gram G = gram;
+          std::array<std::int64_t, kMaxTerms> h = h_all;
           double Go[kMaxTerms][kMaxTerms] = {}, ho[kMaxTerms] = {};
-          for (std::size_t i = 0; i < nr; ++i) {
-            const auto& a = basis_[at[i]];
-            if (out_w[i] == 0.0) {
-              for (int s = 0; s < k; ++s) {
-                h[s] += std::int64_t{e[i]} * a[static_cast<std::size_t>(s)];
-                for (int t = 0; t <= s; ++t) {
-                  G[s][t] += std::int64_t{a[static_cast<std::size_t>(s)]} * a[static_cast<std::size_t>(t)];
-                }
-              }
-            } else {
-              for (int s = 0; s < k; ++s) {
-                const double as = a[static_cast<std::size_t>(s)] * kBasisUnit;
-                ho[s] += out_w[i] * e[i] * as;
-                for (int t = 0; t <= s; ++t) {
-                  Go[s][t] += out_w[i] * as * (a[static_cast<std::size_t>(t)] * kBasisUnit);
-                }
+          for (const Outlier& o : was) {
+            for (std::size_t s = 0; s < K; ++s) {
+              const std::int32_t as_q = x.a[s][o.i];
+              h[s] -= std::int64_t{x.e[o.i]} * as_q;
+              const double as = as_q * kBasisUnit;
+              ho[s] += o.w * x.e[o.i] * as;
+              for (std::size_t t = 0; t <= s; ++t) {
+                G[s][t] -= std::int64_t{as_q} * x.a[t][o.i];
+                Go[s][t] += o.w * as * (x.a[t][o.i] * kBasisUnit);
               }
             }
           }
           std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
           std::array<double, kMaxTerms> rhs{};
-          for (int s = 0; s < k; ++s) {
-            rhs[static_cast<std::size_t>(s)] = (static_cast<double>(h[s]) * kBasisUnit + ho[s]) / v;
-            for (int t = 0; t <= s; ++t) {
+          for (std::size_t s = 0; s < K; ++s) {
+            rhs[s] = (static_cast<double>(h[s]) * kBasisUnit + ho[s]) / v;
+            for (std::size_t t = 0; t <= s; ++t) {
               const double g = (static_cast<double>(G[s][t]) * kBasisUnit2 + Go[s][t]) / v;
-              P[static_cast<std::size_t>(s)][static_cast<std::size_t>(t)] = g;
-              P[static_cast<std::size_t>(t)][static_cast<std::size_t>(s)] = g;
+              P[s][t] = g;
+              P[t][s] = g;
             }
-            P[static_cast<std::size_t>(s)][static_cast<std::size_t>(s)] += 1.0 / pv[static_cast<std::size_t>(s)];
+            P[s][s] += 1.0 / pv[s];
           }
-          logdet = session_detail::cholesky_solve(P, k, rhs, beta) + log_det_prior;
-          // The fit in Q16 steps from the coefficients in Q16 (|B a| <= 2^54): residuals within 2^43.
-          std::array<std::int64_t, kMaxTerms> B{};
-          for (int s = 0; s < k; ++s) {
-            B[static_cast<std::size_t>(s)] =
-                clamp_round(beta[static_cast<std::size_t>(s)] * kFitScale, kMaxCoefficient);
-          }
-          for (std::size_t i = 0; i < nr; ++i) {
-            const auto& a = basis_[at[i]];
-            std::int64_t fit = 0;
-            for (int s = 0; s < k; ++s) fit += B[static_cast<std::size_t>(s)] * a[static_cast<std::size_t>(s)];
-            const std::int64_t rounded = (fit + (std::int64_t{1} << (kBasisBits - 1))) >> kBasisBits;
-            res[i] = std::int64_t{e[i]} * (std::int64_t{1} << kFitBits) - rounded;
-          }
+          session_detail::cholesky_factor_solve(P, k, rhs, beta, diagonal);
+          for (std::size_t s = 0; s < K; ++s) B[s] = clamp_round(beta[s] * kFitScale, kMaxCoefficient);
+          sums = session_detail::session_pass_scalar(x, k, B.data(), noise.threshold, idx, mag);
           if (!huber) break;
-          // Every weight 1 before and after: the next pass would solve the same system again.
-          bool changed = false;
-          for (std::size_t i = 0; i < nr; ++i) {
-            const std::int64_t mag = std::llabs(res[i]);
-            const double was = out_w[i];
-            out_w[i] = mag <= threshold ? 0.0 : static_cast<double>(threshold) / static_cast<double>(mag);
-            changed = changed || out_w[i] != was;
+          // The next pass's weights; every one as it was: it would solve the same system again.
+          now.clear();
+          for (std::size_t o = 0; o < idx.size(); ++o) {
+            const double w = static_cast<double>(noise.threshold) / static_cast<double>(mag[o]);
+            if (w != 0.0) now.push_back({idx[o], w});  // (a weight of 0 marks an inlier: T = 0 only)
           }
+          const bool changed = now.size() != was.size() ||
+                               !std::equal(now.begin(), now.end(), was.begin(),
+                                           [](const Outlier& a, const Outlier& b) { return a.i == b.i && a.w == b.w; });
+          std::swap(was, now);
           if (!changed) break;
         }
-        for (int s = 0; s < k; ++s) {
-          penalty += 0.5 * beta[static_cast<std::size_t>(s)] * beta[static_cast<std::size_t>(s)] /
-                     pv[static_cast<std::size_t>(s)];
-        }
+        logdet = session_detail::cholesky_log_det(diagonal, k) + log_det_prior_steps_[r];
+        for (std::size_t s = 0; s < K; ++s) penalty += 0.5 * beta[s] * beta[s] / pv[s];
+      } else {
+        sums = session_detail::session_pass_scalar(x, 0, B.data(), noise.threshold, idx, mag);
       }
       // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
-      std::uint64_t squares = 0;
-      std::int64_t beyond = 0, n_beyond = 0;
-      for (std::size_t i = 0; i < nr; ++i) {
-        const std::int64_t mag = std::llabs(res[i]);
-        if (huber && mag > threshold) {
-          beyond += mag;  // <= 2^43 each: within 2^59
-          ++n_beyond;
-          continue;
-        }
-        const auto q8 = static_cast<std::uint64_t>((mag + 128) >> 8);  // <= 2^35
-        squares = add_saturating(squares, q8 > 0xffffffffu ? std::numeric_limits<std::uint64_t>::max() : q8 * q8);
-      }
-      double data = static_cast<double>(squares) * (kFitUnit / 2.0) / v;
+      double data = static_cast<double>(sums.squares) * (kFitUnit / 2.0) / v;
       if (huber)
-        data += hk * (static_cast<double>(beyond) * kFitUnit) / sd - 0.5 * hk * hk * static_cast<double>(n_beyond);
+        data += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
+                0.5 * hk * hk * static_cast<double>(sums.n_beyond);
       energy += data + penalty;
-      const double log_norm = 0.5 * (kLog2Pi + std::log(v_mm));
-      total += data + static_cast<double>(nr) * log_norm + penalty + 0.5 * logdet +
-               static_cast<double>(asked - nr) * (0.5 + log_norm);
+      total += data + static_cast<double>(nr) * noise.log_norm + penalty + 0.5 * logdet +
+               static_cast<double>(asked - nr) * (0.5 + noise.log_norm);
     }
     if (compared == 0) continue;
     out.ranking.push_back(Match{index, total, compared, chi_square_deviate(2.0 * energy, compared)});

@@ -12,12 +12,20 @@ namespace tofmat::session_detail {
 
 constexpr int kMaxTerms = kSessionMaxTerms;
 
-// Solves the K x K symmetric positive definite system P beta = b (K <= 3) by
-// Cholesky; returns log det P.
-inline double cholesky_solve(std::array<std::array<double, kMaxTerms>, kMaxTerms> P, int k,
-                             const std::array<double, kMaxTerms>& b, std::array<double, kMaxTerms>& beta) {
-  std::array<std::array<double, kMaxTerms>, kMaxTerms> L{};
+// log det P from the diagonal of P's Cholesky factor (cholesky_factor_solve).
+inline double cholesky_log_det(const std::array<double, kMaxTerms>& diagonal, int k) {
   double logdet = 0.0;
+  for (int i = 0; i < k; ++i) logdet += 2.0 * std::log(diagonal[i]);
+  return logdet;
+}
+
+// Solves the K x K symmetric positive definite system P beta = b (K <= 3) by
+// Cholesky; writes the factor's diagonal (for cholesky_log_det: a caller
+// that solves several times takes the logs of the last solve only).
+inline void cholesky_factor_solve(std::array<std::array<double, kMaxTerms>, kMaxTerms> P, int k,
+                                  const std::array<double, kMaxTerms>& b, std::array<double, kMaxTerms>& beta,
+                                  std::array<double, kMaxTerms>& diagonal) {
+  std::array<std::array<double, kMaxTerms>, kMaxTerms> L{};
   for (int i = 0; i < k; ++i) {
     for (int j = 0; j <= i; ++j) {
       double s = P[i][j];
@@ -25,7 +33,7 @@ inline double cholesky_solve(std::array<std::array<double, kMaxTerms>, kMaxTerms
       if (i == j) {
         // P = (prior precision, > 0) + a Gram matrix: positive definite.
         L[i][i] = std::sqrt(s);
-        logdet += 2.0 * std::log(L[i][i]);
+        diagonal[i] = L[i][i];
       } else {
         L[i][j] = s / L[j][j];
       }
@@ -42,7 +50,14 @@ inline double cholesky_solve(std::array<std::array<double, kMaxTerms>, kMaxTerms
     for (int m = i + 1; m < k; ++m) s -= L[m][i] * beta[m];
     beta[i] = s / L[i][i];
   }
-  return logdet;
+}
+
+// cholesky_factor_solve, returning log det P.
+inline double cholesky_solve(const std::array<std::array<double, kMaxTerms>, kMaxTerms>& P, int k,
+                             const std::array<double, kMaxTerms>& b, std::array<double, kMaxTerms>& beta) {
+  std::array<double, kMaxTerms> diagonal{};
+  cholesky_factor_solve(P, k, b, beta, diagonal);
+  return cholesky_log_det(diagonal, k);
 }
 
 }  // namespace tofmat::session_detail

@@ -10,7 +10,12 @@
 // the logs and the final scaling. Its
 // scores follow the float reference on the same quantised values within the
 // budget of docs/numerics.md (tests/cpp/test_fixed_session_classifier.cpp).
-// Scalar: no NEON kernel yet.
+// The work that does not depend on the candidate is done once a query: the
+// bins the query holds, their basis values and their Gram matrix per row
+// (exact integer sums: a candidate missing some of those bins subtracts
+// them, and a pass subtracts its outliers). Each reweighting pass is one
+// loop over the compared elements, which also sums the data term; the logs
+// are taken of the last pass's factor only.
 #pragma once
 
 #include <array>
@@ -44,8 +49,18 @@ class FixedSessionClassifier {
  private:
   SessionClassifier reference_;
   FixedClassifier eq12_;  // the compact table and the query's quantisation
-  // Per bin, the terms' basis values in Q14 (term t: Legendre degree degree(t)).
-  std::vector<std::array<std::int32_t, kSessionMaxTerms>> basis_;
+  // Per term, each bin's basis value in Q14 (term t: Legendre degree degree(t)).
+  std::array<std::vector<std::int32_t>, kSessionMaxTerms> basis_;
+  // Per candidate (in candidates() order) and row: the noise variance (steps^2)
+  // and sd (steps), the Gaussian's log normaliser (mm), the outlier threshold (Q16 steps).
+  struct RowNoise {
+    double v = 0.0, sd = 0.0, log_norm = 0.0;
+    std::int64_t threshold = 0;
+  };
+  std::vector<RowNoise> noise_;
+  // Per row: the terms' prior variances (steps^2) and the log of their product.
+  std::vector<std::array<double, kSessionMaxTerms>> prior_var_steps_;
+  std::vector<double> log_det_prior_steps_;
 };
 
 }  // namespace tofmat
