@@ -18,6 +18,7 @@ namespace {
 
 using session_detail::kBasisBits;
 using session_detail::kFitBits;
+using session_detail::kWeightBits;
 using session_detail::SessionElements;
 using session_detail::SessionPassSums;
 
@@ -27,10 +28,12 @@ constexpr std::int64_t kMaxCoefficient = std::int64_t{1} << 40;  // |beta| <= 2^
 constexpr std::int64_t kMaxThreshold = std::int64_t{1} << 60;    // beyond every residual: no outlier
 
 // Exact powers of two (a multiplication by one is exact; std::ldexp is a library call).
-constexpr double kBasisUnit = 1.0 / (1 << kBasisBits);            // Q14 -> 1
-constexpr double kBasisUnit2 = kBasisUnit * kBasisUnit;           // Q28 -> 1
-constexpr double kFitScale = static_cast<double>(1 << kFitBits);  // 1 -> Q16
-constexpr double kFitUnit = 1.0 / kFitScale;                      // Q16 -> 1
+constexpr double kBasisUnit = 1.0 / (1 << kBasisBits);                  // Q14 -> 1
+constexpr double kBasisUnit2 = kBasisUnit * kBasisUnit;                 // Q28 -> 1
+constexpr double kFitScale = static_cast<double>(1 << kFitBits);        // 1 -> Q16
+constexpr double kFitUnit = 1.0 / kFitScale;                            // Q16 -> 1
+constexpr double kWeightBasisUnit = kBasisUnit / (1 << kWeightBits);    // Q15 x Q14 -> 1
+constexpr double kWeightBasisUnit2 = kBasisUnit2 / (1 << kWeightBits);  // Q15 x Q28 -> 1
 
 // Nearest integer (ties to even: one instruction on aarch64 and x86-64), held within +-limit.
 std::int64_t clamp_round(double x, std::int64_t limit) {
@@ -45,22 +48,20 @@ using Gram = std::array<std::array<std::int64_t, kMaxTerms>, kMaxTerms>;  // low
 // (|a a| <= 2^28 over at most 2^16 elements: within 2^44).
 struct QueryRow {
   std::vector<std::uint32_t> bins;
+  std::vector<std::uint32_t> at;  // their elements in the compact table's padded layout
+  std::vector<std::int32_t> q;    // the quantised query there
   std::array<std::vector<std::int32_t>, kMaxTerms> a;
   Gram gram{};
-};
-
-// One outlier of a pass: its element and robust weight T / |r| (never 0).
-struct Outlier {
-  std::uint32_t i;
-  double w;
 };
 
 }  // namespace
 
 FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const ExemplarTable>& table, SessionPrior prior,
-                                               std::vector<double> noise_mm, std::vector<std::uint32_t> candidates)
+                                               std::vector<double> noise_mm, std::vector<std::uint32_t> candidates,
+                                               FixedKernel kernel)
     : reference_(table, std::move(prior), std::move(noise_mm), std::move(candidates)),
-      eq12_(table, reference_.candidates(), FixedKernel::kScalar) {
+      eq12_(table, reference_.candidates(), FixedKernel::kScalar),
+      kernel_(kernel) {
   const std::uint32_t bins = table->n_bins(), rows = table->n_rows();
   const int k = reference_.terms();
   for (int t = 0; t < k; ++t) basis_[static_cast<std::size_t>(t)].resize(bins);
@@ -108,6 +109,16 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
   const bool huber = std::isfinite(prior.huber_k);
   const double hk = prior.huber_k;
   const auto has = [](const std::uint8_t* bits, std::size_t i) { return ((bits[i / 8] >> (i % 8)) & 1u) != 0; };
+#if defined(__aarch64__)
+  const bool neon = kernel_ == FixedKernel::kBest;
+  const session_detail::SessionPassFn pass_ =
+      neon ? session_detail::session_pass_neon : session_detail::session_pass_scalar;
+  const session_detail::SessionMomentsFn moments_ =
+      neon ? session_detail::session_moments_neon : session_detail::session_moments_scalar;
+#else
+  const session_detail::SessionPassFn pass_ = session_detail::session_pass_scalar;
+  const session_detail::SessionMomentsFn moments_ = session_detail::session_moments_scalar;
+#endif
 
   // What does not depend on the candidate: per row the query's bins, their basis and Gram matrix.
   std::vector<QueryRow> qrows(rows);
@@ -115,7 +126,11 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
     QueryRow& qr = qrows[r];
     const std::size_t lo = p.first[r] * kCompactBlock, hi = p.last[r] * kCompactBlock;
     for (std::size_t b = lo; b < hi && b < table.n_bins(); ++b) {
-      if (has(p.mask.data(), static_cast<std::size_t>(r) * pb + b)) qr.bins.push_back(static_cast<std::uint32_t>(b));
+      const std::size_t i = static_cast<std::size_t>(r) * pb + b;
+      if (!has(p.mask.data(), i)) continue;
+      qr.bins.push_back(static_cast<std::uint32_t>(b));
+      qr.at.push_back(static_cast<std::uint32_t>(i));
+      qr.q.push_back(p.q[i]);
     }
     for (std::size_t t = 0; t < K; ++t) {
       qr.a[t].reserve(qr.bins.size());
@@ -128,9 +143,6 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
 
   std::vector<std::int32_t> e;                              // query - candidate, steps: |e| <= 65534
   std::array<std::vector<std::int32_t>, kMaxTerms> a_held;  // the basis of the compared bins when some are missing
-  std::vector<std::uint32_t> idx;                           // a pass's outliers
-  std::vector<std::int64_t> mag;                            // and their |r|
-  std::vector<Outlier> was, now;                            // the outliers weighted in the last pass and the next
   Classification out;
   out.ranking.reserve(ct.n_candidates());
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
@@ -147,70 +159,59 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
       const std::size_t base = static_cast<std::size_t>(r) * pb;
       // The compared elements: the query's bins the candidate holds. A bin it
       // lacks leaves the Gram matrix (exact: integers).
-      e.clear();
       Gram gram = qr.gram;
       SessionElements x;
       bool holes = false;
-      for (std::size_t j = 0; j < asked; ++j) {
-        const std::size_t i = base + qr.bins[j];
-        if (valid != nullptr && !has(valid, i)) {
-          holes = true;
-          for (std::size_t s = 0; s < K; ++s)
-            for (std::size_t t = 0; t <= s; ++t) gram[s][t] -= std::int64_t{qr.a[s][j]} * qr.a[t][j];
-          continue;
-        }
-        e.push_back(std::int32_t{p.q[i]} - std::int32_t{values[i]});
+      if (valid != nullptr) {
+        const std::size_t block0 = base / kCompactBlock;
+        for (std::size_t blk = block0 + p.first[r]; blk < block0 + p.last[r]; ++blk)
+          holes = holes || (p.mask[blk] & ~valid[blk]) != 0;
       }
-      for (std::size_t t = 0; t < K; ++t) {
-        if (holes) {
-          a_held[t].clear();
-          for (std::size_t j = 0; j < asked; ++j)
-            if (has(valid, base + qr.bins[j])) a_held[t].push_back(qr.a[t][j]);
+      if (!holes) {
+        e.resize(asked);
+        for (std::size_t j = 0; j < asked; ++j) e[j] = qr.q[j] - std::int32_t{values[qr.at[j]]};
+        for (std::size_t t = 0; t < K; ++t) x.a[t] = qr.a[t].data();
+      } else {
+        e.clear();
+        for (std::size_t t = 0; t < K; ++t) a_held[t].clear();
+        for (std::size_t j = 0; j < asked; ++j) {
+          const std::size_t i = qr.at[j];
+          if (!has(valid, i)) {
+            for (std::size_t s = 0; s < K; ++s)
+              for (std::size_t t = 0; t <= s; ++t) gram[s][t] -= std::int64_t{qr.a[s][j]} * qr.a[t][j];
+            continue;
+          }
+          e.push_back(qr.q[j] - std::int32_t{values[i]});
+          for (std::size_t t = 0; t < K; ++t) a_held[t].push_back(qr.a[t][j]);
         }
-        x.a[t] = holes ? a_held[t].data() : qr.a[t].data();
+        for (std::size_t t = 0; t < K; ++t) x.a[t] = a_held[t].data();
       }
       x.e = e.data();
       x.n = e.size();
       const std::size_t nr = x.n;
       compared += static_cast<std::uint32_t>(nr);
-      // |e a| <= 2^30 over 2^16 elements: within 2^46.
-      std::array<std::int64_t, kMaxTerms> h_all{};
-      for (std::size_t t = 0; t < K; ++t)
-        for (std::size_t i = 0; i < nr; ++i) h_all[t] += std::int64_t{x.e[i]} * x.a[t][i];
-
-      std::array<std::int64_t, kMaxTerms> B{};
       SessionPassSums sums;
       double penalty = 0.0, logdet = 0.0;
       if (k > 0) {
+        // The first pass weighs every element 1 (2^15): its sums are the
+        // Gram matrix's and sum e a (|e a| <= 2^30 over 2^16 elements: within 2^46).
+        session_detail::NormalSums all;
+        moments_(x, k, all.h);
+        for (std::size_t s = 0; s < K; ++s) {
+          all.h[s] *= std::int64_t{1} << kWeightBits;
+          for (std::size_t t = 0; t <= s; ++t) all.G[s][t] = gram[s][t] * (std::int64_t{1} << kWeightBits);
+        }
+        session_detail::NormalSums normal = all;
         const auto& pv = prior_var_steps_[r];
         std::array<double, kMaxTerms> beta{}, diagonal{};
-        was.clear();
+        std::array<std::int64_t, kMaxTerms> B{};
         for (int it = 0; it < prior.iterations; ++it) {
-          // The normal equations: inliers (weight 1) exactly in int64 as all
-          // elements less the outliers; outliers, rare, in double with their
-          // weight T / |r| (a weight quantised to a few bits would move the
-          // fit of a far outlier), in the elements' order.
-          Gram G = gram;
-          std::array<std::int64_t, kMaxTerms> h = h_all;
-          double Go[kMaxTerms][kMaxTerms] = {}, ho[kMaxTerms] = {};
-          for (const Outlier& o : was) {
-            for (std::size_t s = 0; s < K; ++s) {
-              const std::int32_t as_q = x.a[s][o.i];
-              h[s] -= std::int64_t{x.e[o.i]} * as_q;
-              const double as = as_q * kBasisUnit;
-              ho[s] += o.w * x.e[o.i] * as;
-              for (std::size_t t = 0; t <= s; ++t) {
-                G[s][t] -= std::int64_t{as_q} * x.a[t][o.i];
-                Go[s][t] += o.w * as * (x.a[t][o.i] * kBasisUnit);
-              }
-            }
-          }
           std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
           std::array<double, kMaxTerms> rhs{};
           for (std::size_t s = 0; s < K; ++s) {
-            rhs[s] = (static_cast<double>(h[s]) * kBasisUnit + ho[s]) / v;
+            rhs[s] = static_cast<double>(normal.h[s]) * kWeightBasisUnit / v;
             for (std::size_t t = 0; t <= s; ++t) {
-              const double g = (static_cast<double>(G[s][t]) * kBasisUnit2 + Go[s][t]) / v;
+              const double g = static_cast<double>(normal.G[s][t]) * kWeightBasisUnit2 / v;
               P[s][t] = g;
               P[t][s] = g;
             }
@@ -218,24 +219,23 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
           }
           session_detail::cholesky_factor_solve(P, k, rhs, beta, diagonal);
           for (std::size_t s = 0; s < K; ++s) B[s] = clamp_round(beta[s] * kFitScale, kMaxCoefficient);
-          sums = session_detail::session_pass_scalar(x, k, B.data(), noise.threshold, idx, mag);
-          if (!huber) break;
-          // The next pass's weights; every one as it was: it would solve the same system again.
-          now.clear();
-          for (std::size_t o = 0; o < idx.size(); ++o) {
-            const double w = static_cast<double>(noise.threshold) / static_cast<double>(mag[o]);
-            if (w != 0.0) now.push_back({idx[o], w});  // (a weight of 0 marks an inlier: T = 0 only)
+          // The residuals of this fit give the data term and the next pass's weights.
+          const bool last = !huber || it + 1 == prior.iterations;
+          sums = pass_(x, k, B.data(), noise.threshold, !last);
+          if (last) break;
+          session_detail::NormalSums next = all;
+          for (std::size_t s = 0; s < K; ++s) {
+            next.h[s] -= sums.shortfall.h[s];
+            for (std::size_t t = 0; t <= s; ++t) next.G[s][t] -= sums.shortfall.G[s][t];
           }
-          const bool changed = now.size() != was.size() ||
-                               !std::equal(now.begin(), now.end(), was.begin(),
-                                           [](const Outlier& a, const Outlier& b) { return a.i == b.i && a.w == b.w; });
-          std::swap(was, now);
-          if (!changed) break;
+          if (next == normal) break;  // the same system again would give the same fit
+          normal = next;
         }
         logdet = session_detail::cholesky_log_det(diagonal, k) + log_det_prior_steps_[r];
         for (std::size_t s = 0; s < K; ++s) penalty += 0.5 * beta[s] * beta[s] / pv[s];
       } else {
-        sums = session_detail::session_pass_scalar(x, 0, B.data(), noise.threshold, idx, mag);
+        const std::int64_t none[kMaxTerms] = {};
+        sums = pass_(x, 0, none, noise.threshold, false);
       }
       // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
       double data = static_cast<double>(sums.squares) * (kFitUnit / 2.0) / v;

@@ -27,15 +27,18 @@
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/exemplar_table.hpp"
 #include "tofmat/core/fixed_classifier.hpp"
+#include "tofmat/core/fixed_kernel.hpp"
 #include "tofmat/core/session_classifier.hpp"
 
 namespace tofmat {
 
 class FixedSessionClassifier {
  public:
-  // As SessionClassifier's constructor (the same errors).
+  // As SessionClassifier's constructor (the same errors). kernel: the
+  // reweighting passes' (NEON on aarch64 with kBest; the same scores to the bit).
   FixedSessionClassifier(const std::shared_ptr<const ExemplarTable>& table, SessionPrior prior,
-                         std::vector<double> noise_mm = {}, std::vector<std::uint32_t> candidates = {});
+                         std::vector<double> noise_mm = {}, std::vector<std::uint32_t> candidates = {},
+                         FixedKernel kernel = FixedKernel::kBest);
 
   // As SessionClassifier::classify, with FixedClassifier's query rules (a
   // value beyond +-32767 steps saturates there). Same errors.
@@ -49,6 +52,7 @@ class FixedSessionClassifier {
  private:
   SessionClassifier reference_;
   FixedClassifier eq12_;  // the compact table and the query's quantisation
+  FixedKernel kernel_;
   // Per term, each bin's basis value in Q14 (term t: Legendre degree degree(t)).
   std::array<std::vector<std::int32_t>, kSessionMaxTerms> basis_;
   // Per candidate (in candidates() order) and row: the noise variance (steps^2)
