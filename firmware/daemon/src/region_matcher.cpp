@@ -11,8 +11,9 @@
 namespace tofmat::daemon {
 namespace {
 
-double median_of(std::vector<double>& v) {
-  if (v.empty()) return std::numeric_limits<double>::quiet_NaN();
+// The upper median (no average of two: a depth that was measured).
+template <typename T>
+T median_of(std::vector<T>& v) {
   const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
   std::nth_element(v.begin(), mid, v.end());
   return *mid;
@@ -50,22 +51,32 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
 RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelRegion& region) const {
   Decoded d;
   d.region = region;
-  std::vector<double> depths;
+  d.median_mm = std::numeric_limits<double>::quiet_NaN();
   if (backend_ == Backend::kFixed) {
     auto f = decode_region_fixed(frame.raw.data(), kWidth, kHeight, frame.calibration->fixed_tables, region);
     d.pixels = f.pixels;
-    for (std::size_t i = 0; i < f.pixels; ++i)
-      if (f.flags[i] == 0) depths.push_back(f.combined_q8[i] / 256.0);
+    // The median in Q8 mm, converted once (exact: the order of the integers is that of the depths).
+    std::vector<std::int32_t> depths(f.pixels);
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < f.pixels; ++i) {
+      depths[n] = f.combined_q8[i];
+      n += f.flags[i] == 0;
+    }
+    depths.resize(n);
+    d.valid = n;
+    if (n > 0) d.median_mm = median_of(depths) / 256.0;
     d.frame = std::move(f);
   } else {
     auto f = decode_region(frame.raw.data(), kWidth, kHeight, frame.calibration->float_tables, region);
     d.pixels = f.pixels;
+    std::vector<double> depths;
+    depths.reserve(f.pixels);
     for (std::size_t i = 0; i < f.pixels; ++i)
       if (f.flags[i] == 0) depths.push_back(f.combined_mm[i]);
+    d.valid = depths.size();
+    if (!depths.empty()) d.median_mm = median_of(depths);
     d.frame = std::move(f);
   }
-  d.valid = depths.size();
-  d.median_mm = median_of(depths);
   return d;
 }
 
