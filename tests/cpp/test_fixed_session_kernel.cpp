@@ -30,35 +30,50 @@ __extension__ typedef unsigned __int128 u128;
 // Elements with their storage.
 struct Case {
   std::vector<std::int32_t> e;
-  std::vector<std::int32_t> a[kSessionMaxTerms];
-  std::int64_t B[kSessionMaxTerms] = {};
-  std::int64_t threshold = 0;
+  std::vector<std::int32_t> a[kSessionMaxTerms];  // Q14
+  std::vector<std::int32_t> f[kSessionMaxTerms];  // Q31
+  bool constant = false;
+  std::int32_t B[kSessionMaxTerms] = {};
+  std::int32_t threshold = 0;
+  std::size_t n = 0;  // the arrays hold session_padded(n): the padding is junk the kernels must ignore
   SessionElements view() const {
     SessionElements x;
     x.e = e.data();
-    for (int t = 0; t < kSessionMaxTerms; ++t) x.a[t] = a[t].data();
-    x.n = e.size();
+    for (int t = 0; t < kSessionMaxTerms; ++t) {
+      x.a[t] = a[t].data();
+      x.f[t] = f[t].data();
+    }
+    x.constant = constant;
+    x.n = n;
     return x;
   }
 };
 
-// The pass as fixed_session_kernel.hpp defines it, element by element.
+// The pass as fixed_session_kernel.hpp defines it, element by element, in
+// 128-bit integers (the fit's products rounded half up, as (2 B f + 2^31) >> 32 does).
 SessionPassSums definition(const Case& c, int k, bool next) {
   SessionPassSums s;
-  const double tw = static_cast<double>(c.threshold) * 32768.0;
+  const float tw = static_cast<float>(c.threshold) * 32768.0f;
   u128 squares = 0;
-  for (std::size_t i = 0; i < c.e.size(); ++i) {
+  for (std::size_t i = 0; i < c.n; ++i) {
     i128 fit = 0;
-    for (int t = 0; t < k; ++t) fit += static_cast<i128>(c.B[t]) * c.a[t][i];
-    const i128 rounded = (fit + 8192) >> 14;
-    i128 r = static_cast<i128>(c.e[i]) * 65536 - rounded;
+    for (int t = 0; t < k; ++t) {
+      if (c.constant && t == 0) {
+        fit += c.B[0];
+      } else {
+        const i128 p = static_cast<i128>(c.B[t]) * c.f[t][i];  // round(p / 2^31), ties up
+        fit += (p + (i128{1} << 30)) >> 31;
+      }
+    }
+    i128 r = static_cast<i128>(c.e[i]) * 256 - fit;
     if (r < 0) r = -r;
     const auto mag = static_cast<std::int64_t>(r);
     if (mag > c.threshold) {
       s.beyond += mag;
       ++s.n_beyond;
       if (next) {
-        const auto w = static_cast<std::int64_t>(std::nearbyint(tw / static_cast<double>(mag)));
+        const float q = tw / static_cast<float>(mag);
+        const auto w = static_cast<std::int64_t>(std::nearbyint(q));
         const std::int64_t d = 32768 - w;
         for (int u = 0; u < k; ++u) {
           s.shortfall.h[u] += d * c.e[i] * c.a[u][i];
@@ -66,8 +81,7 @@ SessionPassSums definition(const Case& c, int k, bool next) {
         }
       }
     } else {
-      const u128 q8 = static_cast<u128>((mag + 128) >> 8);
-      squares += q8 * q8;
+      squares += static_cast<u128>(mag) * static_cast<u128>(mag);
     }
   }
   s.squares = squares > std::numeric_limits<std::uint64_t>::max() ? std::numeric_limits<std::uint64_t>::max()
@@ -84,21 +98,31 @@ void expect_same(const SessionPassSums& a, const SessionPassSums& b, const std::
 
 // n elements: random values, every fourth case at the ends of their ranges.
 Case make_case(std::size_t n, std::mt19937_64& rng, int flavour) {
-  std::uniform_int_distribution<std::int32_t> e_any(-65534, 65534), small(-400, 400), a_any(-16384, 16384);
-  std::uniform_int_distribution<std::int64_t> b_any(-(std::int64_t{1} << 40), std::int64_t{1} << 40),
-      b_small(-(std::int64_t{1} << 24), std::int64_t{1} << 24);
+  constexpr std::int32_t kF = 2147483647;  // the Q31 basis's bound
+  std::uniform_int_distribution<std::int32_t> e_any(-65534, 65534), small(-400, 400), a_any(-16384, 16384),
+      f_any(-kF, kF), b_any(-kMaxCoefficient, kMaxCoefficient), b_small(-(1 << 16), 1 << 16), t_any(0, kNoThreshold);
   Case c;
+  c.constant = rng() % 2 == 0;
   for (std::size_t i = 0; i < n; ++i) {
     c.e.push_back(flavour == 3 ? (i % 2 ? 65534 : -65534) : flavour == 0 ? small(rng) : e_any(rng));
-    for (int t = 0; t < kSessionMaxTerms; ++t) c.a[t].push_back(flavour == 3 ? (i % 3 ? 16384 : -16384) : a_any(rng));
+    for (int t = 0; t < kSessionMaxTerms; ++t) {
+      c.a[t].push_back(flavour == 3 ? (i % 3 ? 16384 : -16384) : a_any(rng));
+      c.f[t].push_back(flavour == 3 ? (i % 3 ? kF : -kF) : f_any(rng));
+    }
+  }
+  c.n = n;
+  for (std::size_t i = n; i < session_padded(n); ++i) {  // junk: extreme values, which would count if read
+    c.e.push_back(-65534);
+    for (int t = 0; t < kSessionMaxTerms; ++t) {
+      c.a[t].push_back(16384);
+      c.f[t].push_back(kF);
+    }
   }
   for (int t = 0; t < kSessionMaxTerms; ++t) {
-    c.B[t] = flavour == 3   ? (t % 2 ? std::int64_t{1} << 40 : -(std::int64_t{1} << 40))
-             : flavour == 0 ? b_small(rng)
-                            : b_any(rng);
+    c.B[t] = flavour == 3 ? (t % 2 ? kMaxCoefficient : -kMaxCoefficient) : flavour == 0 ? b_small(rng) : b_any(rng);
   }
-  // Thresholds: none (2^60), zero, a typical one (3 sd of 64 steps in Q16), and one among the residuals.
-  const std::int64_t thresholds[4] = {std::int64_t{1} << 60, 0, 3 * 64 * 65536, std::int64_t{1} << 30};
+  // Thresholds: none, zero, a typical one (3 sd of 64 steps in Q8), and any.
+  const std::int32_t thresholds[4] = {kNoThreshold, 0, 3 * 64 * 256, t_any(rng)};
   c.threshold = thresholds[static_cast<std::size_t>(rng() % 4)];
   return c;
 }
@@ -141,15 +165,20 @@ TEST(FixedSessionKernel, TheScalarMomentsAreTheirDefinition) {
 }
 
 TEST(FixedSessionKernel, SaturatedSquaresStayAtTheMaximum) {
-  // Residuals of 2^43: squares of 2^70 each, far past 2^64.
+  // Residuals of 2^24 + 3 x 2^28 (the largest): squares near 2^59.6 each, 2^64 passed within 20 elements.
   Case c;
-  c.e.assign(5, 65534);
-  for (auto& a : c.a) a.assign(5, 16384);
-  c.B[0] = -(std::int64_t{1} << 40);
-  c.threshold = std::int64_t{1} << 60;
-  const SessionPassSums s = session_pass_scalar(c.view(), 1, c.B, c.threshold, false);
+  c.n = 64;
+  c.e.assign(64, 65534);
+  for (auto& a : c.a) a.assign(64, 16384);
+  for (auto& f : c.f) f.assign(64, -2147483647);
+  c.constant = true;
+  c.B[0] = -kMaxCoefficient;
+  c.B[1] = c.B[2] = kMaxCoefficient;
+  c.threshold = kNoThreshold;
+  const SessionPassSums s = session_pass_scalar(c.view(), 3, c.B, c.threshold, false);
   EXPECT_EQ(s.squares, std::numeric_limits<std::uint64_t>::max());
   EXPECT_EQ(s.n_beyond, 0);
+  expect_same(s, definition(c, 3, false), "saturated");
 }
 
 #if defined(__aarch64__)

@@ -18,20 +18,21 @@ namespace {
 
 using session_detail::kBasisBits;
 using session_detail::kFitBits;
+using session_detail::kMaxCoefficient;
+using session_detail::kNoThreshold;
 using session_detail::kWeightBits;
 using session_detail::SessionElements;
 using session_detail::SessionPassSums;
 
 constexpr double kLog2Pi = 1.8378770664093453;  // log(2 pi)
 constexpr int kMaxTerms = kSessionMaxTerms;
-constexpr std::int64_t kMaxCoefficient = std::int64_t{1} << 40;  // |beta| <= 2^24 steps: far beyond any fit
-constexpr std::int64_t kMaxThreshold = std::int64_t{1} << 60;    // beyond every residual: no outlier
 
 // Exact powers of two (a multiplication by one is exact; std::ldexp is a library call).
 constexpr double kBasisUnit = 1.0 / (1 << kBasisBits);                  // Q14 -> 1
 constexpr double kBasisUnit2 = kBasisUnit * kBasisUnit;                 // Q28 -> 1
-constexpr double kFitScale = static_cast<double>(1 << kFitBits);        // 1 -> Q16
-constexpr double kFitUnit = 1.0 / kFitScale;                            // Q16 -> 1
+constexpr double kFitScale = static_cast<double>(1 << kFitBits);        // 1 -> Q8
+constexpr double kFitUnit = 1.0 / kFitScale;                            // Q8 -> 1
+constexpr double kSquareUnit = kFitUnit * kFitUnit;                     // Q16 (a Q8 value squared) -> 1
 constexpr double kWeightBasisUnit = kBasisUnit / (1 << kWeightBits);    // Q15 x Q14 -> 1
 constexpr double kWeightBasisUnit2 = kBasisUnit2 / (1 << kWeightBits);  // Q15 x Q28 -> 1
 
@@ -48,8 +49,9 @@ using Gram = std::array<std::array<std::int64_t, kMaxTerms>, kMaxTerms>;  // low
 // (|a a| <= 2^28 over at most 2^16 elements: within 2^44).
 struct QueryRow {
   std::vector<std::uint32_t> bins;
-  std::vector<std::uint32_t> at;  // their elements in the compact table's padded layout
-  std::vector<std::int32_t> q;    // the quantised query there
+  std::array<std::vector<std::int32_t>, kMaxTerms> f;  // their fit basis (Q31)
+  std::vector<std::uint32_t> at;                       // their elements in the compact table's padded layout
+  std::vector<std::int32_t> q;                         // the quantised query there
   std::array<std::vector<std::int32_t>, kMaxTerms> a;
   Gram gram{};
 };
@@ -64,13 +66,19 @@ FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const Exemp
       kernel_(kernel) {
   const std::uint32_t bins = table->n_bins(), rows = table->n_rows();
   const int k = reference_.terms();
-  for (int t = 0; t < k; ++t) basis_[static_cast<std::size_t>(t)].resize(bins);
+  for (int t = 0; t < k; ++t) {
+    basis_[static_cast<std::size_t>(t)].resize(bins);
+    fit_basis_[static_cast<std::size_t>(t)].resize(bins);
+  }
   for (std::uint32_t j = 0; j < bins; ++j) {
     const double x = 2.0 * ((j + 0.5) / bins - 0.5);
     const double legendre[3] = {1.0, x, 0.5 * (3.0 * x * x - 1.0)};
     for (int t = 0; t < k; ++t) {
       basis_[static_cast<std::size_t>(t)][j] =
           static_cast<std::int32_t>(std::lround(std::ldexp(legendre[reference_.degree(t)], kBasisBits)));
+      // |P1|, |P2| < 1 at a bin's centre: within int32 in Q31 (held there all the same).
+      fit_basis_[static_cast<std::size_t>(t)][j] = static_cast<std::int32_t>(
+          std::clamp(std::nearbyint(std::ldexp(legendre[reference_.degree(t)], 31)), -2147483647.0, 2147483647.0));
     }
   }
   const SessionPrior& p = reference_.prior();
@@ -84,7 +92,8 @@ FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const Exemp
       n.v = v_mm / step2;
       n.sd = std::sqrt(n.v);
       n.log_norm = 0.5 * (kLog2Pi + std::log(v_mm));
-      n.threshold = huber ? clamp_round(p.huber_k * n.sd * kFitScale, kMaxThreshold) : kMaxThreshold;
+      n.threshold =
+          huber ? static_cast<std::int32_t>(clamp_round(p.huber_k * n.sd * kFitScale, kNoThreshold)) : kNoThreshold;
       noise_.push_back(n);
     }
   }
@@ -135,14 +144,19 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
     for (std::size_t t = 0; t < K; ++t) {
       qr.a[t].reserve(qr.bins.size());
       for (const std::uint32_t b : qr.bins) qr.a[t].push_back(basis_[t][b]);
+      qr.f[t].reserve(qr.bins.size());
+      for (const std::uint32_t b : qr.bins) qr.f[t].push_back(fit_basis_[t][b]);
+      qr.a[t].resize(session_detail::session_padded(qr.bins.size()));  // (the kernels' padding)
+      qr.f[t].resize(session_detail::session_padded(qr.bins.size()));
     }
     for (std::size_t j = 0; j < qr.bins.size(); ++j)
       for (std::size_t s = 0; s < K; ++s)
         for (std::size_t t = 0; t <= s; ++t) qr.gram[s][t] += std::int64_t{qr.a[s][j]} * qr.a[t][j];
   }
 
-  std::vector<std::int32_t> e;                              // query - candidate, steps: |e| <= 65534
-  std::array<std::vector<std::int32_t>, kMaxTerms> a_held;  // the basis of the compared bins when some are missing
+  std::vector<std::int32_t> e;  // query - candidate, steps: |e| <= 65534
+  // The bases of the compared bins when some are missing.
+  std::array<std::vector<std::int32_t>, kMaxTerms> a_held, f_held;
   Classification out;
   out.ranking.reserve(ct.n_candidates());
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
@@ -168,12 +182,18 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
           holes = holes || (p.mask[blk] & ~valid[blk]) != 0;
       }
       if (!holes) {
-        e.resize(asked);
+        e.resize(session_detail::session_padded(asked));
         for (std::size_t j = 0; j < asked; ++j) e[j] = qr.q[j] - std::int32_t{values[qr.at[j]]};
-        for (std::size_t t = 0; t < K; ++t) x.a[t] = qr.a[t].data();
+        for (std::size_t t = 0; t < K; ++t) {
+          x.a[t] = qr.a[t].data();
+          x.f[t] = qr.f[t].data();
+        }
       } else {
         e.clear();
-        for (std::size_t t = 0; t < K; ++t) a_held[t].clear();
+        for (std::size_t t = 0; t < K; ++t) {
+          a_held[t].clear();
+          f_held[t].clear();
+        }
         for (std::size_t j = 0; j < asked; ++j) {
           const std::size_t i = qr.at[j];
           if (!has(valid, i)) {
@@ -182,12 +202,23 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
             continue;
           }
           e.push_back(qr.q[j] - std::int32_t{values[i]});
-          for (std::size_t t = 0; t < K; ++t) a_held[t].push_back(qr.a[t][j]);
+          for (std::size_t t = 0; t < K; ++t) {
+            a_held[t].push_back(qr.a[t][j]);
+            f_held[t].push_back(qr.f[t][j]);
+          }
         }
-        for (std::size_t t = 0; t < K; ++t) x.a[t] = a_held[t].data();
+        const std::size_t padded = session_detail::session_padded(e.size());
+        for (std::size_t t = 0; t < K; ++t) {
+          a_held[t].resize(padded);
+          f_held[t].resize(padded);
+          x.a[t] = a_held[t].data();
+          x.f[t] = f_held[t].data();
+        }
       }
+      x.constant = k > 0 && reference_.degree(0) == 0;
+      x.n = holes ? e.size() : asked;
+      e.resize(session_detail::session_padded(x.n));
       x.e = e.data();
-      x.n = e.size();
       const std::size_t nr = x.n;
       compared += static_cast<std::uint32_t>(nr);
       SessionPassSums sums;
@@ -204,7 +235,7 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
         session_detail::NormalSums normal = all;
         const auto& pv = prior_var_steps_[r];
         std::array<double, kMaxTerms> beta{}, diagonal{};
-        std::array<std::int64_t, kMaxTerms> B{};
+        std::array<std::int32_t, kMaxTerms> B{};
         for (int it = 0; it < prior.iterations; ++it) {
           std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
           std::array<double, kMaxTerms> rhs{};
@@ -218,7 +249,8 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
             P[s][s] += 1.0 / pv[s];
           }
           session_detail::cholesky_factor_solve(P, k, rhs, beta, diagonal);
-          for (std::size_t s = 0; s < K; ++s) B[s] = clamp_round(beta[s] * kFitScale, kMaxCoefficient);
+          for (std::size_t s = 0; s < K; ++s)
+            B[s] = static_cast<std::int32_t>(clamp_round(beta[s] * kFitScale, kMaxCoefficient));
           // The residuals of this fit give the data term and the next pass's weights.
           const bool last = !huber || it + 1 == prior.iterations;
           sums = pass_(x, k, B.data(), noise.threshold, !last);
@@ -234,11 +266,11 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
         logdet = session_detail::cholesky_log_det(diagonal, k) + log_det_prior_steps_[r];
         for (std::size_t s = 0; s < K; ++s) penalty += 0.5 * beta[s] * beta[s] / pv[s];
       } else {
-        const std::int64_t none[kMaxTerms] = {};
+        const std::int32_t none[kMaxTerms] = {};
         sums = pass_(x, 0, none, noise.threshold, false);
       }
       // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
-      double data = static_cast<double>(sums.squares) * (kFitUnit / 2.0) / v;
+      double data = static_cast<double>(sums.squares) * (kSquareUnit / 2.0) / v;
       if (huber)
         data += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
                 0.5 * hk * hk * static_cast<double>(sums.n_beyond);

@@ -18,24 +18,22 @@ bool NormalSums::operator==(const NormalSums& o) const {
 
 namespace {
 
-template <int K, bool Next>
-SessionPassSums pass(const SessionElements& x, const std::int64_t* B, std::int64_t threshold) {
+template <int K, bool Constant, bool Next>
+SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold) {
   SessionPassSums s;
-  const double tw = static_cast<double>(threshold) * (1 << kWeightBits);  // T 2^15
+  const float tw = static_cast<float>(threshold) * static_cast<float>(1 << kWeightBits);  // T 2^15
   for (std::size_t i = 0; i < x.n; ++i) {
-    // The fit in Q16 steps from the coefficients in Q16 (|B a| <= 2^54): residuals within 2^43.
-    std::int64_t fit = 0;
-    for (int t = 0; t < K; ++t) fit += B[t] * x.a[t][i];
-    const std::int64_t rounded = (fit + (std::int64_t{1} << (kBasisBits - 1))) >> kBasisBits;
-    const std::int64_t mag = std::llabs(std::int64_t{x.e[i]} * (std::int64_t{1} << kFitBits) - rounded);
+    std::int32_t fit = 0;
+    for (int t = 0; t < K; ++t) fit += Constant && t == 0 ? B[0] : fit_product(B[t], x.f[t][i]);
+    const std::int32_t mag = std::abs(x.e[i] * (1 << kFitBits) - fit);  // < 2^31
     if (mag > threshold) {
       s.beyond += mag;
       ++s.n_beyond;
       if (Next) {
-        // The weight's shortfall from an inlier's: 2^15 - nearest(T 2^15 / |r|) (ties to
-        // even, as the NEON conversion), in (0, 2^15] as |r| > T.
-        const std::int32_t d =
-            (1 << kWeightBits) - static_cast<std::int32_t>(std::nearbyint(tw / static_cast<double>(mag)));
+        // 2^15 - nearest(T 2^15 / |r|) in binary32 (nearbyint: ties to even, as NEON's
+        // conversion), in [0, 2^15] as |r| > T.
+        const float w = std::nearbyint(tw / static_cast<float>(mag));
+        const std::int32_t d = (1 << kWeightBits) - static_cast<std::int32_t>(w);
         const std::int32_t de = d * x.e[i];
         for (int u = 0; u < K; ++u) {
           const std::int32_t da = d * x.a[u][i];
@@ -45,15 +43,19 @@ SessionPassSums pass(const SessionElements& x, const std::int64_t* B, std::int64
       }
       continue;
     }
-    const auto q8 = static_cast<std::uint64_t>((mag + 128) >> 8);  // <= 2^35
-    s.squares = add_saturating(s.squares, q8 > 0xffffffffu ? std::numeric_limits<std::uint64_t>::max() : q8 * q8);
+    s.squares = add_saturating(s.squares, static_cast<std::uint64_t>(std::int64_t{mag} * mag));
   }
   return s;
 }
 
+template <int K, bool Constant>
+SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
+  return next ? pass<K, Constant, true>(x, B, threshold) : pass<K, Constant, false>(x, B, threshold);
+}
+
 template <int K>
-SessionPassSums pass(const SessionElements& x, const std::int64_t* B, std::int64_t threshold, bool next) {
-  return next ? pass<K, true>(x, B, threshold) : pass<K, false>(x, B, threshold);
+SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
+  return x.constant ? pass<K, true>(x, B, threshold, next) : pass<K, false>(x, B, threshold, next);
 }
 
 }  // namespace
@@ -66,10 +68,10 @@ void session_moments_scalar(const SessionElements& x, int k, std::int64_t* h) {
   }
 }
 
-SessionPassSums session_pass_scalar(const SessionElements& x, int k, const std::int64_t* B, std::int64_t threshold,
+SessionPassSums session_pass_scalar(const SessionElements& x, int k, const std::int32_t* B, std::int32_t threshold,
                                     bool next) {
   switch (k) {
-    case 0: return pass<0, false>(x, B, threshold);
+    case 0: return pass<0, false, false>(x, B, threshold);
     case 1: return pass<1>(x, B, threshold, next);
     case 2: return pass<2>(x, B, threshold, next);
     default: return pass<3>(x, B, threshold, next);

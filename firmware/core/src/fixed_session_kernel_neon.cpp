@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-// The session matcher's reweighting pass with NEON, two elements a step in
-// int64 lanes (fixed_session_kernel.hpp): the same sums as the scalar pass
-// to the bit (every sum is of integers, or saturating sums of non-negative
-// ones, so the lanes' order of addition does not matter; the weight's double
-// division and ties-to-even conversion are the scalar's).
+// The session matcher's reweighting pass with NEON, four elements a step in
+// int32 lanes (fixed_session_kernel.hpp), the last block's padding lanes
+// masked: the same sums as the scalar pass to the bit. Every sum is of integers, or a saturating sum of non-negative
+// ones, so the lanes' order of addition does not matter; the fit's products are vqrdmulhq_s32, which fit_product
+// defines; the weight's binary32 division and ties-to-even conversion are the scalar's.
 #if defined(__aarch64__)
 #include <arm_neon.h>
 
@@ -12,76 +12,58 @@
 namespace tofmat::session_detail {
 namespace {
 
-// B_t a_t summed over the terms, exactly: B (|B| <= 2^40) split as
-// hi 2^21 + lo with lo in [0, 2^21), so that both halves multiply the Q14
-// basis in 32 x 32 -> 64-bit lanes (each sum within 2^36; hi 2^21 within 2^56).
-template <int K>
-inline int64x2_t fit_of(const int32x2_t (&a)[kSessionMaxTerms], const std::int32_t (&hi)[kSessionMaxTerms],
-                        const std::int32_t (&lo)[kSessionMaxTerms]) {
-  int64x2_t h = vdupq_n_s64(0), l = vdupq_n_s64(0);
-  for (int t = 0; t < K; ++t) {
-    h = vmlal_s32(h, a[t], vdup_n_s32(hi[t]));
-    l = vmlal_s32(l, a[t], vdup_n_s32(lo[t]));
-  }
-  return vaddq_s64(vshlq_n_s64(h, 21), l);
-}
-
-template <int K, bool Next>
-SessionPassSums pass(const SessionElements& x, const std::int64_t* B, std::int64_t threshold) {
-  std::int32_t hi[kSessionMaxTerms] = {}, lo[kSessionMaxTerms] = {};
-  for (int t = 0; t < K; ++t) {
-    hi[t] = static_cast<std::int32_t>(B[t] >> 21);  // floor: |B| <= 2^40 -> |hi| <= 2^19
-    lo[t] = static_cast<std::int32_t>(B[t] - (std::int64_t{hi[t]} * (std::int64_t{1} << 21)));
-  }
-  const int64x2_t T = vdupq_n_s64(threshold);
-  const float64x2_t tw = vdupq_n_f64(static_cast<double>(threshold) * (1 << kWeightBits));
-  const int64x2_t one = vdupq_n_s64(std::int64_t{1} << kWeightBits);
-  const uint64x2_t u32max = vdupq_n_u64(0xffffffffu);
-  uint64x2_t squares = vdupq_n_u64(0);
-  int64x2_t beyond = vdupq_n_s64(0), n_beyond = vdupq_n_s64(0);
+template <int K, bool Constant, bool Next>
+SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold) {
+  int32x4_t b[kSessionMaxTerms];
+  for (int t = 0; t < K; ++t) b[t] = vdupq_n_s32(B[t]);
+  const int32x4_t T = vdupq_n_s32(threshold);
+  const float32x4_t tw = vdupq_n_f32(static_cast<float>(threshold) * static_cast<float>(1 << kWeightBits));
+  const int32x4_t one = vdupq_n_s32(1 << kWeightBits);
+  uint64x2_t squares = vdupq_n_u64(0), beyond = vdupq_n_u64(0);
+  int32x4_t n_beyond = vdupq_n_s32(0);  // per lane at most 2^14 outliers
   int64x2_t G[kSessionMaxTerms][kSessionMaxTerms], h[kSessionMaxTerms];
   for (int u = 0; u < K; ++u) {
     h[u] = vdupq_n_s64(0);
     for (int t = 0; t <= u; ++t) G[u][t] = vdupq_n_s64(0);
   }
-  std::size_t i = 0;
-  for (; i + 2 <= x.n; i += 2) {
-    const int32x2_t e = vld1_s32(x.e + i);
-    int32x2_t a[kSessionMaxTerms];
-    for (int t = 0; t < K; ++t) a[t] = vld1_s32(x.a[t] + i);
-    const int64x2_t rounded = vrshrq_n_s64(fit_of<K>(a, hi, lo), kBasisBits);  // (fit + 2^13) >> 14
-    const int64x2_t mag = vabsq_s64(vsubq_s64(vshll_n_s32(e, kFitBits), rounded));
-    const uint64x2_t out = vcgtq_s64(mag, T);
-    beyond = vaddq_s64(beyond, vandq_s64(mag, vreinterpretq_s64_u64(out)));
-    n_beyond = vsubq_s64(n_beyond, vreinterpretq_s64_u64(out));  // out: -1 in an outlier's lane
-    // Inliers: round(|r| / 2^8)^2, all ones (saturated) past 2^32 - 1.
-    const uint64x2_t q8 = vrshrq_n_u64(vreinterpretq_u64_s64(mag), 8);  // (|r| + 128) >> 8
-    const uint32x2_t q8_lo = vmovn_u64(q8);
-    const uint64x2_t sq = vorrq_u64(vmull_u32(q8_lo, q8_lo), vcgtq_u64(q8, u32max));
-    squares = vqaddq_u64(squares, vbicq_u64(sq, out));
-    if (Next && vmaxvq_u32(vreinterpretq_u32_u64(out)) != 0) {
+  // Four elements from i; a lane at or past n (the last block's padding) counts for nothing.
+  const auto step = [&](std::size_t i, uint32x4_t lanes) {
+    const int32x4_t e = vld1q_s32(x.e + i);
+    int32x4_t fit = Constant ? b[0] : vdupq_n_s32(0);
+    for (int t = Constant ? 1 : 0; t < K; ++t) fit = vaddq_s32(fit, vqrdmulhq_s32(b[t], vld1q_s32(x.f[t] + i)));
+    const int32x4_t mag = vabsq_s32(vsubq_s32(vshlq_n_s32(e, kFitBits), fit));
+    const uint32x4_t out = vandq_u32(vcgtq_s32(mag, T), lanes);
+    const uint32x4_t umag = vreinterpretq_u32_s32(mag);
+    beyond = vpadalq_u32(beyond, vandq_u32(umag, out));
+    n_beyond = vsubq_s32(n_beyond, vreinterpretq_s32_u32(out));  // out: -1 in an outlier's lane
+    const uint32x4_t in = vandq_u32(vbicq_u32(umag, out), lanes);
+    squares = vqaddq_u64(squares, vmull_u32(vget_low_u32(in), vget_low_u32(in)));
+    squares = vqaddq_u64(squares, vmull_high_u32(in, in));
+    if (Next && vmaxvq_u32(out) != 0) {
       // The outliers' weight shortfall 2^15 - nearest(T 2^15 / |r|); 0 in an inlier's lane.
-      const int64x2_t w = vcvtnq_s64_f64(vdivq_f64(tw, vcvtq_f64_s64(mag)));
-      const int32x2_t d = vmovn_s64(vandq_s64(vsubq_s64(one, w), vreinterpretq_s64_u64(out)));
-      const int32x2_t de = vmul_s32(d, e);
+      const int32x4_t w = vcvtnq_s32_f32(vdivq_f32(tw, vcvtq_f32_s32(mag)));
+      const int32x4_t d = vandq_s32(vsubq_s32(one, w), vreinterpretq_s32_u32(out));
+      const int32x4_t de = vmulq_s32(d, e);
+      int32x4_t a[kSessionMaxTerms];
+      for (int t = 0; t < K; ++t) a[t] = vld1q_s32(x.a[t] + i);
       for (int u = 0; u < K; ++u) {
-        const int32x2_t da = vmul_s32(d, a[u]);
-        h[u] = vmlal_s32(h[u], de, a[u]);
-        for (int t = 0; t <= u; ++t) G[u][t] = vmlal_s32(G[u][t], da, a[t]);
+        const int32x4_t da = vmulq_s32(d, a[u]);
+        h[u] = vmlal_high_s32(vmlal_s32(h[u], vget_low_s32(de), vget_low_s32(a[u])), de, a[u]);
+        for (int t = 0; t <= u; ++t)
+          G[u][t] = vmlal_high_s32(vmlal_s32(G[u][t], vget_low_s32(da), vget_low_s32(a[t])), da, a[t]);
       }
     }
+  };
+  std::size_t i = 0;
+  for (; i + 4 <= x.n; i += 4) step(i, vdupq_n_u32(0xffffffffu));
+  if (i < x.n) {
+    static const std::uint32_t kLane[4] = {0, 1, 2, 3};
+    step(i, vcltq_u32(vld1q_u32(kLane), vdupq_n_u32(static_cast<std::uint32_t>(x.n - i))));
   }
   SessionPassSums s;
-  if (i < x.n) {  // the odd element: the scalar pass over it alone
-    SessionElements tail = x;
-    tail.e = x.e + i;
-    for (int t = 0; t < K; ++t) tail.a[t] = x.a[t] + i;
-    tail.n = x.n - i;
-    s = session_pass_scalar(tail, K, B, threshold, Next);
-  }
   s.squares = add_saturating(add_saturating(s.squares, vgetq_lane_u64(squares, 0)), vgetq_lane_u64(squares, 1));
-  s.beyond += vaddvq_s64(beyond);
-  s.n_beyond += vaddvq_s64(n_beyond);
+  s.beyond += static_cast<std::int64_t>(vaddvq_u64(beyond));
+  s.n_beyond += vaddvq_s32(n_beyond);
   if (Next) {
     for (int u = 0; u < K; ++u) {
       s.shortfall.h[u] += vaddvq_s64(h[u]);
@@ -91,9 +73,14 @@ SessionPassSums pass(const SessionElements& x, const std::int64_t* B, std::int64
   return s;
 }
 
+template <int K, bool Constant>
+SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
+  return next ? pass<K, Constant, true>(x, B, threshold) : pass<K, Constant, false>(x, B, threshold);
+}
+
 template <int K>
-SessionPassSums pass(const SessionElements& x, const std::int64_t* B, std::int64_t threshold, bool next) {
-  return next ? pass<K, true>(x, B, threshold) : pass<K, false>(x, B, threshold);
+SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
+  return x.constant ? pass<K, true>(x, B, threshold, next) : pass<K, false>(x, B, threshold, next);
 }
 
 }  // namespace
@@ -104,8 +91,7 @@ void session_moments_neon(const SessionElements& x, int k, std::int64_t* h) {
     std::size_t i = 0;
     for (; i + 4 <= x.n; i += 4) {
       const int32x4_t e = vld1q_s32(x.e + i), a = vld1q_s32(x.a[t] + i);
-      sum = vmlal_s32(sum, vget_low_s32(e), vget_low_s32(a));
-      sum = vmlal_high_s32(sum, e, a);
+      sum = vmlal_high_s32(vmlal_s32(sum, vget_low_s32(e), vget_low_s32(a)), e, a);
     }
     std::int64_t total = vaddvq_s64(sum);
     for (; i < x.n; ++i) total += std::int64_t{x.e[i]} * x.a[t][i];
@@ -113,10 +99,10 @@ void session_moments_neon(const SessionElements& x, int k, std::int64_t* h) {
   }
 }
 
-SessionPassSums session_pass_neon(const SessionElements& x, int k, const std::int64_t* B, std::int64_t threshold,
+SessionPassSums session_pass_neon(const SessionElements& x, int k, const std::int32_t* B, std::int32_t threshold,
                                   bool next) {
   switch (k) {
-    case 0: return pass<0, false>(x, B, threshold);
+    case 0: return pass<0, false, false>(x, B, threshold);
     case 1: return pass<1>(x, B, threshold, next);
     case 2: return pass<2>(x, B, threshold, next);
     default: return pass<3>(x, B, threshold, next);

@@ -55,11 +55,13 @@ class FixedSessionClassifier {
   FixedKernel kernel_;
   // Per term, each bin's basis value in Q14 (term t: Legendre degree degree(t)).
   std::array<std::vector<std::int32_t>, kSessionMaxTerms> basis_;
+  // The same in Q31 for the fit (a constant term's is unused: it is 1).
+  std::array<std::vector<std::int32_t>, kSessionMaxTerms> fit_basis_;
   // Per candidate (in candidates() order) and row: the noise variance (steps^2)
-  // and sd (steps), the Gaussian's log normaliser (mm), the outlier threshold (Q16 steps).
+  // and sd (steps), the Gaussian's log normaliser (mm), the outlier threshold (Q8 steps).
   struct RowNoise {
     double v = 0.0, sd = 0.0, log_norm = 0.0;
-    std::int64_t threshold = 0;
+    std::int32_t threshold = 0;
   };
   std::vector<RowNoise> noise_;
   // Per row: the terms' prior variances (steps^2) and the log of their product.
