@@ -118,16 +118,9 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
   const bool huber = std::isfinite(prior.huber_k);
   const double hk = prior.huber_k;
   const auto has = [](const std::uint8_t* bits, std::size_t i) { return ((bits[i / 8] >> (i % 8)) & 1u) != 0; };
-#if defined(__aarch64__)
-  const bool neon = kernel_ == FixedKernel::kBest;
-  const session_detail::SessionPassFn pass_ =
-      neon ? session_detail::session_pass_neon : session_detail::session_pass_scalar;
-  const session_detail::SessionMomentsFn moments_ =
-      neon ? session_detail::session_moments_neon : session_detail::session_moments_scalar;
-#else
-  const session_detail::SessionPassFn pass_ = session_detail::session_pass_scalar;
-  const session_detail::SessionMomentsFn moments_ = session_detail::session_moments_scalar;
-#endif
+  const bool vector = kernel_ == FixedKernel::kBest;  // NEON on aarch64; the scalar kernels elsewhere
+  const session_detail::SessionPassFn pass_ = session_detail::session_pass(vector);
+  const session_detail::SessionMomentsFn moments_ = session_detail::session_moments(vector);
 
   // What does not depend on the candidate: per row the query's bins, their basis and Gram matrix.
   std::vector<QueryRow> qrows(rows);

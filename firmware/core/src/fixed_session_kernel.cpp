@@ -68,6 +68,14 @@ void session_moments_scalar(const SessionElements& x, int k, std::int64_t* h) {
   }
 }
 
+#if defined(__aarch64__)
+SessionPassFn session_pass(bool vector) { return vector ? session_pass_neon : session_pass_scalar; }
+SessionMomentsFn session_moments(bool vector) { return vector ? session_moments_neon : session_moments_scalar; }
+#else
+SessionPassFn session_pass(bool) { return session_pass_scalar; }
+SessionMomentsFn session_moments(bool) { return session_moments_scalar; }
+#endif
+
 SessionPassSums session_pass_scalar(const SessionElements& x, int k, const std::int32_t* B, std::int32_t threshold,
                                     bool next) {
   switch (k) {

@@ -90,6 +90,9 @@ SessionPassSums session_pass_scalar(const SessionElements& x, int k, const std::
 // over 2^16 elements: within 2^46): the first pass's right-hand side, all weights 1.
 using SessionMomentsFn = void (*)(const SessionElements& x, int k, std::int64_t* h);
 void session_moments_scalar(const SessionElements& x, int k, std::int64_t* h);
+// The kernels to run: the vector ones where this build has them (NEON on aarch64), or the scalar ones.
+SessionPassFn session_pass(bool vector);
+SessionMomentsFn session_moments(bool vector);
 #if defined(__aarch64__)
 void session_moments_neon(const SessionElements& x, int k, std::int64_t* h);
 SessionPassSums session_pass_neon(const SessionElements& x, int k, const std::int32_t* B, std::int32_t threshold,
