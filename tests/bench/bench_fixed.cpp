@@ -408,8 +408,8 @@ int run_single(const Options& o) {
       for (long r = 0; r < reps; ++r) {
         for (const auto& q : qs) g_sink = g_sink + sc.classify(q.v.data(), q.v.size()).best().index;
       }
-    } else {  // (scalar only: best is the same code)
-      const FixedSessionClassifier fs(table, prior);
+    } else {  // scalar or best (NEON on aarch64)
+      const FixedSessionClassifier fs(table, prior, {}, {}, fixed_kernel(o.kernel));
       for (long r = 0; r < reps; ++r) {
         for (const auto& q : qs) g_sink = g_sink + fs.classify(q.v.data(), q.v.size()).best().index;
       }

@@ -84,16 +84,18 @@ done
 
 # The session-robust matcher (docs/evaluation.md), tuned settings, a whole
 # query against the 29 materials: its float reference (double) against its
-# fixed-point path (scalar: no NEON kernel yet), next to Eq. (12)'s fixed
-# NEON search, by sweep length.
+# fixed-point path (scalar and NEON kernels), next to Eq. (12)'s fixed NEON
+# search, by sweep length.
 echo
-echo "| session matcher: query of | Eq. (12) fixed NEON | session float (double) | session fixed (scalar) | float / fixed |"
-echo "|---|---:|---:|---:|---:|"
+echo "| session matcher: query of | Eq. (12) fixed NEON | session float (double) | session fixed (scalar) | session fixed (NEON) | float / NEON |"
+echo "|---|---:|---:|---:|---:|---:|"
 for window in 1 10 100 0; do
   e=$(per_unit nn best)
   f=$(per_unit session float)
   x=$(per_unit session scalar)
+  n=$(per_unit session best)
   label=$([ "$window" = 0 ] && echo "all five lengths" || echo "$window bin$([ "$window" = 1 ] || echo s)")
-  awk -v l="$label" -v e="$e" -v f="$f" -v x="$x" 'BEGIN { printf "| %s | %d | %d | %d | %.2f |\n", l, e, f, x, f / x }'
+  awk -v l="$label" -v e="$e" -v f="$f" -v x="$x" -v n="$n" \
+    'BEGIN { printf "| %s | %d | %d | %d | %d | %.2f |\n", l, e, f, x, n, f / n }'
 done
 window=0

@@ -57,6 +57,17 @@ for p in handheld sorting sorting-idle segmentation; do
 done
 fi
 
+
+# The camera's path (no truth: a camera never has one) with each exemplar
+# classifier, best kernels; the rows above are tofmatd's default, with the
+# simulated frames' truth.
+echo
+echo "| profile, camera path (no truth), best kernels | --classifier session (default) | --classifier eq12 |"
+echo "|---|---:|---:|"
+for p in handheld sorting; do
+  echo "| $p | $(per_frame "$p" best --no-truth --classifier session) | $(per_frame "$p" best --no-truth --classifier eq12) |"
+done
+
 [ "$part" != profiles ] || exit 0
 
 # Where segmentation's instructions go: its steps, each row the whole of what
