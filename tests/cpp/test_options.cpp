@@ -66,8 +66,8 @@ TEST(Options, TheDefaultsAreTheCameraAndTheServicesSocket) {
   EXPECT_TRUE(o.server.tcp.empty());
   EXPECT_EQ(o.profile.name, "handheld");
   EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFixed);
-  EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kEq12);  // the frame budget's (ProfileConfig)
-  EXPECT_FALSE(o.profile.open_set);                            // the open set asked for only
+  EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kSession);  // as the SDK's (ProfileConfig)
+  EXPECT_FALSE(o.profile.open_set);                               // the open set asked for only
   EXPECT_EQ(o.queue_frames, 2u);
   EXPECT_EQ(p.cl->log_level, "info");
   // This test program is not installed: no simulator data beside it, and no
@@ -82,7 +82,7 @@ TEST(Options, EveryFlagReachesItsOption) {
   // One flag and its value a pair, as on a command line (clang-format would put one string a line).
   // clang-format off
   const auto p = parse({"--table", "t.tmx", "--source", "sim:static,material=cork", "--profile", "sorting",
-                        "--backend", "float", "--classifier", "session",
+                        "--backend", "float", "--classifier", "eq12",
                         "--socket", "/tmp/s.sock", "--socket-mode", "0600",
                         "--tcp", "127.0.0.1:7020", "--token-file", token.string(),
                         "--control-token-file", control.string(), "--control-group", "root",
@@ -99,7 +99,7 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.source, "sim:static,material=cork");
   EXPECT_EQ(o.profile.name, "sorting");
   EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFloat);
-  EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kSession);
+  EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kEq12);
   EXPECT_EQ(o.server.socket_path, "/tmp/s.sock");
   EXPECT_EQ(o.server.socket_mode, 0600u);
   EXPECT_EQ(o.server.tcp, "127.0.0.1:7020");
@@ -206,15 +206,23 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   expect_usage_error({"--table", "t", "--backend", "gpu"});       // not a backend
   expect_usage_error({"--table", "t", "--classifier", "knn"});    // not a classifier
   // The open set needs the session matcher's noise model; it reaches its option.
-  expect_usage_error({"--table", "t", "--open-set"});  // (Eq. (12), the default)
+  expect_usage_error({"--table", "t", "--classifier", "eq12", "--open-set"});
   {
-    const auto p = parse({"--table", "t", "--classifier", "session", "--open-set"});
+    const auto p = parse({"--table", "t", "--open-set"});  // (the session matcher, the default)
     ASSERT_TRUE(p.cl.has_value());
     EXPECT_TRUE(p.cl->daemon.profile.open_set);
   }
   // An Eq. (12) distance bound means nothing to the session classifier's score.
   expect_usage_error({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
                       "--classifier", "session", "--line-max-distance", "2"});
+  expect_usage_error({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
+                      "--line-max-distance", "2"});  // (the default classifier is the session matcher)
+  {
+    const auto p = parse({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
+                          "--classifier", "eq12", "--line-max-distance", "2"});
+    ASSERT_TRUE(p.cl.has_value());
+    EXPECT_EQ(p.cl->daemon.profile.method, tofmat::daemon::Method::kEq12);
+  }
   // A learned model: onnx:FILE (the file is opened at start, not here), and its library.
   {
     const auto p = parse({"--table", "t", "--classifier", "onnx:models/m.onnx", "--onnxruntime-library", "/l.so"});

@@ -54,10 +54,13 @@ def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]
             assert label.ranking[0].material == label.material and label.distance == distances[0]
             assert label.latency_ms >= 0.0
             assert label.simulated  # a simulated source says so in every label
+            # Protocol 1.7: a calibrated confidence, and the session matcher's fit (known: no unknown).
+            assert label.confidence is not None and 0.0 < label.confidence <= 1.0
+            assert label.fit is not None and math.isfinite(label.fit)
         assert sorted(label.material for label in labels) == ["acryl", "cork", "paper", "pvc"]
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["device"]["state"] == "streaming"
-        assert s["classifier"] == "eq12"
+        assert s["classifier"] == "session"  # the default, as the SDK's Classifier
         assert s["simulated"] is True
         assert s["frames_processed"] > 0 and s["processing_errors"] == 0
 
@@ -70,26 +73,25 @@ def test_float_backend_agrees(start: Callable[..., Daemon]) -> None:
             assert label.truth is not None and label.material == label.truth.material
 
 
-def test_the_session_classifier_labels_the_sweeps(start: Callable[..., Daemon]) -> None:
-    # The simulator's table against its own sweeps (one session): both matchers should be right;
-    # the session one reports itself in status, and its score is the label's distance.
-    d = start(sweep(["cork", "acryl"]), "--classifier", "session")
+def test_the_eq12_classifier_labels_the_sweeps(start: Callable[..., Daemon]) -> None:
+    # The simulator's table against its own sweeps (one session): the paper's Eq. (12), asked for
+    # by name, is right too; it reports itself in status, its distance is the mean squared
+    # difference (mm^2), and it has no noise model: no fit.
+    d = start(sweep(["cork", "acryl"]), "--classifier", "eq12")
     with d.client() as c:
         s = c.status()
-        assert s["classifier"] == "session" and s["backend"] == "fixed"
+        assert s["classifier"] == "eq12" and s["backend"] == "fixed"
         for label in final_labels(c, 2):
             assert label.truth is not None and label.material == label.truth.material
             distances = [r.distance for r in label.ranking]
-            assert distances == sorted(distances) and label.distance == distances[0]
-            # Protocol 1.7: a calibrated confidence, and the session matcher's fit (known: no unknown).
+            assert distances == sorted(distances) and label.distance == distances[0] and label.distance >= 0.0
             assert label.confidence is not None and 0.0 < label.confidence <= 1.0
-            assert label.fit is not None and math.isfinite(label.fit)
+            assert label.fit is None
 
 
 def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Callable[..., Daemon]) -> None:
     # Copper swept against cork and paper only: whole sweeps end unknown (material none, index -1,
     # the nearest still ranked); without --open-set (the default) the nearest is the label.
-    # (tofmatd's default classifier is Eq. (12): the session matcher is asked for.)
     d = start(sweep(["copper"]), "--classifier", "session", "--open-set", "--candidates", "cork,paper")
     with d.client() as c:
         assert c.status()["open_set"] is True

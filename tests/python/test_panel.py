@@ -114,7 +114,8 @@ def test_the_panel_follows_tofmatd_and_the_button_resets_it(start: Callable[...,
     assert any(lines[4] == "reset by button" for lines in r.drawn)
     # The end: the label, its confidence, the rate, the camera; the reset note gone again.
     assert r.shown[0] == "acryl" and r.shown[3] == "camera streaming" and r.shown[4] == "simulated"
-    assert re.fullmatch(r"d \d+\.\d next x\d+\.\d", r.shown[1]), r.shown  # (Eq. (12): tofmatd's default)
+    # The session matcher (tofmatd's default): its confidence and the runner-up.
+    assert re.fullmatch(r"p [01]\.\d\d next [a-z0-9]+", r.shown[1]), r.shown
     assert re.fullmatch(r"handheld \d+ fps", r.shown[2]), r.shown
     assert np.array_equal(bus.frame(), render_text(r.shown))
 

@@ -133,7 +133,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   DaemonOptions& o = cl.daemon;
   o.server.socket_path = "/run/tofmat/tofmatd.sock";
   o.source_options.sim_data_dir = installed_sim_data_dir();
-  std::string profile = o.profile.name, backend = "fixed", classifier = "eq12", roi, tcp, token_file,
+  std::string profile = o.profile.name, backend = "fixed", classifier = "session", roi, tcp, token_file,
               control_token_file, control_group, socket_mode = "0660";
   int idle_timeout_s = o.server.idle_timeout_ms / 1000;
   std::vector<std::string> candidates;
@@ -274,7 +274,8 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       ->capture_default_str()
       ->check(non_negative);
   app.add_option("--line-max-distance", line.max_distance,
-                 "a burst's label is confident when its Eq. (12) distance is at most this (mm^2; 0: any)")
+                 "a burst's label is confident when its Eq. (12) distance is at most this (mm^2; 0: any; over 0 "
+                 "needs --classifier eq12)")
       ->capture_default_str()
       ->check(non_negative);
   auto& button = o.button;
@@ -304,8 +305,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     }
     if (o.profile.method != Method::kEq12 && line.max_distance > 0)
       throw CLI::ValidationError("--line-max-distance",
-                                 "it bounds an Eq. (12) distance (mm^2): the session and learned classifiers' "
-                                 "scores are no distance; leave it 0 with --classifier session or onnx:FILE");
+                                 "it bounds an Eq. (12) distance (mm^2), so it needs --classifier eq12 (the "
+                                 "default classifier is session, whose scores are no distance; so are a learned "
+                                 "model's)");
     if (o.profile.open_set && o.profile.method != Method::kSession)
       throw CLI::ValidationError("--open-set",
                                  "needs --classifier session: Eq. (12) has no noise model to judge a fit");
