@@ -283,12 +283,14 @@ def sweeps_cmd(table_path: Path, sweeps: int, sweep_bins: int, frames_per_bin: i
 @click.option(
     "--gap", default=10, show_default=True, type=click.IntRange(0, 10000), help="Frames with no target between sweeps."
 )
-def demo(table_path: Path | None, materials: str, frames: int, gap: int) -> None:
+@click.option("--classifier", default="session", show_default=True, type=click.Choice(["session", "eq12"]),
+              help="tofmatd's --classifier: the session-robust matcher or the paper's Eq. (12).")  # fmt: skip
+def demo(table_path: Path | None, materials: str, frames: int, gap: int, classifier: str) -> None:
     """tofmatd on the simulated camera, live labels through the Python client, accuracy and latency."""
     from .tools.live_demo import run_live_demo
 
     table = table_path or _sim_table()
-    run_live_demo(table, csv_list(materials) or [], frames, gap, echo=click.echo)
+    run_live_demo(table, csv_list(materials) or [], frames, gap, echo=click.echo, classifier=classifier)
 
 
 @main.command("line-demo")

@@ -770,3 +770,18 @@ def test_a_folder_of_npy_curves_is_a_table_with_the_databases_bins(start: Callab
         assert t["materials"] == expected.materials and t["bins"] == expected.bins.count
         assert t["bin_start_mm"] == expected.bins.start_mm
         assert abs(t["bin_width_mm"] - expected.bins.width_mm) < 1e-12
+
+
+def test_the_live_demo_runs_either_classifier(sim_table: Path) -> None:
+    # `tofmat demo --classifier`: tofmatd is started with it, says so in status, and the sweeps end right.
+    from tofmat.tools.live_demo import run_live_demo
+
+    for classifier in ("eq12", "session"):
+        lines: list[str] = []
+        r = run_live_demo(sim_table, ["cork", "acryl"], 40, 6, echo=lines.append, classifier=classifier)
+        assert r.sweeps == 2 and r.correct == 2, lines
+        assert r.status["classifier"] == classifier
+        assert f"--classifier {classifier}" in lines[0]
+        # Eq. (12)'s distance is in mm^2; the session matcher's score comes with its confidence.
+        shown = [line for line in lines if line.startswith("  frame")]
+        assert shown and all(("mm^2" in line) == (classifier == "eq12") for line in shown), lines

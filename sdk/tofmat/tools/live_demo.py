@@ -98,13 +98,15 @@ def run_live_demo(
     frames: int,
     gap: int,
     echo: Callable[[str], None],
+    classifier: str = "session",
 ) -> DemoResult:
+    """``classifier``: tofmatd's ``--classifier`` (``session``, its default, or ``eq12``)."""
     result = DemoResult()
     with tempfile.TemporaryDirectory(prefix="tofmat-demo-") as tmp:
         socket, log = Path(tmp) / "tofmatd.sock", Path(tmp) / "tofmatd.log"
         source = f"sim:sweep,materials={'+'.join(materials)},frames={frames},gap={gap}"
-        echo(f"starting tofmatd --source {source} --table {table}")
-        daemon = start_daemon(table, socket, source, log)
+        echo(f"starting tofmatd --source {source} --table {table} --classifier {classifier}")
+        daemon = start_daemon(table, socket, source, log, extra=["--classifier", classifier])
         try:
             with connect(socket, daemon) as client:
                 echo(
