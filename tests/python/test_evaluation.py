@@ -9,6 +9,7 @@ small simulator run.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from pathlib import Path
@@ -230,6 +231,31 @@ def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
     assert all(0 <= v <= 100 for v in rows["known rejected"] + rows["held-out accepted"])
     r = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--sessions", "0"])
     assert r.exit_code == 2 and "--sessions" in r.output
+
+
+def test_thickness_among_the_acrylics_with_confusions(real_tmx: Path) -> None:
+    # --materials evaluates a few of the table's curves among themselves (candidates and targets).
+    acrylics = ["acryl", "acryl1mm", "acryl2mm", "acryl3mm"]
+    args = ["-q", "evaluate", "--source", "curves", "--table", str(real_tmx), "--sessions", "20"]
+    r = CliRunner().invoke(main, [*args, "--materials", ",".join(acrylics), "--confusion", "--json"])
+    assert r.exit_code == 0, r.output
+    (res,) = json.loads(r.output)
+    assert res["names"] == acrylics and res["materials"] == 4
+    for row in res["rows"]:
+        for length, m in row["confusion"].items():
+            counts = np.array(m)
+            # Every query once: its true material's row, the label's column; the diagonal is the accuracy.
+            assert counts.shape == (4, 4) and counts.sum() == row["queries"][length]
+            assert 100.0 * np.trace(counts) / counts.sum() == pytest.approx(row["accuracy"][length])
+    session_100 = next(x for x in res["rows"] if x["method"] == "session" and x["split"] == "test")["accuracy"]["100"]
+    assert session_100 >= 90.0  # (99.5 % with 100 sessions: docs/benchmarks.md)
+    r = CliRunner().invoke(main, [*args, "--materials", ",".join(acrylics), "--confusion"])
+    assert r.exit_code == 0 and "Confusions of session (test split" in r.output and "| 100 bins | acryl |" in r.output
+    for bad, why in (("acryl,glass", "not in the table: glass"), ("acryl", "at least two"), ("acryl,acryl", "once")):
+        r = CliRunner().invoke(main, [*args, "--materials", bad])
+        assert r.exit_code == 2 and why in r.output, r.output
+    r = CliRunner().invoke(main, ["evaluate", "--source", "sim", "--materials", "acryl,acryl1mm"])
+    assert r.exit_code == 2 and "--sim-materials" in r.output
 
 
 def test_a_small_simulator_run() -> None:

@@ -41,6 +41,14 @@ from ..report.cli import resolve_table, table_option
 )
 @click.option("--sim-materials", help="Comma-separated materials for the simulator source (default: its library's).")
 @click.option(
+    "--materials",
+    help="Comma-separated materials of the real curves' table to evaluate among themselves (candidates and "
+    "targets; e.g. acryl,acryl1mm,acryl2mm,acryl3mm: thickness). Default: all of them.",
+)
+@click.option(
+    "--confusion", is_flag=True, help="Also print each matcher's confusion tables of the test split by sweep length."
+)
+@click.option(
     "--sim-table",
     type=click.Path(exists=True, path_type=Path),
     help="The simulator source's table (e.g. tofmat sim table's file) instead of one recorded here.",
@@ -66,6 +74,8 @@ def evaluate(
     sessions: int,
     sim_sessions: int,
     sim_materials: str | None,
+    materials: str | None,
+    confusion: bool,
     sim_table: Path | None,
     out: Path | None,
     models: tuple[Path, ...],
@@ -78,6 +88,8 @@ def evaluate(
     from ..tools.tables import open_table
     from .run import evaluate_curves, evaluate_sim, format_markdown
 
+    if materials and source == "sim":
+        raise UserError("--materials chooses among the real curves' materials (the simulator's: --sim-materials)")
     if sim_table is not None and sim_materials:
         raise UserError("--sim-table gives the simulator source's materials: leave out --sim-materials")
     # The sources' tables, and the learned model where it was trained for one (its contract).
@@ -112,7 +124,15 @@ def evaluate(
     results = []
     with progress_bar("evaluate") as progress:
         if curves is not None:
-            results.append(evaluate_curves(curves, sessions, progress=progress, learned=learned.get("curves")))
+            only = [m.strip() for m in materials.split(",")] if materials else None
+            if only is not None and "curves" in learned:
+                raise UserError("a learned model is trained for the whole table: leave out --materials or --model")
+            try:
+                results.append(
+                    evaluate_curves(curves, sessions, progress=progress, learned=learned.get("curves"), materials=only)
+                )
+            except ValueError as e:  # an unknown material, or fewer than two
+                raise UserError(str(e)) from e
         if source in ("sim", "all"):
             names = [m.strip() for m in sim_materials.split(",")] if sim_materials else None
             try:
@@ -126,7 +146,7 @@ def evaluate(
             _strict_json([{**asdict(r), "tuning": [[asdict(p), s] for p, s in r.tuning]} for r in results]), indent=2
         )
         if as_json
-        else format_markdown(results)
+        else format_markdown(results, confusions=confusion)
     )
     if plot is not None:
         from .plots import reliability_diagram

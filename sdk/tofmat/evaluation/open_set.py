@@ -46,7 +46,11 @@ class OpenSetCurves:
 
 
 def _without(table: ExemplarTable, m: int) -> ExemplarTable:
-    keep = [i for i in range(len(table.materials)) if i != m]
+    return subset(table, [i for i in range(len(table.materials)) if i != m])
+
+
+def subset(table: ExemplarTable, keep: list[int]) -> ExemplarTable:
+    """The table of the materials ``keep`` (indices, in that order), with their stored noise."""
     noise = table.noise_mm
     return ExemplarTable(
         [table.materials[i] for i in keep],

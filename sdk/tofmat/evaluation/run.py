@@ -20,7 +20,7 @@ from .._progress import Progress
 from ..learn import LearnedClassifier
 from .confidence import ECE_BINS, fit_temperatures, reliability
 from .matchers import CompiledSessionMatcher, Eq12Matcher, LearnedMatcher, Matcher, SessionParams, session_prior
-from .open_set import MAX_FALSE_REJECT, choose_thresholds, open_set_curves
+from .open_set import MAX_FALSE_REJECT, choose_thresholds, open_set_curves, subset
 from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries
 
 LENGTHS = (1, 3, 10, 30, 100)
@@ -47,6 +47,8 @@ class Row:
     )  # of the confidence per length, fitted on the tuning split
     ece: float = math.nan  # expected calibration error of that confidence on this split, 0..1
     reliability: list[tuple[float, float, int]] = field(default_factory=list)  # (confidence, accuracy, queries)
+    # Per sweep length, queries by true material (row) and label (column), the table's order.
+    confusion: dict[int, list[list[int]]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,21 @@ class SourceResult:
     tuning: list[tuple[SessionParams, float]] = field(default_factory=list)  # each setting and its tuning score
     open_set: list[OpenSetRow] = field(default_factory=list)
     seconds: float = 0.0
+    names: list[str] = field(default_factory=list)  # the table's materials (the confusions' order)
+
+
+def confusion_by_length(scores: np.ndarray, q: Queries) -> dict[int, list[list[int]]]:
+    """Per sweep length, the count of queries of each true material (row) given each label
+    (column: the best score's material)."""
+    n = scores.shape[1]
+    labels = np.argmin(scores, axis=1)
+    out: dict[int, list[list[int]]] = {}
+    for length in sorted(set(q.lengths.tolist())):
+        m = np.zeros((n, n), dtype=np.int64)
+        sel = q.lengths == length
+        np.add.at(m, (q.truth[sel], labels[sel]), 1)
+        out[int(length)] = m.tolist()
+    return out
 
 
 def accuracy_by_length(scores: np.ndarray, q: Queries) -> tuple[dict[int, float], dict[int, int]]:
@@ -120,7 +137,7 @@ def evaluate_source(
     """``draw(seed)``: the queries of one split. ``learned``: learned models' matchers, reported
     beside the exemplar matchers."""
     t0 = time.perf_counter()
-    res = SourceResult(source, description, len(table.materials))
+    res = SourceResult(source, description, len(table.materials), names=list(table.materials))
     tune_q = draw(SPLIT_SEEDS["tune"])
     res.tuning = tune(table, model, tune_q, progress)
     res.tuned = res.tuning[0][0]
@@ -134,7 +151,9 @@ def evaluate_source(
             if split == "tune":
                 temperature[m.name] = fit_temperatures(s, q.truth, q.lengths)
             ece, diagram = reliability(s, q.truth, q.lengths, temperature[m.name])
-            res.rows.append(Row(source, m.name, split, acc, count, us, temperature[m.name], ece, diagram))
+            res.rows.append(
+                Row(source, m.name, split, acc, count, us, temperature[m.name], ece, diagram, confusion_by_length(s, q))
+            )
     thresholds: dict[int, float] = {}
     for split, q in (("tune", tune_q), ("test", test_q)):  # (the tuning split first: it chooses the thresholds)
         if progress:
@@ -165,15 +184,26 @@ def evaluate_curves(
     lengths: Sequence[int] = LENGTHS,
     progress: Progress | None = None,
     learned: LearnedClassifier | None = None,
+    materials: Sequence[str] | None = None,
 ) -> SourceResult:
     """The real curves in new sessions (:mod:`.sessions`), with the calibrated simulator's drift;
-    ``learned``: also a learned model trained for this table (``tofmat train``)."""
+    ``learned``: also a learned model trained for this table (``tofmat train``); ``materials``:
+    only these of the table (at least two), as both the candidates and the swept targets."""
+    described = f"the {len(table.materials)} stored curves in new sessions"
+    if materials is not None:
+        unknown = [m for m in materials if m not in table.materials]
+        if unknown:
+            raise ValueError(f"not in the table: {', '.join(unknown)} (it has {', '.join(table.materials)})")
+        if len(set(materials)) < 2 or len(set(materials)) != len(materials):
+            raise ValueError("--materials needs at least two different materials, each once")
+        table = subset(table, [table.materials.index(m) for m in materials])
+        described = f"{len(materials)} stored curves ({', '.join(materials)}) in new sessions, among themselves"
     library, device = calibrated_json()
     model = calibrated_model(library, table)
     cs = CurveSessions(table, model, device, library)
     return evaluate_source(
         "curves",
-        _describe(model, f"the {len(table.materials)} stored curves in new sessions"),
+        _describe(model, described),
         table,
         model,
         lambda seed: draw_queries(cs, list(lengths), sessions_per_material, seed),
@@ -237,8 +267,39 @@ def _describe(model: SessionModel, what: str) -> str:
     return f"{what}: row offsets sd {o} mm, session states sd {t}{extra}"
 
 
-def format_markdown(results: Sequence[SourceResult]) -> str:
-    """The test split's table (and the tuning split's beside it), per source."""
+# A sweep length "suffices" for a matcher from this share of its test queries right on.
+SUFFICIENT = 90.0
+
+
+def format_confusions(r: SourceResult) -> list[str]:
+    """The test split's confusions of every matcher at every sweep length (rows: the true material,
+    columns: the label), and the shortest length from which each gets SUFFICIENT % right."""
+    lines: list[str] = []
+    short = [n[:10] for n in r.names]
+    for row in sorted((x for x in r.rows if x.split == "test"), key=lambda x: x.method):
+        lengths = sorted(row.confusion)
+        enough = next((n for n in lengths if all(row.accuracy[m] >= SUFFICIENT for m in lengths if m >= n)), None)
+        lines += [
+            "",
+            f"Confusions of {row.method} (test split; rows: the true material, columns: the label). "
+            + (
+                f"{SUFFICIENT:.0f} % right from {enough} bins on."
+                if enough is not None
+                else f"Under {SUFFICIENT:.0f} % right at {lengths[-1]} bins."
+            ),
+        ]
+        for n in lengths:
+            lines += ["", f"| {n} bins | " + " | ".join(short) + " |", "|---|" + "---:|" * len(short)]
+            lines += [
+                f"| {name} | " + " | ".join(str(c) for c in counts) + " |"
+                for name, counts in zip(short, row.confusion[n], strict=True)
+            ]
+    return lines
+
+
+def format_markdown(results: Sequence[SourceResult], confusions: bool = False) -> str:
+    """The test split's table (and the tuning split's beside it), per source; ``confusions``: also
+    each matcher's confusion tables (format_confusions)."""
     lines: list[str] = []
     for r in results:
         lengths = sorted(next(iter(r.rows)).accuracy) if r.rows else []
@@ -296,5 +357,7 @@ def format_markdown(results: Sequence[SourceResult]) -> str:
                 f"Huber k {t.huber_k:g}, offset priors {', '.join(f'{s:.2f}' for s in t.offset_sd_mm)} mm "
                 f"(the calibration's spread); {r.seconds:.0f} s."
             )
+        if confusions:
+            lines += format_confusions(r)
         lines.append("")
     return "\n".join(lines)
