@@ -48,15 +48,12 @@ SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32
   return s;
 }
 
-template <int K, bool Constant>
-SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
-  return next ? pass<K, Constant, true>(x, B, threshold) : pass<K, Constant, false>(x, B, threshold);
-}
-
-template <int K>
-SessionPassSums pass(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
-  return x.constant ? pass<K, true>(x, B, threshold, next) : pass<K, false>(x, B, threshold, next);
-}
+struct Kernel {
+  template <int K, bool Constant, bool Next>
+  static SessionPassSums run(const SessionElements& x, const std::int32_t* B, std::int32_t threshold) {
+    return pass<K, Constant, Next>(x, B, threshold);
+  }
+};
 
 }  // namespace
 
@@ -78,12 +75,7 @@ SessionMomentsFn session_moments(bool) { return session_moments_scalar; }
 
 SessionPassSums session_pass_scalar(const SessionElements& x, int k, const std::int32_t* B, std::int32_t threshold,
                                     bool next) {
-  switch (k) {
-    case 0: return pass<0, false, false>(x, B, threshold);
-    case 1: return pass<1>(x, B, threshold, next);
-    case 2: return pass<2>(x, B, threshold, next);
-    default: return pass<3>(x, B, threshold, next);
-  }
+  return dispatch_pass<Kernel>(x, k, B, threshold, next);
 }
 
 }  // namespace tofmat::session_detail

@@ -78,6 +78,31 @@ inline std::uint64_t add_saturating(std::uint64_t a, std::uint64_t b) {
   return b > std::numeric_limits<std::uint64_t>::max() - a ? std::numeric_limits<std::uint64_t>::max() : a + b;
 }
 
+// A pass kernel's instantiation for the run-time number of terms (0..3),
+// constant term 0 and next: Kernel::run<K, Constant, Next>(x, B, threshold).
+template <class Kernel, int K, bool Constant>
+SessionPassSums dispatch_next(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
+  if (next) return Kernel::template run<K, Constant, true>(x, B, threshold);
+  return Kernel::template run<K, Constant, false>(x, B, threshold);
+}
+
+template <class Kernel, int K>
+SessionPassSums dispatch_terms(const SessionElements& x, const std::int32_t* B, std::int32_t threshold, bool next) {
+  if (x.constant) return dispatch_next<Kernel, K, true>(x, B, threshold, next);
+  return dispatch_next<Kernel, K, false>(x, B, threshold, next);
+}
+
+template <class Kernel>
+SessionPassSums dispatch_pass(const SessionElements& x, int k, const std::int32_t* B, std::int32_t threshold,
+                              bool next) {
+  switch (k) {
+    case 0: return Kernel::template run<0, false, false>(x, B, threshold);  // no terms: nothing to fit or weigh
+    case 1: return dispatch_terms<Kernel, 1>(x, B, threshold, next);
+    case 2: return dispatch_terms<Kernel, 2>(x, B, threshold, next);
+    default: return dispatch_terms<Kernel, 3>(x, B, threshold, next);
+  }
+}
+
 // Which kernel runs the passes: session_pass_neon is session_pass_scalar to the bit.
 using SessionPassFn = SessionPassSums (*)(const SessionElements& x, int k, const std::int32_t* B,
                                           std::int32_t threshold, bool next);
