@@ -39,7 +39,9 @@ RecordResult record(const std::string& source_spec, const std::string& path, std
     std::lock_guard<std::mutex> lock(mutex);
     if (stop.load() || !error.empty()) return;
     try {
-      if (!writer) writer = std::make_unique<daemon::RecordingWriter>(path, f.calibration->p0_rad, f.simulated);
+      if (!writer)
+        writer = std::make_unique<daemon::RecordingWriter>(path, f.calibration->p0_rad, f.simulated,
+                                                           f.calibration->intrinsics);
       writer->write(f);
       if (++result.frames >= frames) stop = true;
     } catch (const std::exception& e) {

@@ -50,6 +50,7 @@ from .client import (
     ProtocolVersionError,
 )
 from .devices import Device, devices
+from .geometry import Intrinsics
 
 try:
     __version__ = version("tofmat")
@@ -73,6 +74,7 @@ __all__ = [
     "Device",
     "ExemplarTable",
     "FormatError",
+    "Intrinsics",
     "MissingExtraError",
     "NotPermittedError",
     "ProtocolError",

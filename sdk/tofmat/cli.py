@@ -572,6 +572,44 @@ def watch(address: str, token_file: Path | None, top: int, count: int) -> None:
 
 @main.command()
 @_client_options
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Folder to write labels.png, depth.png, points.ply and snapshot.json into.")  # fmt: skip
+@click.option("--timeout", "timeout_s", default=10.0, show_default=True, type=FiniteFloat(0.1, 3600),
+              help="Seconds to wait for a frame.")  # fmt: skip
+@click.option("--intrinsics", type=NumberList(float, -1e6, 1e6),
+              help="FX,FY,CX,CY[,K1,K2,K3,P1,P2] in place of the camera's own (a daemon that sends none).")  # fmt: skip
+@click.option("--overwrite", is_flag=True, help="Replace the files of an earlier snapshot in the folder.")
+def snapshot(address: str, token_file: Path | None, output: Path, timeout_s: float, intrinsics: list[float] | None,
+             overwrite: bool) -> None:  # fmt: skip
+    """One frame of what tofmatd sees: the label map and depth as PNGs, and a PLY point cloud."""
+    from .client import ClientError
+    from .geometry import Intrinsics
+    from .tools.snapshot import SnapshotError, capture, write_snapshot
+
+    intr = None
+    if intrinsics is not None:
+        if len(intrinsics) not in (4, 9):
+            raise click.BadParameter("give FX,FY,CX,CY or all nine values", param_hint="--intrinsics")
+        try:
+            intr = Intrinsics(*intrinsics)
+        except ValueError as e:
+            raise click.BadParameter(str(e), param_hint="--intrinsics") from e
+    with _connect(address, token_file) as client:
+        try:
+            shot = capture(client, timeout_s)
+        except (ClientError, SnapshotError) as e:
+            raise click.ClickException(str(e)) from e
+    try:
+        paths = write_snapshot(shot, output, intrinsics=intr, overwrite=overwrite)
+    except (SnapshotError, OSError) as e:
+        raise click.ClickException(str(e)) from e
+    labelled = int((shot.labels != 255).sum())
+    click.echo(f"frame {shot.frame} ({shot.profile}): {labelled} of {shot.labels.size} pixels labelled; "
+               f"wrote {', '.join(str(p) for p in paths)}")  # fmt: skip
+
+
+@main.command()
+@_client_options
 def status(address: str, token_file: Path | None) -> None:
     """tofmatd's status as JSON."""
     with _connect(address, token_file) as client:

@@ -38,6 +38,7 @@ from ._tofmat import (
     ProtocolError,
     ProtocolVersionError,
 )
+from .geometry import Intrinsics, range_to_points
 
 DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
 
@@ -165,12 +166,33 @@ class LabelMap:
 
 @dataclass(frozen=True)
 class DepthImage:
+    """A depth image over the region the profile decodes: ranges along each pixel's ray (mm, what a
+    Time-of-Flight camera measures), NaN where invalid, with the camera's intrinsics when the daemon
+    knows them (protocol minor 9; not from a recording made before recordings kept them)."""
+
     frame: int
     timestamp_ns: int
     kind: DepthKind  # "80", "16", "120" (wrapped) or "combined"
     x0: int
     y0: int
     depth_mm: npt.NDArray[np.float32]  # (height, width), NaN where invalid; the caller's own (writable) copy
+    intrinsics: Intrinsics | None = None
+
+    @property
+    def valid(self) -> npt.NDArray[np.bool_]:
+        """(height, width): the pixels with a depth."""
+        return np.isfinite(self.depth_mm)
+
+    def points(self, intrinsics: Intrinsics | None = None) -> npt.NDArray[np.float32]:
+        """Each pixel's 3D point, (height, width, 3) mm in the camera's frame (x right, y down, z
+        forward), NaN where invalid; with the image's own intrinsics unless others are given."""
+        k = intrinsics or self.intrinsics
+        if k is None:
+            raise ValueError(
+                "this depth image carries no intrinsics (a daemon before protocol minor 9, or a "
+                "recording without them): pass intrinsics=tofmat.Intrinsics(fx, fy, cx, cy)"
+            )
+        return range_to_points(self.depth_mm, k, self.x0, self.y0)
 
 
 @dataclass(frozen=True)
@@ -261,7 +283,8 @@ def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
         )
     if name == "depth":
         depth = np.frombuffer(blob, "<f4").reshape(meta["height"], meta["width"]).astype(np.float32)  # writable
-        return DepthImage(meta["frame"], meta["timestamp_ns"], meta["kind"], meta["x0"], meta["y0"], depth)
+        intrinsics = Intrinsics.from_meta(meta["intrinsics"]) if "intrinsics" in meta else None
+        return DepthImage(meta["frame"], meta["timestamp_ns"], meta["kind"], meta["x0"], meta["y0"], depth, intrinsics)
     if name == "device":
         return DeviceEvent(meta["state"], meta["message"], meta["timestamp_ns"])
     if name == "sort":

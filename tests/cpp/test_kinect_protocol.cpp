@@ -130,6 +130,15 @@ TEST(Responses, DepthParamsRoundTripAndValidate) {
   Bytes zero = b;
   std::memset(zero.data(), 0, 4);
   EXPECT_CONTAINS(format_error([&] { parse_depth_params(zero.data(), zero.size()); }), "focal");
+  for (float DepthParams::*field :
+       {&DepthParams::k1, &DepthParams::k2, &DepthParams::k3, &DepthParams::p1, &DepthParams::p2}) {
+    DepthParams wild = p;
+    wild.*field = 10.5f;
+    const Bytes w = encode_depth_params(wild);
+    EXPECT_CONTAINS(format_error([&] { parse_depth_params(w.data(), w.size()); }), "distortion");
+    wild.*field = -10.0f;  // at the bound: kept
+    EXPECT_NO_THROW(check_depth_params(wild));
+  }
 }
 
 TEST(Responses, P0TablesLayoutAndPhase) {

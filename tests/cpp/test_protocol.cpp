@@ -833,6 +833,43 @@ TEST(Messages, LabelMapBounds) {
   EXPECT_CONTAINS(error_of<ProtocolError>([&] { encode_label_map(e); }), "width x height");
 }
 
+TEST(Messages, DepthIntrinsicsRoundTripAndBounds) {
+  DepthEvent e;
+  e.kind = "combined";
+  e.width = 1;
+  e.height = 1;
+  e.depth_mm = {900.0f};
+  EXPECT_FALSE(decode_depth(through_reader(encode_depth(e))).intrinsics);  // none known: none sent
+  EXPECT_FALSE(encode_depth(e).meta.contains("intrinsics"));
+  e.intrinsics = Intrinsics{365.5, 365.25, 255.5, 211.75, 0.09, -0.27, 0.1, 0.001, -0.002};
+  const Message good = through_reader(encode_depth(e));
+  const DepthEvent d = decode_depth(good);
+  ASSERT_TRUE(d.intrinsics);
+  const Intrinsics& k = *d.intrinsics;
+  EXPECT_EQ(std::vector<double>({k.fx, k.fy, k.cx, k.cy, k.k1, k.k2, k.k3, k.p1, k.p2}),
+            std::vector<double>({365.5, 365.25, 255.5, 211.75, 0.09, -0.27, 0.1, 0.001, -0.002}));
+  const auto err = [](const Message& m) { return error_of<ProtocolError>([&] { decode_depth(m); }); };
+  Message m = good;
+  m.meta["intrinsics"] = 3;
+  EXPECT_CONTAINS(err(m), "intrinsics");
+  for (const char* key : {"fx", "fy", "cx", "cy", "k1", "k2", "k3", "p1", "p2"}) {
+    m = good;
+    m.meta["intrinsics"].erase(key);
+    EXPECT_CONTAINS(err(m), key);
+    m = good;
+    m.meta["intrinsics"][key] = "x";
+    EXPECT_CONTAINS(err(m), key);
+  }
+  for (const char* key : {"fx", "fy"}) {
+    m = good;
+    m.meta["intrinsics"][key] = 0.0;
+    EXPECT_CONTAINS(err(m), "focal");
+  }
+  m = good;
+  m.meta["intrinsics"]["later"] = 1;  // a later minor's field: ignored
+  EXPECT_TRUE(decode_depth(m).intrinsics);
+}
+
 TEST(Messages, DepthBounds) {
   DepthEvent e;
   e.kind = "combined";

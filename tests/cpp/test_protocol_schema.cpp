@@ -61,6 +61,8 @@ TEST(ProtocolSchema, EveryEncoderFollowsItToTheLetter) {
   depth.height = 1;
   depth.depth_mm = {900.0F};
   check_event(encode_depth(depth), true);
+  depth.intrinsics = Intrinsics{365, 365, 256, 212, 0, 0, 0, 0, 0};
+  check_event(encode_depth(depth), true);
 }
 
 TEST(ProtocolSchema, StreamsComeFromTheEventsAndOnlyBloblessOnesArePolled) {

@@ -97,6 +97,22 @@ TEST(SourceRegions, WithoutAskingTheWholeFrameIsUnpacked) {
   EXPECT_EQ(std::count(frames[0].raw.begin(), frames[0].raw.end(), kSentinel), 0);
 }
 
+TEST(SourceRegions, FramesCarryTheCamerasIntrinsics) {
+  // The driver reads the depth-parameters page at start; the simulated camera
+  // answers with its pinhole camera (no distortion).
+  const auto frames = frames_from_sim(2, nullptr);
+  ASSERT_EQ(frames.size(), 2u);
+  ASSERT_TRUE(frames[0].calibration && frames[0].calibration->intrinsics);
+  const auto& k = *frames[0].calibration->intrinsics;
+  EXPECT_EQ(k.fx, 365.0f);
+  EXPECT_EQ(k.fy, 365.0f);
+  EXPECT_EQ(k.cx, 256.0f);
+  EXPECT_EQ(k.cy, 212.0f);
+  EXPECT_EQ(k.k1, 0.0f);
+  EXPECT_EQ(k.p2, 0.0f);
+  EXPECT_EQ(frames[1].calibration, frames[0].calibration);  // one per device start
+}
+
 TEST(SourceRegions, ThePipelineAsksForWhatItsProfileReads) {
   auto table = std::make_shared<const tofmat::ExemplarTable>(tofmat::ExemplarTable::from_npy_dir(
       tofmat_test::db_dir().string(), tofmat::kDatabaseBinStartMm, tofmat::kDatabaseBinStopMm));

@@ -67,17 +67,19 @@ void check(const std::uint8_t* data, std::size_t size) {
   } catch (const tofmat::FormatError&) {
     return;  // refused: fine
   }
-  if (size < kRecordingHeaderBytes) __builtin_trap();
+  const std::size_t header = r.header_bytes;
+  if (header != kRecordingHeaderBytes + (r.intrinsics ? kRecordingIntrinsicsBytes : 0)) __builtin_trap();
+  if (size < header) __builtin_trap();
+  if (r.intrinsics && !(r.intrinsics->fx > 0 && r.intrinsics->fy > 0)) __builtin_trap();
   if (r.p0_rad.size() != 3 * kPixels) __builtin_trap();
   for (float v : r.p0_rad)
     if (!std::isfinite(v) || std::abs(v) > 1000.0f) __builtin_trap();
-  const std::size_t whole = (size - kRecordingHeaderBytes) / kRecordedFrameBytes;
+  const std::size_t whole = (size - header) / kRecordedFrameBytes;
   const std::size_t frames = std::min(whole, kMaxFrames);
   if (r.frames.size() != frames) __builtin_trap();
-  if (r.truncated != (frames < kMaxFrames && size != kRecordingHeaderBytes + frames * kRecordedFrameBytes))
-    __builtin_trap();
+  if (r.truncated != (frames < kMaxFrames && size != header + frames * kRecordedFrameBytes)) __builtin_trap();
   for (std::size_t f = 0; f < frames; ++f) {
-    const std::uint8_t* p = data + kRecordingHeaderBytes + f * kRecordedFrameBytes;
+    const std::uint8_t* p = data + header + f * kRecordedFrameBytes;
     if (r.frames[f].raw.size() != 9 * kPixels || r.frames[f].sequence != get_le(p + 4, 8) ||
         r.frames[f].offset_ns != get_le(p + 12, 8) || std::memcmp(r.frames[f].raw.data(), p + 20, 2) != 0)
       __builtin_trap();

@@ -65,7 +65,7 @@ void DeviceSource::stream(const SourceCallbacks& callbacks, const std::atomic<bo
     callbacks.frame(std::move(f));
   });
   // Frames arrive only from pump(): the calibration is in place before the first.
-  calibration = std::make_shared<const Calibration>(identity.p0.p0_rad());
+  calibration = std::make_shared<const Calibration>(identity.p0.p0_rad(), identity.depth);
   {
     std::lock_guard<std::mutex> lock(mutex_);
     ++opens_;

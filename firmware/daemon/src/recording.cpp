@@ -43,19 +43,46 @@ std::uint64_t get_u64(const std::uint8_t* p) {
 struct Header {
   std::vector<float> p0_rad;
   bool simulated = false;
+  bool has_intrinsics = false;  // kRecordingIntrinsicsBytes follow the first kRecordingHeaderBytes
 };
 
-// The header's checks, shared by the in-memory parser and the file reader.
+float get_f32(const std::uint8_t* p) {
+  const std::uint32_t bits = get_u32(p);
+  float v;
+  std::memcpy(&v, &bits, sizeof v);
+  return v;
+}
+void put_f32(std::ostream& out, float v) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  put_u32(out, bits);
+}
+
+// The intrinsics block: read and held to the driver's own check.
+kinect::DepthParams parse_intrinsics(const std::uint8_t* p) {
+  kinect::DepthParams d;
+  float* const fields[9] = {&d.fx, &d.fy, &d.cx, &d.cy, &d.k1, &d.k2, &d.k3, &d.p1, &d.p2};
+  for (int i = 0; i < 9; ++i) *fields[i] = get_f32(p + 4 * i);
+  try {
+    kinect::check_depth_params(d);
+  } catch (const FormatError& e) {
+    throw FormatError(std::string("recording's intrinsics: ") + e.what());
+  }
+  return d;
+}
+
+// The first kRecordingHeaderBytes' checks, shared by the in-memory parser and the file reader.
 Header parse_header(const std::uint8_t* h) {
   if (std::memcmp(h, kRecordingMagic, 8) != 0) throw FormatError("not a tofmat recording (bad magic)");
   const std::uint32_t width = get_u32(h + 8), height = get_u32(h + 12), flags = get_u32(h + 16);
   if (width != static_cast<std::uint32_t>(kWidth) || height != static_cast<std::uint32_t>(kHeight))
     throw FormatError("recording is " + std::to_string(width) + " x " + std::to_string(height) +
                       ", expected the Kinect v2's 512 x 424");
-  if ((flags & ~kRecordingFlagSimulated) != 0)
+  if ((flags & ~(kRecordingFlagSimulated | kRecordingFlagIntrinsics)) != 0)
     throw FormatError("recording has unknown flags " + std::to_string(flags));
   Header header;
   header.simulated = (flags & kRecordingFlagSimulated) != 0;
+  header.has_intrinsics = (flags & kRecordingFlagIntrinsics) != 0;
   header.p0_rad.resize(3 * kPixels);
   std::memcpy(header.p0_rad.data(), h + 20, header.p0_rad.size() * sizeof(float));
   for (float v : header.p0_rad)
@@ -76,15 +103,21 @@ RecordedFrame parse_frame(const std::uint8_t* p) {
 
 }  // namespace
 
-RecordingWriter::RecordingWriter(const std::string& path, const std::vector<float>& p0_rad, bool simulated)
+RecordingWriter::RecordingWriter(const std::string& path, const std::vector<float>& p0_rad, bool simulated,
+                                 const std::optional<kinect::DepthParams>& intrinsics)
     : out_(path, std::ios::binary | std::ios::trunc), path_(path) {
   if (!out_) throw std::runtime_error("cannot create recording \"" + path + "\"");
   if (p0_rad.size() != 3 * kPixels) throw std::invalid_argument("recording: P0 corrections must be 3 x 512 x 424");
+  if (intrinsics) kinect::check_depth_params(*intrinsics);  // (a reader would refuse the file)
   out_.write(kRecordingMagic, 8);
   put_u32(out_, kWidth);
   put_u32(out_, kHeight);
-  put_u32(out_, simulated ? kRecordingFlagSimulated : 0);
+  put_u32(out_, (simulated ? kRecordingFlagSimulated : 0) | (intrinsics ? kRecordingFlagIntrinsics : 0));
   out_.write(reinterpret_cast<const char*>(p0_rad.data()), static_cast<std::streamsize>(p0_rad.size() * sizeof(float)));
+  if (intrinsics) {
+    const kinect::DepthParams& d = *intrinsics;
+    for (float v : {d.fx, d.fy, d.cx, d.cy, d.k1, d.k2, d.k3, d.p1, d.p2}) put_f32(out_, v);
+  }
 }
 
 void RecordingWriter::write(const RawFrame& frame) {
@@ -112,7 +145,13 @@ Recording parse_recording(const std::uint8_t* data, std::size_t size, std::size_
   Header header = parse_header(data);
   r.p0_rad = std::move(header.p0_rad);
   r.simulated = header.simulated;
-  std::size_t at = kRecordingHeaderBytes;
+  if (header.has_intrinsics) {
+    if (size - kRecordingHeaderBytes < kRecordingIntrinsicsBytes)
+      throw FormatError("recording is shorter than its header (the intrinsics are cut off)");
+    r.intrinsics = parse_intrinsics(data + kRecordingHeaderBytes);
+    r.header_bytes += kRecordingIntrinsicsBytes;
+  }
+  std::size_t at = r.header_bytes;
   while (size - at >= kRecordedFrameBytes && r.frames.size() < max_frames) {
     r.frames.push_back(parse_frame(data + at));
     at += kRecordedFrameBytes;
@@ -129,6 +168,13 @@ RecordingReader::RecordingReader(const std::string& path) : in_(path, std::ios::
   Header parsed = parse_header(header.data());
   p0_rad_ = std::move(parsed.p0_rad);
   simulated_ = parsed.simulated;
+  if (parsed.has_intrinsics) {
+    std::uint8_t block[kRecordingIntrinsicsBytes];
+    if (!in_.read(reinterpret_cast<char*>(block), sizeof block))
+      throw FormatError("recording \"" + path + "\" is shorter than its header (the intrinsics are cut off)");
+    intrinsics_ = parse_intrinsics(block);
+    header_bytes_ += kRecordingIntrinsicsBytes;
+  }
 }
 
 std::optional<RecordedFrame> RecordingReader::next() {
@@ -139,7 +185,7 @@ std::optional<RecordedFrame> RecordingReader::next() {
 
 void RecordingReader::rewind() {
   in_.clear();
-  in_.seekg(static_cast<std::streamoff>(kRecordingHeaderBytes));
+  in_.seekg(static_cast<std::streamoff>(header_bytes_));
 }
 
 namespace {
@@ -158,7 +204,7 @@ class ReplaySource : public Source {
     return {{"frames", frames_}, {"loops", loops_}};
   }
   void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) override {
-    auto calibration = std::make_shared<const Calibration>(reader_.p0_rad());
+    auto calibration = std::make_shared<const Calibration>(reader_.p0_rad(), reader_.intrinsics());
     callbacks.state(DeviceState::kStreaming, describe());
     const auto start = std::chrono::steady_clock::now();
     std::uint64_t base_ns = 0, last_ns = 0;

@@ -147,6 +147,10 @@ void RegionMatcher::emit_depths(const Decoded& d, const RawFrame& frame, const E
     e.y0 = d.region.y0;
     e.width = d.region.x1 - d.region.x0;
     e.height = d.region.y1 - d.region.y0;
+    if (frame.calibration && frame.calibration->intrinsics) {
+      const kinect::DepthParams& c = *frame.calibration->intrinsics;
+      e.intrinsics = protocol::Intrinsics{c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.k3, c.p1, c.p2};
+    }
     e.depth_mm.resize(d.pixels);
     if (const auto* f = std::get_if<FixedDecodedFrame>(&d.frame)) {
       for (std::size_t i = 0; i < d.pixels; ++i) {

@@ -143,13 +143,20 @@ DepthParams parse_depth_params(const std::uint8_t* data, std::size_t size) {
   p.p1 = f32(r, "p1");
   p.p2 = f32(r, "p2");
   p.k3 = f32(r, "k3");
+  check_depth_params(p);
+  return p;
+}
+
+void check_depth_params(const DepthParams& p) {
   for (float v : {p.fx, p.fy, p.cx, p.cy, p.k1, p.k2, p.p1, p.p2, p.k3}) {
     if (!std::isfinite(v)) throw FormatError("depth parameters: not finite");
   }
   if (!(p.fx > 0 && p.fy > 0 && p.cx > 0 && p.cx < 512 && p.cy > 0 && p.cy < 424)) {
     throw FormatError("depth parameters: focal lengths must be > 0 and the centre inside the image");
   }
-  return p;
+  for (float v : {p.k1, p.k2, p.p1, p.p2, p.k3}) {
+    if (!(std::fabs(v) <= 10.0f)) throw FormatError("depth parameters: a distortion coefficient beyond 10");
+  }
 }
 
 std::vector<std::uint8_t> encode_depth_params(const DepthParams& p) {

@@ -268,6 +268,11 @@ Message encode_depth(const DepthEvent& e) {
   m.meta = {{"event", "depth"}, {"frame", e.frame},   {"timestamp_ns", e.timestamp_ns},
             {"kind", e.kind},   {"x0", e.x0},         {"y0", e.y0},
             {"width", e.width}, {"height", e.height}, {"dtype", "float32"}};
+  if (e.intrinsics) {
+    const Intrinsics& k = *e.intrinsics;
+    m.meta["intrinsics"] = {{"fx", k.fx}, {"fy", k.fy}, {"cx", k.cx}, {"cy", k.cy}, {"k1", k.k1},
+                            {"k2", k.k2}, {"k3", k.k3}, {"p1", k.p1}, {"p2", k.p2}};
+  }
   m.blob.resize(e.depth_mm.size() * sizeof(float));
   if (!m.blob.empty()) std::memcpy(m.blob.data(), e.depth_mm.data(), m.blob.size());  // little-endian hosts
   return m;
@@ -293,6 +298,22 @@ DepthEvent decode_depth(const Message& m) {
                         " pixels");
   e.depth_mm.resize(n);
   if (n) std::memcpy(e.depth_mm.data(), m.blob.data(), m.blob.size());
+  if (m.meta.contains("intrinsics")) {
+    const Json& j = m.meta["intrinsics"];
+    if (!j.is_object()) throw ProtocolError("field \"intrinsics\" must be an object");
+    Intrinsics k;
+    k.fx = get_number(j, "fx");
+    k.fy = get_number(j, "fy");
+    k.cx = get_number(j, "cx");
+    k.cy = get_number(j, "cy");
+    k.k1 = get_number(j, "k1");
+    k.k2 = get_number(j, "k2");
+    k.k3 = get_number(j, "k3");
+    k.p1 = get_number(j, "p1");
+    k.p2 = get_number(j, "p2");
+    if (!(k.fx > 0 && k.fy > 0)) throw ProtocolError("intrinsics: focal lengths must be > 0");
+    e.intrinsics = k;
+  }
   return e;
 }
 

@@ -5,11 +5,13 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/frame_decode.hpp"
+#include "tofmat/kinect/command.hpp"
 
 namespace tofmat::daemon {
 
@@ -24,14 +26,17 @@ inline bool region_covers(const PixelRegion& outer, const PixelRegion& inner) {
          (outer.x0 <= inner.x0 && outer.y0 <= inner.y0 && inner.x1 <= outer.x1 && inner.y1 <= outer.y1);
 }
 
-// The decode's per-pixel corrections, built once per device start (the P0
-// tables do not change while the camera streams) and shared by its frames.
+// What the device told at its start, shared by its frames (neither changes
+// while the camera streams): the decode's per-pixel corrections built from
+// its P0 tables, and its depth camera's intrinsics (the depth-parameters
+// page; none from a recording made before recordings kept them).
 struct Calibration {
-  explicit Calibration(const std::vector<float>& p0)
-      : p0_rad(p0), float_tables(p0, kPixels), fixed_tables(p0, kPixels) {}
+  explicit Calibration(const std::vector<float>& p0, std::optional<kinect::DepthParams> depth_intrinsics = std::nullopt)
+      : p0_rad(p0), float_tables(p0, kPixels), fixed_tables(p0, kPixels), intrinsics(depth_intrinsics) {}
   std::vector<float> p0_rad;  // 3 x kPixels
   DecodeTables float_tables;
   FixedDecodeTables fixed_tables;
+  std::optional<kinect::DepthParams> intrinsics;
 };
 
 // Ground truth of a simulated frame: per pixel, the index into `materials` of

@@ -3,8 +3,10 @@
 // what the camera delivered, so a session can be replayed through the same
 // pipeline. Little-endian, fixed sizes (docs/protocol.md, "Recordings"):
 //   header  "TMREC001", u32 width (512), u32 height (424), u32 flags (bit 0:
-//           the frames are the simulator's; no other bit may be set),
-//           3 x width x height float32 P0 corrections (radians, finite)
+//           the frames are the simulator's; bit 1: the intrinsics follow; no
+//           other bit may be set), 3 x width x height float32 P0 corrections
+//           (radians, finite), then with bit 1 the depth camera's intrinsics:
+//           9 float32 fx, fy, cx, cy, k1, k2, k3, p1, p2
 //   frames  "FRM1", u64 sequence, u64 time since the first frame (ns),
 //           9 x width x height int16 raw samples
 // A reader checks every size and value range; a recording cut short in the
@@ -22,15 +24,19 @@ namespace tofmat::daemon {
 
 inline constexpr char kRecordingMagic[8] = {'T', 'M', 'R', 'E', 'C', '0', '0', '1'};
 inline constexpr char kFrameMagic[4] = {'F', 'R', 'M', '1'};
-inline constexpr std::size_t kRecordingHeaderBytes = 8 + 12 + 3 * kPixels * sizeof(float);
-inline constexpr std::uint32_t kRecordingFlagSimulated = 1;  // header flags: frames rendered by the simulator
+inline constexpr std::size_t kRecordingHeaderBytes = 8 + 12 + 3 * kPixels * sizeof(float);  // without intrinsics
+inline constexpr std::size_t kRecordingIntrinsicsBytes = 9 * sizeof(float);
+inline constexpr std::uint32_t kRecordingFlagSimulated = 1;   // header flags: frames rendered by the simulator
+inline constexpr std::uint32_t kRecordingFlagIntrinsics = 2;  // the header ends with the camera's intrinsics
 inline constexpr std::size_t kRecordedFrameBytes = 4 + 16 + 9 * kPixels * sizeof(std::int16_t);
 
 class RecordingWriter {
  public:
   // Throws std::runtime_error if the file cannot be created. `simulated`:
   // the frames come from the simulator (kept in the header's flags).
-  RecordingWriter(const std::string& path, const std::vector<float>& p0_rad, bool simulated);
+  // `intrinsics`: the depth camera's (kept when known).
+  RecordingWriter(const std::string& path, const std::vector<float>& p0_rad, bool simulated,
+                  const std::optional<kinect::DepthParams>& intrinsics = std::nullopt);
   void write(const RawFrame& frame);
   std::uint64_t frames() const { return frames_; }
   void close();
@@ -51,6 +57,8 @@ struct RecordedFrame {
 struct Recording {
   std::vector<float> p0_rad;
   bool simulated = false;
+  std::optional<kinect::DepthParams> intrinsics;
+  std::size_t header_bytes = kRecordingHeaderBytes;  // the frames start here
   std::vector<RecordedFrame> frames;
   bool truncated = false;  // bytes after the last whole frame
 };
@@ -62,6 +70,7 @@ class RecordingReader {
   explicit RecordingReader(const std::string& path);  // reads and checks the header
   const std::vector<float>& p0_rad() const { return p0_rad_; }
   bool simulated() const { return simulated_; }
+  const std::optional<kinect::DepthParams>& intrinsics() const { return intrinsics_; }
   // The next frame; nothing at the end (or at a cut-short frame). Throws FormatError.
   std::optional<RecordedFrame> next();
   void rewind();
@@ -71,6 +80,8 @@ class RecordingReader {
   std::string path_;
   std::vector<float> p0_rad_;
   bool simulated_ = false;
+  std::optional<kinect::DepthParams> intrinsics_;
+  std::size_t header_bytes_ = kRecordingHeaderBytes;
 };
 
 // `replay:FILE[,loop=1]`: plays the frames at the pace they were recorded.

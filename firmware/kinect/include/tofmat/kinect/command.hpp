@@ -104,6 +104,11 @@ struct DepthParams {
 };
 inline constexpr std::size_t kDepthParamsBytes = 23 * 4;
 DepthParams parse_depth_params(const std::uint8_t* data, std::size_t size);
+// Throws FormatError unless every value is finite, the focal lengths are
+// positive, the principal point lies inside the 512 x 424 image and the
+// distortion coefficients are at most 10 in size (the Kinect's are under 1):
+// parse_depth_params's check, and a recording's.
+void check_depth_params(const DepthParams& p);
 std::vector<std::uint8_t> encode_depth_params(const DepthParams& p);
 
 // P0 tables (3.1): 32-byte header, then three blocks of (pad, 512 x 424

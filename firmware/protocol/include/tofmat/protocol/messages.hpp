@@ -104,13 +104,24 @@ struct LabelMapEvent {
 Message encode_label_map(const LabelMapEvent& e);
 LabelMapEvent decode_label_map(const Message& m);
 
+// The depth camera's intrinsics in pixels of the whole 512 x 424 frame (pixel
+// (x, y)'s centre at x + 0.5, y + 0.5) and Brown's radial (k1, k2, k3) and
+// tangential (p1, p2) distortion, as the camera reports them.
+struct Intrinsics {
+  double fx = 0, fy = 0, cx = 0, cy = 0, k1 = 0, k2 = 0, k3 = 0, p1 = 0, p2 = 0;
+};
+
 // Depth images: "80", "16", "120" (wrapped, per frequency) or "combined"
-// (unwrapped), float32 mm, NaN where invalid, over the region the profile decodes.
+// (unwrapped), float32 mm along each pixel's ray, NaN where invalid, over the
+// region the profile decodes.
 struct DepthEvent {
   std::uint64_t frame = 0, timestamp_ns = 0;
   std::string kind;
   int x0 = 0, y0 = 0, width = 0, height = 0;
   std::vector<float> depth_mm;
+  // Minor 9: the camera's intrinsics (absent when the source does not know
+  // them: a recording made before recordings kept them).
+  std::optional<Intrinsics> intrinsics;
 };
 Message encode_depth(const DepthEvent& e);
 DepthEvent decode_depth(const Message& m);
