@@ -448,8 +448,9 @@ def test_record_and_replay(start: Callable[..., Daemon], tmp_path: Path, sim_tab
     p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", "sim:static,material=acryl,depth=800,realtime=0",
                         "-o", str(rec), "--frames", "4"], capture_output=True, text=True, timeout=120)  # fmt: skip
     assert p.returncode == 0, p.stderr
-    header = 8 + 12 + 3 * 512 * 424 * 4
+    header = 8 + 12 + 3 * 512 * 424 * 4 + 9 * 4  # with the camera's intrinsics (flags bit 1)
     assert rec.stat().st_size == header + 4 * (20 + 9 * 512 * 424 * 2)
+    assert rec.read_bytes()[16] == 0b11  # simulated, and the intrinsics follow the P0 tables
     d = start(f"replay:{rec},loop=1")
     with d.client() as c:
         label = next(lb for lb in c.labels(timeout=30) if lb.state == "tracking")
@@ -518,7 +519,7 @@ def test_a_corrupt_recording_fails_the_source_not_the_daemon(start: Callable[...
                         "-o", str(rec), "--frames", "3"], capture_output=True, text=True, timeout=120)  # fmt: skip
     assert p.returncode == 0, p.stderr
     data = rec.read_bytes()
-    header, frame = 8 + 12 + 3 * 512 * 424 * 4, 20 + 9 * 512 * 424 * 2
+    header, frame = 8 + 12 + 3 * 512 * 424 * 4 + 9 * 4, 20 + 9 * 512 * 424 * 2  # (the intrinsics' 36 bytes)
     marker = bytearray(data)
     marker[header + frame : header + frame + 4] = b"XXXX"  # the second frame's marker
     late = bytearray(data)
