@@ -10,6 +10,7 @@
 #include "bindings.hpp"
 #include "tofmat/core/decode.hpp"
 #include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/daemon/sim_source.hpp"
 #include "tofmat/sim/curve.hpp"
 #include "tofmat/sim/profile_io.hpp"
 #include "tofmat/sim/renderer.hpp"
@@ -145,7 +146,19 @@ void register_sim(pyb::module_& parent) {
            pyb::arg("targets"), pyb::arg("background_material") = "", pyb::arg("background_depth_mm") = 3000.0)
       .def_readwrite("targets", &Scene::targets)
       .def_static("centred_target", &Scene::centred_target, pyb::arg("material"), pyb::arg("depth_mm"),
-                  pyb::arg("yaw_deg") = 0.0, pyb::arg("size") = 120);
+                  pyb::arg("yaw_deg") = 0.0, pyb::arg("size") = 120)
+      .def_static(
+          "of_source",
+          [](const std::string& spec, std::uint64_t frame) {
+            try {
+              return tofmat::daemon::sim_scene_at(tofmat::daemon::parse_sim_spec(spec), frame);
+            } catch (const std::invalid_argument& e) {
+              throw pyb::value_error(e.what());
+            }
+          },
+          pyb::arg("spec"), pyb::arg("frame") = 0,
+          "The scene tofmatd's `--source sim:SPEC` shows at a frame (SPEC: the text after \"sim:\"), e.g. to "
+          "render its ground truth.");
 
   pyb::class_<Frame>(m, "Frame", "A rendered raw frame (or region) and its ground truth (numpy arrays).")
       .def_readonly("x0", &Frame::x0)

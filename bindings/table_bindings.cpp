@@ -140,6 +140,59 @@ void register_table(pyb::module_& m) {
           },
           pyb::arg("noise_mm"), "A copy of this table carrying noise_mm (as the constructor's; None drops it).")
       .def_property_readonly(
+          "distortion_grid",
+          [](const ExemplarTable& t) -> std::optional<BinSpec> {
+            if (!t.distortion()) return std::nullopt;
+            return t.distortion()->grid;
+          },
+          "The measured depths the depth distortion is sampled at (the centres of these bins), or None.")
+      .def_property_readonly(
+          "distortion_mm",
+          [](const ExemplarTable& t) -> std::optional<pyb::array_t<double>> {
+            if (!t.distortion()) return std::nullopt;
+            const auto& d = *t.distortion();
+            pyb::array_t<double> out(
+                {static_cast<pyb::ssize_t>(t.n_materials()), static_cast<pyb::ssize_t>(d.grid.count)});
+            std::copy(d.mm.begin(), d.mm.end(), out.mutable_data());
+            return out;
+          },
+          "Each material's absolute distortion of the combined depth, Eq. (8)'s measured minus true depth "
+          "(n_materials, grid count), mm, at distortion_grid's bin centres of the measured depth; NaN = unknown; "
+          "None when the table carries none (files before version 1.2).")
+      .def(
+          "with_distortion",
+          [](const ExemplarTable& t, const std::optional<BinSpec>& grid, const pyb::handle& distortion_mm) {
+            if (!grid || distortion_mm.is_none()) {
+              if (grid || !distortion_mm.is_none())
+                throw pyb::value_error("give both grid and distortion_mm, or neither (None drops the distortion)");
+              return std::make_shared<ExemplarTable>(t.with_distortion(std::nullopt));
+            }
+            auto a = as_float32(distortion_mm,
+                                {static_cast<pyb::ssize_t>(t.n_materials()), static_cast<pyb::ssize_t>(grid->count)},
+                                "distortion_mm");
+            DepthDistortion d{*grid, std::vector<float>(a.data(), a.data() + a.size())};
+            return std::make_shared<ExemplarTable>(t.with_distortion(std::move(d)));
+          },
+          pyb::arg("grid"), pyb::arg("distortion_mm"),
+          "A copy of this table carrying a depth distortion: distortion_mm (n_materials, grid.count), mm, sampled "
+          "at grid's bin centres of the measured depth, NaN = unknown (None, None drops it).")
+      .def(
+          "distortion_at",
+          [](const ExemplarTable& t, const std::string& material,
+             const pyb::array_t<double, pyb::array::forcecast>& measured) {
+            const std::int64_t index = t.index_of(material);
+            if (index < 0) throw pyb::key_error("no material '" + material + "' in the table");
+            pyb::array_t<double> out(measured.request().shape);
+            const auto n = static_cast<std::size_t>(measured.size());
+            const double* in = measured.data();
+            double* o = out.mutable_data();
+            for (std::size_t i = 0; i < n; ++i) o[i] = t.distortion_mm(static_cast<std::size_t>(index), in[i]);
+            return out;
+          },
+          pyb::arg("material"), pyb::arg("measured_mm"),
+          "The material's distortion at each measured depth (linear between samples; NaN outside them, next to "
+          "an unknown one, or when the table has none): what tofmatd subtracts for the corrected depth.")
+      .def_property_readonly(
           "features",
           [](const ExemplarTable& t) {
             pyb::array_t<float> out({static_cast<pyb::ssize_t>(t.n_materials()), static_cast<pyb::ssize_t>(t.n_rows()),

@@ -96,6 +96,16 @@ def table_import(directory: Path, output: Path, bin_start: float, bin_stop: floa
     )
 
 
+def _distortion_summary(t: ExemplarTable) -> dict[str, Any] | None:
+    g, d = t.distortion_grid, t.distortion_mm
+    if g is None or d is None:
+        return None
+    return {
+        "grid": {"start_mm": g.start_mm, "width_mm": g.width_mm, "count": g.count},
+        "known_samples": {m: int(np.isfinite(row).sum()) for m, row in zip(t.materials, d, strict=True)},
+    }
+
+
 def table_summary(path: Path, t: ExemplarTable) -> dict[str, Any]:
     return {
         "path": str(path),
@@ -110,6 +120,7 @@ def table_summary(path: Path, t: ExemplarTable) -> dict[str, Any]:
         else {
             m: [None if np.isnan(v) else float(v) for v in row] for m, row in zip(t.materials, t.noise_mm, strict=True)
         },
+        "distortion": _distortion_summary(t),
     }
 
 
@@ -136,8 +147,15 @@ def table_info(path: Path, as_json: bool) -> None:
     per_mat = t.n_rows * t.n_bins
     noise = t.noise_mm
     click.echo("bin noise: " + ("measured, mm per row" if noise is not None else "not stored (a version 1.0 table)"))
+    g, dist = t.distortion_grid, t.distortion_mm
+    click.echo("depth distortion: " + ("none (no corrected depth)" if g is None else
+               f"{g.count} samples every {g.width_mm:g} mm of measured depth from {g.start_mm + g.width_mm / 2:g} mm"))  # fmt: skip
     for i, (name, n) in enumerate(zip(t.materials, t.valid_counts, strict=True)):
         sd = "" if noise is None else "  noise " + " ".join("-" if np.isnan(v) else f"{v:.3f}" for v in noise[i])
+        if dist is not None:
+            known = np.isfinite(dist[i])
+            sd += ("  distortion " + (f"{dist[i][known].min():+.1f}..{dist[i][known].max():+.1f} mm over "
+                                      f"{int(known.sum())} samples" if known.any() else "none"))  # fmt: skip
         click.echo(f"  {name:<14s} {n:5d}/{per_mat} valid{sd}")
 
 
@@ -369,6 +387,28 @@ def bench_daemon_cmd(table_path: Path | None, profiles: str, clients: list[int],
     click.echo(format_markdown(runs))
 
 
+@main.command("bench-depth")
+@_sim_table_option
+@click.option("--scenes", help="sim:SCENE specs (without 'sim:') separated by ';' (default: the regions scene with "
+              "3 and with 6 materials at 600..1200 mm).")  # fmt: skip
+@click.option("--frames", default=5, show_default=True, type=click.IntRange(1, 1000), help="Frames per scene.")
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, as_json: bool) -> None:
+    """Error of tofmatd's material-corrected depth against the simulator's truth, per material."""
+    from dataclasses import asdict
+
+    from .tools.depth_bench import DEFAULT_SCENES, bench_depth, format_markdown
+
+    table = table_path or _sim_table()
+    specs = [s.strip() for s in scenes.split(";") if s.strip()] if scenes else list(DEFAULT_SCENES)
+    try:
+        with progress_bar("scenes") as progress:
+            results = bench_depth(table, specs, frames, progress)
+    except (RuntimeError, ValueError) as e:
+        raise click.ClickException(str(e)) from e
+    click.echo(json.dumps([asdict(r) for r in results], indent=2) if as_json else format_markdown(results))
+
+
 def _sim_table() -> Path:
     """The simulated camera's own table, recorded once into build/ (a minute or so the first time)."""
     from .tools.live_demo import ensure_sim_table
@@ -409,6 +449,49 @@ def _connect(address: str, token_file: Path | None) -> Any:
         return Client(address, token=token)
     except ClientError as e:
         raise click.ClickException(str(e)) from e
+
+
+@table.command("distortion")
+@click.argument("path", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table file to write (default: PATH itself, replaced atomically).")  # fmt: skip
+@click.option("--device", default="kinect2_tanaka2017", show_default=True, help="Simulator device profile.")
+@click.option("--library", default="tanaka2017", show_default=True,
+              help="Simulator material library (the calibrated one: each material's response fitted to the "
+                   "real database).")  # fmt: skip
+@click.option("--yaw", default=10.0, show_default=True, type=FiniteFloat(-80, 80), help="Target orientation, degrees.")
+def table_distortion(path: Path, output: Path | None, device: str, library: str, yaw: float) -> None:
+    """Add each material's depth distortion (Eq. (8)) from the calibrated simulator to a table.
+
+    The database's rows are relative, so a table imported from it cannot correct a depth; the
+    simulator's library holds each material's response fitted to those rows, and a sweep of it in
+    front of the simulated camera gives the absolute distortion tofmatd's corrected depth
+    subtracts. How far to trust it: how well the fit matched the material's relative rows (the
+    "fit rms" printed, from the library)."""
+    from .sim import Renderer, load_device, load_library
+    from .sim.table import DISTORTION_GRID, depth_distortion, library_fit_rms
+
+    t = open_table(path)
+    r = Renderer(load_device(device), load_library(library))
+    known = [m for m in t.materials if m in r.library.names]
+    with progress_bar("sweeping materials") as progress:
+        found = depth_distortion(r, known, yaw_deg=yaw, progress=progress)
+    out = np.full((len(t), DISTORTION_GRID.count), np.nan)
+    for k, name in enumerate(known):
+        out[t.index_of(name)] = found[k]
+    t = t.with_distortion(DISTORTION_GRID, out)
+    target = output or path
+    t.save(str(target))
+    fits = library_fit_rms(library)
+    click.echo(f"{target}: depth distortion for {len(known)} of {len(t)} materials (library {library})")
+    for i, name in enumerate(t.materials):
+        row = out[i][np.isfinite(out[i])]
+        if name not in known:
+            click.echo(f"  {name:<14s} none: not in the simulator's library")
+            continue
+        fit = f"fit rms {fits[name]:.2f} mm" if name in fits else "fit rms unknown"
+        span = f"{row.min():+.1f}..{row.max():+.1f} mm over {row.size} samples" if row.size else "none measured"
+        click.echo(f"  {name:<14s} {span}  ({fit})")
 
 
 @table.command("add")

@@ -44,12 +44,22 @@ DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
 
 # The names the protocol uses (docs/protocol.md), as types: a checker catches a misspelt one.
 Stream = Literal[
-    "labels", "label_map", "device", "depth:80", "depth:16", "depth:120", "depth:combined", "sort", "line", "reset"
+    "labels",
+    "label_map",
+    "device",
+    "depth:80",
+    "depth:16",
+    "depth:120",
+    "depth:combined",
+    "depth:corrected",
+    "sort",
+    "line",
+    "reset",
 ]
 Profile = Literal["handheld", "segmentation", "sorting"]
 Backend = Literal["fixed", "float"]
 ClassifierMethod = Literal["eq12", "session"]
-DepthKind = Literal["80", "16", "120", "combined"]
+DepthKind = Literal["80", "16", "120", "combined", "corrected"]
 LabelState = Literal["tracking", "no_target", "final", "mixed", "unknown"]
 DeviceState = Literal["opening", "streaming", "disconnected", "stopped", "failed"]
 Role = Literal["read", "control"]
@@ -172,7 +182,7 @@ class DepthImage:
 
     frame: int
     timestamp_ns: int
-    kind: DepthKind  # "80", "16", "120" (wrapped) or "combined"
+    kind: DepthKind  # "80", "16", "120" (wrapped), "combined", or "corrected" (for each pixel's material)
     x0: int
     y0: int
     depth_mm: npt.NDArray[np.float32]  # (height, width), NaN where invalid; the caller's own (writable) copy
@@ -507,8 +517,10 @@ class Client:
         return self._wait_for(lambda e: isinstance(e, LabelMap), timeout)  # type: ignore[return-value]
 
     def depth(self, kind: DepthKind = "combined", timeout: float | None = 5.0) -> DepthImage:
-        """The next depth image of the profile's region: "80", "16", "120" or "combined". Other
-        events that come meanwhile are kept for next_event() and events(), not dropped."""
+        """The next depth image of the profile's region: "80", "16", "120", "combined" or "corrected"
+        (the combined depth less each labelled pixel's material distortion, NaN where there is no
+        label or the table has no distortion for its material: a daemon of protocol minor 9 on).
+        Other events that come meanwhile are kept for next_event() and events(), not dropped."""
         stream = f"depth:{kind}"
         if stream not in self._streams:
             self.subscribe(stream)

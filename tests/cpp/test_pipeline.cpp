@@ -482,3 +482,62 @@ TEST(Pipeline, CommandsFromTwoThreadsAtOnceAreBothApplied) {
 }
 
 }  // namespace
+
+// The corrected depth (stream depth:corrected): each pixel's combined depth
+// less its labelled material's distortion (here a constant 3 mm x (table index
+// + 1), so the expected value is plain), NaN where a pixel has no label.
+TEST(Pipeline, CorrectedDepthSubtractsEachPixelsLabelledMaterial) {
+  const auto& real = *real_table();
+  tofmat::DepthDistortion d{tofmat::BinSpec{0.0, 10.0, 1000}, {}};
+  for (std::size_t m = 0; m < real.n_materials(); ++m) d.mm.insert(d.mm.end(), 1000, 3.0f * static_cast<float>(m + 1));
+  const auto table = std::make_shared<const ExemplarTable>(real.with_distortion(d));
+  const auto shift = [&](const std::string& name) { return 3.0f * static_cast<float>(table->index_of(name) + 1); };
+  Pipeline p(table, kTablePath, handheld_with({"copper", "pvc", "cork"}));
+  Events events;
+  events.want_depth({"combined", "corrected"});
+  p.set_emitter(events.emitter());
+  Running running(p);
+  p.push(make_frame(1, {target_in_roi("copper", 60)}));
+  ASSERT_TRUE(events.wait_labels(1));
+  ASSERT_TRUE(events.wait_depths(2));
+  const std::string material = events.labels().back().material;
+  ASSERT_FALSE(material.empty());
+  auto depths = events.depths();
+  ASSERT_EQ(depths[0].kind, "combined");
+  ASSERT_EQ(depths[1].kind, "corrected");
+  ASSERT_EQ(depths[1].depth_mm.size(), depths[0].depth_mm.size());
+  std::size_t checked = 0;
+  for (std::size_t i = 0; i < depths[0].depth_mm.size(); ++i) {
+    const float comb = depths[0].depth_mm[i], corr = depths[1].depth_mm[i];
+    ASSERT_EQ(std::isnan(comb), std::isnan(corr)) << i;
+    if (std::isnan(comb)) continue;
+    EXPECT_NEAR(corr, comb - shift(material), 1e-3) << i;
+    ++checked;
+  }
+  EXPECT_GT(checked, depths[0].depth_mm.size() / 2);
+
+  // Segmentation: each pixel for its own label, none where it has none.
+  p.set_profile("segmentation");
+  p.push(make_frame(2, {Patch{{0, 0, 256, 424}, material_at_bin(real, "copper", 60)},
+                        Patch{{256, 0, 512, 424}, material_at_bin(real, "cork", 60)}}));
+  ASSERT_TRUE(events.wait_maps(1));
+  ASSERT_TRUE(events.wait_depths(4));
+  const auto map = events.maps().back();
+  depths = events.depths();
+  const auto& comb = depths[2];
+  const auto& corr = depths[3];
+  ASSERT_EQ(corr.kind, "corrected");
+  ASSERT_EQ(corr.depth_mm.size(), map.labels.size());
+  std::size_t labelled = 0, unlabelled = 0;
+  for (std::size_t i = 0; i < map.labels.size(); ++i) {
+    const std::uint8_t k = map.labels[i];
+    if (k == tofmat::protocol::kNoLabel || std::isnan(comb.depth_mm[i])) {
+      EXPECT_TRUE(std::isnan(corr.depth_mm[i])) << i;
+      ++unlabelled;
+      continue;
+    }
+    EXPECT_NEAR(corr.depth_mm[i], comb.depth_mm[i] - shift(map.materials[k]), 1e-3) << i;
+    ++labelled;
+  }
+  EXPECT_GT(labelled, map.labels.size() / 2);
+}

@@ -69,7 +69,7 @@ TEST(ProtocolSchema, StreamsComeFromTheEventsAndOnlyBloblessOnesArePolled) {
   const auto& s = stream_names();
   EXPECT_EQ(std::set<std::string>(s.begin(), s.end()),
             (std::set<std::string>{"labels", "label_map", "depth:80", "depth:16", "depth:120", "depth:combined",
-                                   "device", "sort", "line", "reset"}));
+                                   "depth:corrected", "device", "sort", "line", "reset"}));
   EXPECT_TRUE(valid_stream("depth:16"));
   EXPECT_FALSE(valid_stream("depth"));
   EXPECT_FALSE(valid_stream(""));
@@ -77,6 +77,7 @@ TEST(ProtocolSchema, StreamsComeFromTheEventsAndOnlyBloblessOnesArePolled) {
   EXPECT_TRUE(pollable_stream("sort"));
   EXPECT_FALSE(pollable_stream("label_map"));
   EXPECT_FALSE(pollable_stream("depth:combined"));
+  EXPECT_FALSE(pollable_stream("depth:corrected"));
   EXPECT_FALSE(pollable_stream("sparkles"));
   ASSERT_NE(find_event("label"), nullptr);
   EXPECT_EQ(find_event("sparkles"), nullptr);

@@ -246,6 +246,80 @@ TEST(TableFile, EncoderWritesTheDocumentedLayout) {
 // 3 x 2 noise values for synthetic(): one not measured.
 ExemplarTable synthetic_with_noise() { return synthetic().with_noise({0.25f, 0.5f, 1.5f, kNaN, 0.125f, 3.0f}); }
 
+// Four samples at 505, 515, 525 and 535 mm for each of the three materials; gamma has none.
+tofmat::DepthDistortion synthetic_distortion() {
+  return {BinSpec{500.0, 10.0, 4}, {10.0f, 20.0f, kNaN, -5.5f, -1.0f, -2.0f, -3.0f, -4.0f, kNaN, kNaN, kNaN, kNaN}};
+}
+
+TEST(TableFile, DistortionRoundTripsInVersion12WithOrWithoutNoise) {
+  for (const auto& base : {synthetic(), synthetic_with_noise()}) {
+    const auto t = base.with_distortion(synthetic_distortion());
+    const auto b = tofmat::encode_table(t);
+    EXPECT_EQ(b[10], 2);  // minor 2
+    const auto back = decode(b);
+    expect_round_trip(t, back);  // (noise absent stays absent: 1.2 writes NaN for it)
+    ASSERT_TRUE(back.distortion());
+    EXPECT_EQ(back.distortion()->grid, (BinSpec{500.0, 10.0, 4}));
+    const auto& mm = back.distortion()->mm;
+    ASSERT_EQ(mm.size(), 12u);
+    for (std::size_t i = 0; i < mm.size(); ++i) {
+      const float x = synthetic_distortion().mm[i];
+      if (std::isnan(x)) {
+        EXPECT_TRUE(std::isnan(mm[i])) << i;
+      } else {
+        EXPECT_EQ(mm[i], x) << i;
+      }
+    }
+    // A table without a distortion is written as before.
+    EXPECT_LT(tofmat::encode_table(base)[10], 2);
+    EXPECT_FALSE(decode(tofmat::encode_table(base)).distortion());
+  }
+}
+
+TEST(ExemplarTable, DistortionIsInterpolatedBetweenItsSamples) {
+  const auto t = synthetic().with_distortion(synthetic_distortion());
+  EXPECT_DOUBLE_EQ(t.distortion_mm(0, 505.0), 10.0);  // a sample
+  EXPECT_DOUBLE_EQ(t.distortion_mm(0, 510.0), 15.0);  // half way
+  EXPECT_DOUBLE_EQ(t.distortion_mm(1, 532.5), -3.75);
+  EXPECT_DOUBLE_EQ(t.distortion_mm(1, 535.0), -4.0);   // the last sample
+  EXPECT_TRUE(std::isnan(t.distortion_mm(0, 520.0)));  // next to an unknown sample
+  EXPECT_TRUE(std::isnan(t.distortion_mm(0, 504.9)));  // outside the samples
+  EXPECT_TRUE(std::isnan(t.distortion_mm(1, 535.1)));
+  EXPECT_TRUE(std::isnan(t.distortion_mm(2, 515.0)));  // a material without one
+  EXPECT_TRUE(std::isnan(t.distortion_mm(3, 515.0)));  // no such material
+  EXPECT_TRUE(std::isnan(t.distortion_mm(0, NAN)));
+  EXPECT_TRUE(std::isnan(synthetic().distortion_mm(0, 515.0)));  // no distortion at all
+  EXPECT_FALSE(t.with_distortion(std::nullopt).distortion());
+  EXPECT_TRUE(t.with_noise({0.25f, 0.5f, 1.5f, kNaN, 0.125f, 3.0f}).distortion());  // kept
+}
+
+TEST(ExemplarTable, RejectsDistortionsOfTheWrongShapeOrValue) {
+  const auto t = synthetic();
+  auto d = synthetic_distortion();
+  d.mm.pop_back();
+  EXPECT_CONTAINS(error_of<std::invalid_argument>([&] { t.with_distortion(d); }), "holds 11 values");
+  for (float bad : {std::numeric_limits<float>::infinity(), 10001.0f}) {
+    d = synthetic_distortion();
+    d.mm[3] = bad;
+    EXPECT_CONTAINS(error_of<std::invalid_argument>([&] { t.with_distortion(d); }), "distortion");
+  }
+  d = synthetic_distortion();
+  d.grid.width_mm = 0.0;
+  EXPECT_THROW(t.with_distortion(d), std::invalid_argument);
+  // In a file: the grid's count, and a value behind a valid checksum.
+  auto b = tofmat::encode_table(t.with_distortion(synthetic_distortion()));
+  const std::size_t grid = b.size() - 4 - 12 * 4 - 20;
+  Bytes zero_count = b;
+  for (int i = 0; i < 4; ++i) zero_count[grid + 16 + static_cast<std::size_t>(i)] = 0;
+  EXPECT_CONTAINS(decode_error(zero_count), "distortion grid count 0");
+  Bytes huge = b;
+  const float v = 1e6f;
+  std::memcpy(huge.data() + grid + 20, &v, 4);
+  const std::uint32_t crc = crc32_ieee(huge.data(), huge.size() - 4);
+  std::memcpy(huge.data() + huge.size() - 4, &crc, 4);
+  EXPECT_CONTAINS(decode_error(huge), "distortion");
+}
+
 TEST(TableFile, ATableWithoutNoiseIsWrittenAsVersion10) {
   // Readers older than 1.1 still load every table that carries no noise.
   const auto b = tofmat::encode_table(synthetic());
@@ -361,7 +435,8 @@ TEST(TableFile, ChecksumFieldIsCrc32OfEverythingBefore) {
 }
 
 TEST(TableFile, EveryTruncationIsAFormatError) {
-  for (const auto& full : {tofmat::encode_table(synthetic()), tofmat::encode_table(synthetic_with_noise())}) {
+  for (const auto& full : {tofmat::encode_table(synthetic()), tofmat::encode_table(synthetic_with_noise()),
+                           tofmat::encode_table(synthetic().with_distortion(synthetic_distortion()))}) {
     for (std::size_t n = 0; n < full.size(); ++n) {
       const Bytes cut(full.begin(), full.begin() + static_cast<std::ptrdiff_t>(n));  // exact-size heap copy for ASan
       EXPECT_THROW(decode(cut), FormatError) << "prefix of " << n << " bytes";
@@ -372,7 +447,8 @@ TEST(TableFile, EveryTruncationIsAFormatError) {
 // CRC-32 detects every single-byte error, so no damaged file may decode; the
 // message must point at the first field that gave the damage away.
 TEST(TableFile, EveryByteFlipIsAFormatError) {
-  for (const auto& full : {tofmat::encode_table(synthetic()), tofmat::encode_table(synthetic_with_noise())}) {
+  for (const auto& full : {tofmat::encode_table(synthetic()), tofmat::encode_table(synthetic_with_noise()),
+                           tofmat::encode_table(synthetic_with_noise().with_distortion(synthetic_distortion()))}) {
     for (std::size_t i = 0; i < full.size(); ++i) {
       for (int mask : {0x01, 0x80, 0xff}) {
         Bytes b = full;
@@ -381,12 +457,12 @@ TEST(TableFile, EveryByteFlipIsAFormatError) {
         SCOPED_TRACE("byte " + std::to_string(i) + " mask " + std::to_string(mask) + ": " + msg);
         if (i < 8) {
           EXPECT_CONTAINS(msg, "magic");
-        } else if (i == 10 && mask == 0x01) {
+        } else if (i == 10 && mask == 0x01 && full[10] < 2) {
           // 1.0 <-> 1.1, both known: the noise block is then missing or left over.
           const bool sized = msg.find("truncated") != std::string::npos || msg.find("trailing") != std::string::npos;
           EXPECT_TRUE(sized) << "a changed minor version not caught by the file's size";
         } else if (i < 12) {
-          EXPECT_CONTAINS(msg, "version");  // major and minor: only 1.0 and 1.1 are read (docs/table-format.md)
+          EXPECT_CONTAINS(msg, "version");  // major and minor: only 1.0 to 1.2 are read (docs/table-format.md)
         } else {
           const bool named = msg.find("checksum") != std::string::npos || msg.find("count") != std::string::npos ||
                              msg.find("truncated") != std::string::npos || msg.find("trailing") != std::string::npos ||
@@ -400,8 +476,8 @@ TEST(TableFile, EveryByteFlipIsAFormatError) {
 }
 
 TEST(TableFile, RejectsOtherVersions) {
-  // A reader reads only the versions it knows: 1.0 and 1.1 (docs/table-format.md).
-  const std::pair<int, int> versions[] = {{0, 0}, {2, 0}, {0xffff, 0}, {1, 2}, {1, 7}, {1, 0xffff}};
+  // A reader reads only the versions it knows: 1.0 to 1.2 (docs/table-format.md).
+  const std::pair<int, int> versions[] = {{0, 0}, {2, 0}, {0xffff, 0}, {1, 3}, {1, 7}, {1, 0xffff}};
   for (const auto& [major, minor] : versions) {
     SCOPED_TRACE(std::to_string(major) + "." + std::to_string(minor));
     RawTable raw;

@@ -30,6 +30,8 @@ void check(const std::uint8_t* data, std::size_t size) {
   const auto again = tofmat::encode_table(*t);
   const tofmat::ExemplarTable u = tofmat::decode_table(again.data(), again.size());
   if (u.materials() != t->materials() || !(u.rows() == t->rows()) || !(u.bins() == t->bins())) __builtin_trap();
+  if (u.distortion().has_value() != t->distortion().has_value()) __builtin_trap();
+  if (t->distortion() && !(u.distortion()->grid == t->distortion()->grid)) __builtin_trap();
 }
 
 }  // namespace

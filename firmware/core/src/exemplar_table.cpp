@@ -75,7 +75,41 @@ ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<Row
 }
 
 ExemplarTable ExemplarTable::with_noise(std::vector<float> noise_mm) const {
-  return ExemplarTable(materials_, rows_, bins_, values_, quant_step_mm_, std::move(noise_mm));
+  ExemplarTable t(materials_, rows_, bins_, values_, quant_step_mm_, std::move(noise_mm));
+  t.distortion_ = distortion_;
+  return t;
+}
+
+ExemplarTable ExemplarTable::with_distortion(std::optional<DepthDistortion> d) const {
+  if (d) {
+    d->grid.validate();
+    const std::size_t expected = materials_.size() * d->grid.count;
+    if (d->mm.size() != expected) {
+      throw std::invalid_argument("depth distortion holds " + std::to_string(d->mm.size()) + " values, expected " +
+                                  std::to_string(expected) + " (materials x grid samples)");
+    }
+    for (float v : d->mm) {
+      if (!std::isnan(v) && !(std::fabs(v) <= kMaxDistortionMm)) {
+        throw std::invalid_argument("a depth distortion must be NaN (unknown) or finite and at most 10000 mm in size");
+      }
+    }
+  }
+  ExemplarTable t = *this;
+  t.distortion_ = std::move(d);
+  return t;
+}
+
+double ExemplarTable::distortion_mm(std::size_t m, double measured_mm) const {
+  if (!distortion_ || m >= materials_.size() || !std::isfinite(measured_mm)) return NAN;
+  const BinSpec& g = distortion_->grid;
+  // Position among the samples (sample j at the centre of bin j).
+  const double p = (measured_mm - g.start_mm) / g.width_mm - 0.5;
+  if (!(p >= 0.0) || p > static_cast<double>(g.count - 1)) return NAN;
+  const auto j = static_cast<std::uint32_t>(p);
+  const float* row = distortion_->mm.data() + m * g.count;
+  if (j + 1 >= g.count) return row[j];  // (p is exactly the last sample)
+  const double f = p - j;
+  return (1.0 - f) * row[j] + f * row[j + 1];  // NaN next to an unknown sample
 }
 
 std::size_t ExemplarTable::valid_count(std::size_t m) const {

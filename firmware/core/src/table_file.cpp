@@ -54,7 +54,8 @@ std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
   ByteWriter w;
   w.bytes(std::string_view(kTableMagic, sizeof kTableMagic));
   w.u16(kTableVersionMajor);
-  w.u16(table.has_noise() ? std::uint16_t{1} : std::uint16_t{0});
+  const auto& distortion = table.distortion();
+  w.u16(distortion ? std::uint16_t{2} : table.has_noise() ? std::uint16_t{1} : std::uint16_t{0});
   w.u32(static_cast<std::uint32_t>(table.n_materials()));
   w.u32(table.n_rows());
   w.u32(table.n_bins());
@@ -74,7 +75,20 @@ std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
         std::isnan(v) ? kTableMissing : static_cast<std::int16_t>(std::nearbyint(static_cast<double>(v) / step));
     w.u16(static_cast<std::uint16_t>(q));
   }
-  for (float s : table.noise_mm()) w.f32(s);  // 1.1's noise block
+  if (distortion) {
+    // 1.2: the noise block always (NaN: none), then the distortion's grid and values.
+    if (table.has_noise()) {
+      for (float s : table.noise_mm()) w.f32(s);
+    } else {
+      for (std::size_t i = 0; i < table.n_materials() * table.n_rows(); ++i) w.f32(NAN);
+    }
+    w.f64(distortion->grid.start_mm);
+    w.f64(distortion->grid.width_mm);
+    w.u32(distortion->grid.count);
+    for (float v : distortion->mm) w.f32(v);
+  } else {
+    for (float s : table.noise_mm()) w.f32(s);  // 1.1's noise block
+  }
   const std::uint32_t crc = crc32_of(w.data().data(), w.data().size());
   w.u32(crc);
   return w.take();
@@ -123,17 +137,39 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
     name.assign(reinterpret_cast<const char*>(p), len);
   }
   const std::size_t n_noise = minor >= 1 ? std::size_t{n_materials} * n_rows : 0;
-  const std::size_t expected_rest = n_values * 2 + n_noise * 4 + 4;
-  if (in.remaining() < expected_rest) {
-    fail("truncated: " + std::to_string(in.remaining()) + " bytes left for values, noise and checksum, need " +
-         std::to_string(expected_rest));
+  constexpr std::size_t kGridBytes = 8 + 8 + 4;  // 1.2: the distortion grid's start, width and count
+  const std::size_t fixed_rest = n_values * 2 + n_noise * 4 + (minor >= 2 ? kGridBytes : 0) + 4;
+  if (in.remaining() < fixed_rest) {
+    fail("truncated: " + std::to_string(in.remaining()) + " bytes left for values, noise" +
+         (minor >= 2 ? ", distortion" : "") + " and checksum, need " + std::to_string(fixed_rest));
   }
-  if (in.remaining() > expected_rest) {
-    fail(std::to_string(in.remaining() - expected_rest) + " unexpected trailing bytes");
+  if (minor < 2 && in.remaining() > fixed_rest) {
+    fail(std::to_string(in.remaining() - fixed_rest) + " unexpected trailing bytes");
   }
   const std::uint8_t* raw = in.take(n_values * 2, "values");
   std::vector<float> noise(n_noise);
   for (float& x : noise) x = in.f32("noise");
+  // 1.2 always has the noise block: all NaN stands for no noise.
+  if (minor >= 2 && std::all_of(noise.begin(), noise.end(), [](float x) { return std::isnan(x); })) noise.clear();
+  std::optional<DepthDistortion> distortion;
+  if (minor >= 2) {
+    DepthDistortion d;
+    d.grid.start_mm = in.f64("distortion grid start");
+    d.grid.width_mm = in.f64("distortion grid width");
+    d.grid.count = in.u32("distortion grid count");
+    if (d.grid.count < 1 || d.grid.count > kMaxBins)
+      fail("distortion grid count " + std::to_string(d.grid.count) + " is outside 1..65535");
+    const std::size_t n_distortion = std::size_t{n_materials} * d.grid.count;
+    const std::size_t rest = n_distortion * 4 + 4;
+    if (in.remaining() < rest) {
+      fail("truncated: " + std::to_string(in.remaining()) + " bytes left for the distortion and checksum, need " +
+           std::to_string(rest));
+    }
+    if (in.remaining() > rest) fail(std::to_string(in.remaining() - rest) + " unexpected trailing bytes");
+    d.mm.resize(n_distortion);
+    for (float& x : d.mm) x = in.f32("distortion");
+    distortion = std::move(d);
+  }
   const std::size_t crc_offset = in.offset();
   const std::uint32_t stored_crc = in.u32("checksum");
   const std::uint32_t actual_crc = crc32_of(bytes, crc_offset);
@@ -152,7 +188,8 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
     values[i] = static_cast<float>(v);
   }
   try {
-    return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step, std::move(noise));
+    return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step, std::move(noise))
+        .with_distortion(std::move(distortion));
   } catch (const std::invalid_argument& e) {
     fail(std::string("inconsistent content: ") + e.what());
   }

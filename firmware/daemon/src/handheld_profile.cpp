@@ -22,6 +22,20 @@ class HandheldProfile : public Profile {
   void process(const RawFrame& frame, const Emitter& emit) override {
     const auto d = matcher_.decode(frame, config_.roi);
     RegionMatcher::emit_depths(d, frame, emit);
+    // The corrected depth is corrected for this frame's label (none: no target, or unknown).
+    const std::int64_t material = label(d, frame, emit);
+    RegionMatcher::emit_corrected(d, frame, emit, *table_, [material](std::size_t) { return material; });
+  }
+
+  void reset() override {
+    matcher_.reset();
+    tracking_ = false;
+  }
+
+ private:
+  // Tracks the target and emits this frame's label; returns its material's
+  // table index, or -1 when there is none.
+  std::int64_t label(const RegionMatcher::Decoded& d, const RawFrame& frame, const Emitter& emit) {
     const BinSpec& bins = table_->bins();
     // A target is there when most of the ROI decodes and its depth is in (or
     // near) the table's range; a jump in depth means another target.
@@ -35,7 +49,7 @@ class HandheldProfile : public Profile {
         e.state = "no_target";
         emit.label(stamp(e, frame));
       }
-      return;
+      return -1;
     }
     if (tracking_ && std::abs(d.median_mm - last_mm_) > config_.jump_mm) matcher_.reset();
     tracking_ = true;
@@ -45,15 +59,10 @@ class HandheldProfile : public Profile {
       auto e = matcher_.label_event(*c, config_.top_k);
       e.state = matcher_.unknown(*c) ? "unknown" : "tracking";
       emit.label(stamp(e, frame));
+      return e.index;  // (-1 when unknown)
     }
+    return -1;
   }
-
-  void reset() override {
-    matcher_.reset();
-    tracking_ = false;
-  }
-
- private:
   protocol::LabelEvent& stamp(protocol::LabelEvent& e, const RawFrame& frame) const {
     e.frame = frame.sequence;
     e.timestamp_ns = frame.arrival_ns;

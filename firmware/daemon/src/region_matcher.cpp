@@ -135,35 +135,59 @@ protocol::LabelEvent RegionMatcher::label_event(const Classification& c, int top
   return e;
 }
 
+namespace {
+
+// Depth image k (0..2: a frequency's wrapped depth, 3: the combined depth) of a decoded region.
+protocol::DepthEvent depth_image(const RegionMatcher::Decoded& d, const RawFrame& frame, int k, const char* kind) {
+  protocol::DepthEvent e;
+  e.frame = frame.sequence;
+  e.timestamp_ns = frame.arrival_ns;
+  e.kind = kind;
+  e.x0 = d.region.x0;
+  e.y0 = d.region.y0;
+  e.width = d.region.x1 - d.region.x0;
+  e.height = d.region.y1 - d.region.y0;
+  if (frame.calibration && frame.calibration->intrinsics) {
+    const kinect::DepthParams& c = *frame.calibration->intrinsics;
+    e.intrinsics = protocol::Intrinsics{c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.k3, c.p1, c.p2};
+  }
+  e.depth_mm.resize(d.pixels);
+  if (const auto* f = std::get_if<FixedDecodedFrame>(&d.frame)) {
+    for (std::size_t i = 0; i < d.pixels; ++i) {
+      const std::int32_t v = k < 3 ? f->depth_q16[static_cast<std::size_t>(k)][i] : f->combined_q8[i];
+      e.depth_mm[i] = v == kFixedInvalid ? std::numeric_limits<float>::quiet_NaN()
+                                         : static_cast<float>(k < 3 ? v / 65536.0 : v / 256.0);
+    }
+  } else {
+    const auto& g = std::get<DecodedFrame>(d.frame);
+    e.depth_mm = k < 3 ? g.depth_mm[static_cast<std::size_t>(k)] : g.combined_mm;
+  }
+  return e;
+}
+
+}  // namespace
+
 void RegionMatcher::emit_depths(const Decoded& d, const RawFrame& frame, const Emitter& emit) {
   static const char* const kinds[4] = {"80", "16", "120", "combined"};
   for (int k = 0; k < 4; ++k) {
     if (!emit.wants_depth || !emit.wants_depth(kinds[k])) continue;
-    protocol::DepthEvent e;
-    e.frame = frame.sequence;
-    e.timestamp_ns = frame.arrival_ns;
-    e.kind = kinds[k];
-    e.x0 = d.region.x0;
-    e.y0 = d.region.y0;
-    e.width = d.region.x1 - d.region.x0;
-    e.height = d.region.y1 - d.region.y0;
-    if (frame.calibration && frame.calibration->intrinsics) {
-      const kinect::DepthParams& c = *frame.calibration->intrinsics;
-      e.intrinsics = protocol::Intrinsics{c.fx, c.fy, c.cx, c.cy, c.k1, c.k2, c.k3, c.p1, c.p2};
-    }
-    e.depth_mm.resize(d.pixels);
-    if (const auto* f = std::get_if<FixedDecodedFrame>(&d.frame)) {
-      for (std::size_t i = 0; i < d.pixels; ++i) {
-        const std::int32_t v = k < 3 ? f->depth_q16[static_cast<std::size_t>(k)][i] : f->combined_q8[i];
-        e.depth_mm[i] = v == kFixedInvalid ? std::numeric_limits<float>::quiet_NaN()
-                                           : static_cast<float>(k < 3 ? v / 65536.0 : v / 256.0);
-      }
-    } else {
-      const auto& g = std::get<DecodedFrame>(d.frame);
-      e.depth_mm = k < 3 ? g.depth_mm[static_cast<std::size_t>(k)] : g.combined_mm;
-    }
-    emit.depth(e);
+    emit.depth(depth_image(d, frame, k, kinds[k]));
   }
+}
+
+void RegionMatcher::emit_corrected(const Decoded& d, const RawFrame& frame, const Emitter& emit,
+                                   const ExemplarTable& table,
+                                   const std::function<std::int64_t(std::size_t)>& material_of) {
+  if (!emit.wants_depth || !emit.wants_depth("corrected")) return;
+  protocol::DepthEvent e = depth_image(d, frame, 3, "corrected");
+  for (std::size_t i = 0; i < e.depth_mm.size(); ++i) {
+    const std::int64_t m = material_of(i);
+    // Eq. (8): the distortion is measured minus true depth, so the true depth is measured less it.
+    const double delta = m < 0 ? std::numeric_limits<double>::quiet_NaN()
+                               : table.distortion_mm(static_cast<std::size_t>(m), e.depth_mm[i]);
+    e.depth_mm[i] = static_cast<float>(e.depth_mm[i] - delta);  // (NaN where either is)
+  }
+  emit.depth(e);
 }
 
 std::optional<protocol::Truth> region_truth(const RawFrame& frame, const PixelRegion& region) {

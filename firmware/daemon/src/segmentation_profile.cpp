@@ -59,6 +59,12 @@ class SegmentationProfile : public Profile {
     d.pixels = kPixels;
     d.frame = std::move(frame_);  // lent to the depth events, taken back after
     RegionMatcher::emit_depths(d, frame, emit);
+    // Each pixel corrected for its own label (a candidate's index -> the table's).
+    const auto& candidates = compact_.candidates();
+    RegionMatcher::emit_corrected(d, frame, emit, *table_, [&](std::size_t i) {
+      const std::uint8_t k = e.labels[i];
+      return k < candidates.size() ? std::int64_t{candidates[k]} : std::int64_t{-1};
+    });
     frame_ = std::move(std::get<FixedDecodedFrame>(d.frame));
     emit.label_map(e);
   }

@@ -24,6 +24,7 @@ class SortingProfile : public Profile {
  public:
   SortingProfile(const ProfileConfig& c, const std::shared_ptr<const ExemplarTable>& table)
       : config_(c),
+        table_(table),
         matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model),
         frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model) {}
 
@@ -43,11 +44,16 @@ class SortingProfile : public Profile {
     if (remaining_ == 0) return;
     auto d = matcher_.decode(frame, config_.roi);
     RegionMatcher::emit_depths(d, frame, emit);
+    std::optional<Classification> c;
     if (static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels)) {
       frame_matcher_.reset();
       frame_matcher_.accumulate(d);
-      if (const auto c = frame_matcher_.classify()) frames_.push_back({c->best().index, std::move(d)});
+      c = frame_matcher_.classify();
     }
+    // The corrected depth is corrected for this frame's own label.
+    const std::int64_t material = c && !frame_matcher_.unknown(*c) ? std::int64_t{c->best().index} : -1;
+    RegionMatcher::emit_corrected(d, frame, emit, *table_, [material](std::size_t) { return material; });
+    if (c) frames_.push_back({c->best().index, std::move(d)});
     if (--remaining_ > 0) return;
     emit.label(burst_label(frame));
     frames_.clear();
@@ -95,6 +101,7 @@ class SortingProfile : public Profile {
   }
 
   ProfileConfig config_;
+  std::shared_ptr<const ExemplarTable> table_;
   RegionMatcher matcher_, frame_matcher_;
   std::vector<Frame> frames_;
   int remaining_ = 0;

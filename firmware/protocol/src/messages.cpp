@@ -102,7 +102,7 @@ std::string event_name(const Message& m) {
 }
 
 bool valid_depth_kind(const std::string& kind) {
-  return kind == "80" || kind == "16" || kind == "120" || kind == "combined";
+  return kind == "80" || kind == "16" || kind == "120" || kind == "combined" || kind == "corrected";
 }
 
 Message encode_hello(const Hello& h) {

@@ -44,7 +44,7 @@ std::vector<EventSpec> make_schema() {
         {"truth_accuracy", F::kNumber, kOptional},
         {"simulated", F::kBool, kOptional}}},
       {"depth",
-       {"depth:80", "depth:16", "depth:120", "depth:combined"},
+       {"depth:80", "depth:16", "depth:120", "depth:combined", "depth:corrected"},
        true,
        {{"frame", F::kUint, kAlways},
         {"timestamp_ns", F::kUint, kAlways},

@@ -153,9 +153,13 @@ def run_live_demo(
 
 
 def ensure_sim_table(path: Path, progress: Progress | None = None) -> Path:
-    """The simulated camera's own table (tofmat sim table), recorded once into ``path``."""
+    """The simulated camera's own table (tofmat sim table), recorded once into ``path`` (again when
+    the file there predates tables with a depth distortion)."""
     if path.is_file():
-        return path
+        from .. import ExemplarTable
+
+        if ExemplarTable.load(str(path)).distortion_mm is not None:
+            return path
     from ..sim import Renderer, load_device, load_library
     from ..sim.table import database_bins, simulated_table
 

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -35,6 +36,18 @@ struct RowSpec {
 // bin edges, the defaults wherever a folder of .npy curves is imported.
 inline constexpr double kDatabaseBinStartMm = 600.0;
 inline constexpr double kDatabaseBinStopMm = 1200.0;
+
+// Each material's absolute distortion of the combined depth, Eq. (8)'s
+// measured minus true depth (mm), sampled at the centres of `grid`'s bins of
+// the measured (combined) depth: what corrects a labelled pixel's depth. The
+// database's rows are relative (Eq. (10)), so this comes from elsewhere: a
+// table recorded with the simulated camera, or the calibrated simulator's
+// fitted response of each material (tofmat table distortion).
+struct DepthDistortion {
+  BinSpec grid;
+  std::vector<float> mm;  // n_materials x grid.count, material-major; NaN = unknown
+};
+inline constexpr double kMaxDistortionMm = 10000.0;
 
 class ExemplarTable {
  public:
@@ -74,6 +87,15 @@ class ExemplarTable {
   bool has_noise() const { return !noise_mm_.empty(); }
   // This table with `noise_mm` (as the constructor's; empty drops it).
   ExemplarTable with_noise(std::vector<float> noise_mm) const;
+  // The depth distortion, if the table carries one.
+  const std::optional<DepthDistortion>& distortion() const { return distortion_; }
+  // This table with `d` (nothing drops it). Throws std::invalid_argument
+  // unless the grid is valid, d.mm holds n_materials x grid.count values and
+  // each is NaN or finite and at most kMaxDistortionMm in size.
+  ExemplarTable with_distortion(std::optional<DepthDistortion> d) const;
+  // Material m's distortion at a measured depth, linear between the grid's
+  // samples; NaN outside them, next to an unknown sample, or without a distortion.
+  double distortion_mm(std::size_t m, double measured_mm) const;
   const float* material_values(std::size_t m) const { return values_.data() + m * elements_per_material(); }
   std::size_t valid_count(std::size_t m) const;
 
@@ -87,6 +109,7 @@ class ExemplarTable {
   std::vector<float> values_;
   double quant_step_mm_;
   std::vector<float> noise_mm_;
+  std::optional<DepthDistortion> distortion_;
 };
 
 // The Kinect v2 database's rows: 16 vs 120 MHz, then 80 vs 120 MHz.

@@ -4,6 +4,7 @@
 // fixed-point path (the default) or the float reference: what the handheld
 // and sorting profiles share.
 #pragma once
+#include <functional>
 #include <memory>
 #include <optional>
 #include <variant>
@@ -48,6 +49,13 @@ class RegionMatcher {
   bool unknown(const Classification& c) const;
   // Depth images of a decoded region for the subscribers that want them.
   static void emit_depths(const Decoded& d, const RawFrame& frame, const Emitter& emit);
+  // The corrected depth image (kind "corrected") of a decoded region for its
+  // subscribers: the combined depth less the distortion of the material
+  // `material_of(pixel)` gives (a table index, -1: none) for each pixel of the
+  // region (row-major), from the table's depth distortion (Eq. (8)); NaN where
+  // a pixel has no depth, no label, or its material no distortion there.
+  static void emit_corrected(const Decoded& d, const RawFrame& frame, const Emitter& emit, const ExemplarTable& table,
+                             const std::function<std::int64_t(std::size_t)>& material_of);
 
  private:
   std::shared_ptr<const ExemplarTable> table_;

@@ -111,9 +111,10 @@ struct Intrinsics {
   double fx = 0, fy = 0, cx = 0, cy = 0, k1 = 0, k2 = 0, k3 = 0, p1 = 0, p2 = 0;
 };
 
-// Depth images: "80", "16", "120" (wrapped, per frequency) or "combined"
-// (unwrapped), float32 mm along each pixel's ray, NaN where invalid, over the
-// region the profile decodes.
+// Depth images: "80", "16", "120" (wrapped, per frequency), "combined"
+// (unwrapped) or "corrected" (minor 9: the combined depth less each labelled
+// pixel's material distortion), float32 mm along each pixel's ray, NaN where
+// invalid, over the region the profile decodes.
 struct DepthEvent {
   std::uint64_t frame = 0, timestamp_ns = 0;
   std::string kind;
