@@ -392,21 +392,28 @@ def bench_daemon_cmd(table_path: Path | None, profiles: str, clients: list[int],
 @click.option("--scenes", help="sim:SCENE specs (without 'sim:') separated by ';' (default: the regions scene with "
               "3 and with 6 materials at 600..1200 mm).")  # fmt: skip
 @click.option("--frames", default=5, show_default=True, type=click.IntRange(1, 1000), help="Frames per scene.")
+@click.option("--no-region-vote", is_flag=True, help="Run tofmatd with --no-region-vote.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, as_json: bool) -> None:
-    """Error of tofmatd's material-corrected depth against the simulator's truth, per material."""
+def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no_region_vote: bool,
+                    as_json: bool) -> None:  # fmt: skip
+    """tofmatd's segmentation on simulated scenes against their truth: the label map's accuracy (away
+    from the targets' edges and near them), and the material-corrected depth's error per material."""
     from dataclasses import asdict
 
-    from .tools.depth_bench import DEFAULT_SCENES, bench_depth, format_markdown
+    from .tools.depth_bench import DEFAULT_SCENES, bench_depth, format_labels_markdown, format_markdown
 
     table = table_path or _sim_table()
     specs = [s.strip() for s in scenes.split(";") if s.strip()] if scenes else list(DEFAULT_SCENES)
     try:
         with progress_bar("scenes") as progress:
-            results = bench_depth(table, specs, frames, progress)
+            labels, results = bench_depth(table, specs, frames, progress,
+                                          ["--no-region-vote"] if no_region_vote else None)  # fmt: skip
     except (RuntimeError, ValueError) as e:
         raise click.ClickException(str(e)) from e
-    click.echo(json.dumps([asdict(r) for r in results], indent=2) if as_json else format_markdown(results))
+    if as_json:
+        click.echo(json.dumps({"labels": [asdict(s) for s in labels], "depth": [asdict(r) for r in results]}, indent=2))
+    else:
+        click.echo(format_labels_markdown(labels) + "\n\n" + format_markdown(results))
 
 
 def _sim_table() -> Path:

@@ -6,7 +6,7 @@
 //
 //   tofmat_bench_profiles [--profile all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|
 //                                    smooth-box|smooth-majority]
-//                         [--reps R] [--kernel best|scalar] [--smooth N] [--no-truth]
+//                         [--reps R] [--kernel best|scalar] [--smooth N] [--no-truth] [--no-region-vote]
 //                         [--table DIR|FILE.tmx] [--sim-data DIR] [--candidates a,b,c]
 //
 // The path measured, per frame, as tofmatd runs it (docs/daemon.md):
@@ -118,6 +118,7 @@ struct Options {
   int smooth = -1;  // -1: the profile's default
   int threads = 1;  // segmentation: threads sharing each frame (one core unless told)
   bool truth = true;
+  bool region_vote = true;  // segmentation: --no-region-vote leaves it out
   std::vector<std::string> candidates;
   std::string classifier;  // empty: the daemon's default
 };
@@ -131,6 +132,7 @@ const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting"
       "error: %s\nusage: tofmat_bench_profiles [--profile "
       "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
       "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
+      "                             [--no-region-vote]\n"
       "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c] [--classifier "
       "eq12|session]\n",
       why);
@@ -154,6 +156,10 @@ Options parse(int argc, char** argv) {
     const std::string a = argv[i];
     if (a == "--no-truth") {
       o.truth = false;
+      continue;
+    }
+    if (a == "--no-region-vote") {
+      o.region_vote = false;
       continue;
     }
     if (i + 1 >= argc) usage(("missing value after " + a).c_str());
@@ -458,6 +464,7 @@ ProfileConfig config_of(const Options& o, const std::string& profile, Backend ba
   c.candidates = o.candidates;
   if (!o.classifier.empty()) c.method = parse_method(o.classifier);
   if (o.smooth > 0) c.smooth = o.smooth;
+  c.region_vote = o.region_vote;
   c.threads = o.threads;
   kernel_applied = set_profile_kernel(c, fixed_kernel(o.kernel));
   return c;

@@ -60,6 +60,7 @@ TEST(Options, TheDefaultsAreTheCameraAndTheServicesSocket) {
   ASSERT_TRUE(p.cl.has_value());
   const auto& o = p.cl->daemon;
   EXPECT_EQ(o.source, "kinect");  // never the simulator by default
+  EXPECT_TRUE(o.profile.region_vote);
   EXPECT_EQ(o.table, "t.tmx");
   EXPECT_EQ(o.server.socket_path, "/run/tofmat/tofmatd.sock");
   EXPECT_EQ(o.server.socket_mode, 0660u);
@@ -88,7 +89,7 @@ TEST(Options, EveryFlagReachesItsOption) {
                         "--control-token-file", control.string(), "--control-group", "root",
                         "--max-tcp-clients", "5", "--max-clients-per-peer", "3", "--idle-timeout", "12",
                         "--peer-request-rate", "50", "--peer-connect-rate", "2.5", "--roi", "10,20,60,70",
-                        "--candidates", "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5",
+                        "--candidates", "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--no-region-vote",
                         "--threads", "3", "--queue-frames", "4", "--max-clients", "9",
                         "--sim-data", "/opt/sim", "--log-level", "debug"});
   // clang-format on
@@ -117,6 +118,7 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.profile.top_k, 3);
   EXPECT_EQ(o.profile.burst, 12);
   EXPECT_EQ(o.profile.smooth, 5);
+  EXPECT_FALSE(o.profile.region_vote);
   EXPECT_EQ(o.profile.threads, 3);
   EXPECT_EQ(o.queue_frames, 4u);
   EXPECT_EQ(o.server.max_clients, 9u);
@@ -143,9 +145,10 @@ TEST(Options, TheResetButtonReachesItsOptionsWithOrWithoutALine) {
 }
 
 TEST(Options, TheConfigurationFileHasTheFlagsKeysAndTheCommandLineWins) {
-  const auto cfg = temp_file("cfg.toml",
-                             "table = \"/usr/share/t.tmx\"\nprofile = \"segmentation\"\nsmooth = 7\n"
-                             "candidates = [\"cork\", \"paper\"]\nlog-level = \"warn\"\n");
+  const auto cfg =
+      temp_file("cfg.toml",
+                "table = \"/usr/share/t.tmx\"\nprofile = \"segmentation\"\nsmooth = 7\nno-region-vote = true\n"
+                "candidates = [\"cork\", \"paper\"]\nlog-level = \"warn\"\n");
   const auto from_file = parse({"--config", cfg.string()});
   const auto overridden = parse({"--config", cfg.string(), "--profile", "sorting"});
   std::filesystem::remove(cfg);
@@ -153,6 +156,7 @@ TEST(Options, TheConfigurationFileHasTheFlagsKeysAndTheCommandLineWins) {
   EXPECT_EQ(from_file.cl->daemon.table, "/usr/share/t.tmx");
   EXPECT_EQ(from_file.cl->daemon.profile.name, "segmentation");
   EXPECT_EQ(from_file.cl->daemon.profile.smooth, 7);
+  EXPECT_FALSE(from_file.cl->daemon.profile.region_vote);
   EXPECT_EQ(from_file.cl->daemon.profile.candidates, (std::vector<std::string>{"cork", "paper"}));
   EXPECT_EQ(from_file.cl->log_level, "warn");
   EXPECT_EQ(from_file.cl->daemon.source, "kinect");  // the file does not name one: still the camera
@@ -176,10 +180,11 @@ TEST(Options, TheConfigurationFileIsStrictAndBounded) {
   const auto folder = std::filesystem::temp_directory_path();
   EXPECT_EQ(parse({"--config=" + folder.string()}).exit_code, 2);
   // The same keys spelt right are taken.
-  const auto right = temp_file("right.toml", "table = \"t.tmx\"\nsmooth = 5\n");
+  const auto right = temp_file("right.toml", "table = \"t.tmx\"\nsmooth = 5\nno-region-vote = false\n");
   const auto ok = parse({"--config", right.string()});
   ASSERT_TRUE(ok.cl.has_value());
   EXPECT_EQ(ok.cl->daemon.profile.smooth, 5);
+  EXPECT_TRUE(ok.cl->daemon.profile.region_vote);  // (false: the vote stays)
   for (const auto& f : {typo, garbage, big, right}) std::filesystem::remove(f);
 }
 

@@ -138,7 +138,10 @@ def test_bench_depth_meets_the_target_on_opaque_materials(sim_table: Path) -> No
                         "--scenes", "regions,materials=cork+pvc+paper,near=650,far=900", "--json"],
                        capture_output=True, text=True, timeout=300)  # fmt: skip
     assert p.returncode == 0, p.stderr
-    rows = {r["material"]: r for r in json.loads(p.stdout)}
+    out = json.loads(p.stdout)
+    rows = {r["material"]: r for r in out["depth"]}
+    (labels,) = out["labels"]
+    assert labels["accuracy"] > 0.95 and labels["band"] > 0.9 and 0.0 < labels["band_share"] < 0.5, labels
     assert sorted(rows) == ["cork", "paper", "pvc"]
     for name, r in rows.items():
         assert r["corrected_share"] > 0.9 and r["right_share"] > 0.5, (name, r)

@@ -214,6 +214,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
   app.add_option("--burst", o.profile.burst, "sorting: frames per trigger")->capture_default_str();
   app.add_option("--smooth", o.profile.smooth, "segmentation: window side (odd pixels)")->capture_default_str();
+  app.add_flag_callback(
+      "--no-region-vote", [&o] { o.profile.region_vote = false; },
+      "segmentation: leave out the region vote (each surface of steady depth taking its majority label)");
   app.add_option("--threads", o.profile.threads, "segmentation: threads sharing each frame (0: every core)")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));

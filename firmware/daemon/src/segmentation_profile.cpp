@@ -15,6 +15,7 @@
 #include "tofmat/core/fixed_decode.hpp"
 #include "tofmat/core/frame_smoothing.hpp"
 #include "tofmat/core/pixel_classifier.hpp"
+#include "tofmat/core/region_vote.hpp"
 #include "tofmat/daemon/band_workers.hpp"
 #include "tofmat/daemon/region_matcher.hpp"
 
@@ -33,7 +34,8 @@ class SegmentationProfile : public Profile {
         thresholds_(fixed_thresholds(DecodeOptions{})),
         workers_(std::min(BandWorkers::bands_for(c.threads), kHeight)),
         mean_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)},
-        unclean_(kPixels) {
+        unclean_(kPixels),
+        vote_(kWidth, kHeight, kRegionStepQ8, kRegionMinPixels, static_cast<int>(compact_.candidates().size())) {
     for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
     for (int b = 0; b < workers_.bands() && config_.smooth > 1; ++b) {
       box_.emplace_back(kWidth, kHeight, config_.smooth);
@@ -102,11 +104,13 @@ class SegmentationProfile : public Profile {
       pixels_.classify_range(frame_.combined_q8.data() + at(y0), frame_.flags.data() + at(y0), f0 + at(y0), f1 + at(y0),
                              at(y1) - at(y0), (smooth ? unclean_.data() : labels) + at(y0));
     });
-    if (!smooth) return;
-    workers_.run([&](int b) {
-      const auto [y0, y1] = rows(b);
-      majority_[static_cast<std::size_t>(b)].apply(unclean_.data(), y0, y1, labels);
-    });
+    if (smooth) {
+      workers_.run([&](int b) {
+        const auto [y0, y1] = rows(b);
+        majority_[static_cast<std::size_t>(b)].apply(unclean_.data(), y0, y1, labels);
+      });
+    }
+    if (config_.region_vote) vote_.apply(frame_.combined_q8.data(), frame_.flags.data(), labels);
   }
 
  private:
@@ -138,7 +142,13 @@ class SegmentationProfile : public Profile {
   std::vector<BoxMeanFilter> box_;                 // per band
   std::vector<MajorityFilter> majority_;           // per band
   std::array<std::vector<std::int32_t>, 2> mean_;  // the smoothed features (Q16 mm)
-  std::vector<std::uint8_t> unclean_;              // the labels before the majority filter
+  // Region voting: neighbours at most 10 mm apart in depth are one surface
+  // (a plane at 60 degrees to the rays steps about 6 mm a pixel at 1.2 m);
+  // a surface of 100 pixels or more votes.
+  static constexpr std::int32_t kRegionStepQ8 = 10 * 256;
+  static constexpr std::size_t kRegionMinPixels = 100;
+  std::vector<std::uint8_t> unclean_;  // the labels before the majority filter
+  RegionVote vote_;
   std::vector<std::string> names_;
 };
 

@@ -32,6 +32,34 @@ DEFAULT_SCENES = (
 )
 
 
+BAND_PX = 5  # the boundary band: target pixels within this many pixels of another target or of none
+
+
+@dataclass(frozen=True)
+class SceneLabels:
+    """The label map's accuracy on a scene's target pixels: all, away from the edges, in the band."""
+
+    scene: str
+    frames: int
+    accuracy: float  # mean over the frames
+    interior: float
+    band: float
+    band_share: float  # of the target pixels, the share in the band
+    first_frame: float  # the first frame taken (frames are labelled each on its own)
+
+
+def boundary_band(target: npt.NDArray[np.int16], px: int = BAND_PX) -> npt.NDArray[np.bool_]:
+    """Target pixels within px (Chebyshev distance) of a pixel of another target or of none."""
+    h, w = target.shape
+    padded = np.pad(target, px, constant_values=-1)
+    band = np.zeros((h, w), bool)
+    for dy in range(-px, px + 1):
+        for dx in range(-px, px + 1):
+            band |= padded[px + dy : px + dy + h, px + dx : px + dx + w] != target
+    out: npt.NDArray[np.bool_] = band & (target >= 0)
+    return out
+
+
 @dataclass(frozen=True)
 class MaterialError:
     scene: str
@@ -66,13 +94,14 @@ def truth_of(spec: str) -> tuple[list[str], npt.NDArray[np.int16], npt.NDArray[n
     return [t.material for t in scene.targets], target, true_range
 
 
-def bench_scene(table: Path, spec: str, frames: int, timeout_s: float = 120.0) -> list[MaterialError]:
+def bench_scene(table: Path, spec: str, frames: int, timeout_s: float = 120.0,
+                extra: list[str] | None = None) -> tuple[SceneLabels, list[MaterialError]]:  # fmt: skip
     """Runs tofmatd on `spec` (segmentation, the scene's materials as candidates) for `frames` frames."""
     materials, target, true_range = truth_of(spec)
     with tempfile.TemporaryDirectory(prefix="tofmat-depth-") as tmp:
         sock, log = Path(tmp) / "d.sock", Path(tmp) / "d.log"
         daemon = start_daemon(table, sock, f"sim:{spec},realtime=0", log, "segmentation",
-                              ["--candidates", ",".join(dict.fromkeys(materials))])  # fmt: skip
+                              ["--candidates", ",".join(dict.fromkeys(materials)), *(extra or [])])  # fmt: skip
         try:
             try:
                 client = connect(sock, daemon)
@@ -103,6 +132,21 @@ def bench_scene(table: Path, spec: str, frames: int, timeout_s: float = 120.0) -
                     raise RuntimeError(f"tofmatd sent {len(taken)} of {frames} frames within {timeout_s:g} s")
         finally:
             stop_daemon(daemon)
+    # Labels: right where the pixel's label names its target's material.
+    band = boundary_band(target)
+    on_target = target >= 0
+    per_frame = []
+    for shot in taken:
+        m = shot["map"]
+        assert isinstance(m, LabelMap)
+        names = np.array([*m.materials, ""])[np.minimum(m.labels, len(m.materials))]
+        truth = np.array([*materials, ""])[np.where(on_target, target, len(materials))]
+        right = on_target & (names == truth)
+        per_frame.append([right[on_target].mean(), right[on_target & ~band].mean(), right[band].mean()])
+    acc = np.array(per_frame)
+    mean = acc.mean(axis=0)
+    labels = SceneLabels(spec, len(taken), float(mean[0]), float(mean[1]), float(mean[2]),
+                         float(band.sum() / on_target.sum()), float(acc[0, 0]))  # fmt: skip
     out = []
     for i, name in enumerate(materials):
         on = (target == i) & np.isfinite(true_range)
@@ -122,18 +166,34 @@ def bench_scene(table: Path, spec: str, frames: int, timeout_s: float = 120.0) -
         b, a, r = (np.concatenate(x) for x in (before, after, right))
         out.append(MaterialError(spec, name, n, n_corrected / max(n, 1), n_right / max(n_corrected, 1), *_stats(b),
                                  *_stats(a), *_stats(r)))  # fmt: skip
-    return out
+    return labels, out
 
 
-def bench_depth(table: Path, scenes: list[str], frames: int, progress: Progress | None = None) -> list[MaterialError]:
+def bench_depth(table: Path, scenes: list[str], frames: int, progress: Progress | None = None,
+                extra: list[str] | None = None) -> tuple[list[SceneLabels], list[MaterialError]]:  # fmt: skip
+    """Every scene in turn; `extra`: more tofmatd flags (--no-region-vote, --smooth N)."""
+    labels: list[SceneLabels] = []
     results: list[MaterialError] = []
     for k, spec in enumerate(scenes):
         if progress:
             progress(k, len(scenes), spec)
-        results.extend(bench_scene(table, spec, frames))
+        scene_labels, errors = bench_scene(table, spec, frames, extra=extra)
+        labels.append(scene_labels)
+        results.extend(errors)
     if progress:
         progress(len(scenes), len(scenes), "done")
-    return results
+    return labels, results
+
+
+def format_labels_markdown(labels: list[SceneLabels]) -> str:
+    lines = [
+        f"| scene | frames | target pixels right | away from edges | within {BAND_PX} px of an edge (share) | first frame |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for s in labels:
+        lines.append(f"| {s.scene} | {s.frames} | {100 * s.accuracy:.1f} % | {100 * s.interior:.1f} % | "
+                     f"{100 * s.band:.1f} % ({100 * s.band_share:.1f} %) | {100 * s.first_frame:.1f} % |")  # fmt: skip
+    return "\n".join(lines)
 
 
 def format_markdown(results: list[MaterialError]) -> str:
