@@ -50,23 +50,26 @@ class Intrinsics:
         """From a depth event's ``intrinsics`` object (fields a later minor adds are ignored)."""
         return cls(*(float(meta[k]) for k in ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "p1", "p2")))
 
+    def _brown(self, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> tuple[
+            npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:  # fmt: skip
+        """Brown's model's radial factor and tangential shifts at ideal normalised coordinates."""
+        r2 = x * x + y * y
+        radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
+        return (radial, 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x),
+                self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y)  # fmt: skip
+
     def distort(self, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> tuple[
             npt.NDArray[np.float64], npt.NDArray[np.float64]]:  # fmt: skip
         """Brown's model: ideal normalised coordinates to where the lens puts them."""
-        r2 = x * x + y * y
-        radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        return (x * radial + 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x),
-                y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y)  # fmt: skip
+        radial, dx, dy = self._brown(x, y)
+        return x * radial + dx, y * radial + dy
 
     def undistort(self, xd: npt.NDArray[np.float64], yd: npt.NDArray[np.float64]) -> tuple[
             npt.NDArray[np.float64], npt.NDArray[np.float64]]:  # fmt: skip
         """The inverse of :meth:`distort`, by fixed-point iteration from the distorted point."""
         x, y = xd.copy(), yd.copy()
         for _ in range(_UNDISTORT_ITERATIONS):
-            r2 = x * x + y * y
-            radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-            dx = 2.0 * self.p1 * x * y + self.p2 * (r2 + 2.0 * x * x)
-            dy = self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * x * y
+            radial, dx, dy = self._brown(x, y)
             x, y = (xd - dx) / radial, (yd - dy) / radial
         return x, y
 

@@ -48,6 +48,12 @@ def load_device(name_or_path: str = DEFAULT_DEVICE) -> DeviceProfile:
     return DeviceProfile.load(name_or_path, data_dir())
 
 
+def library_path(name_or_path: str) -> Path:
+    """A material library's file: a path as given, or a name's data/materials/<name>.json."""
+    p = Path(name_or_path)
+    return p if (p.suffix or p.parent != Path(".")) else data_dir() / "materials" / f"{name_or_path}.json"
+
+
 def load_library(name_or_path: str = DEFAULT_LIBRARY) -> MaterialLibrary:
     """A material library by name (data/materials/<name>.json) or path."""
     return MaterialLibrary.load(name_or_path, data_dir())
@@ -65,6 +71,7 @@ __all__ = [
     "Target",
     "data_dir",
     "distortion_curves",
+    "library_path",
     "load_device",
     "load_library",
     "stage_sweep",

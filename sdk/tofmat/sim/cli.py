@@ -15,7 +15,16 @@ import numpy as np
 
 from .._clikit import FiniteFloat, TofmatGroup, progress_bar
 from .._extras import require, require_pyplot
-from . import DEFAULT_DEVICE, DEFAULT_LIBRARY, Renderer, Scene, Target, data_dir, load_device, load_library
+from . import (
+    DEFAULT_DEVICE,
+    DEFAULT_LIBRARY,
+    Renderer,
+    Scene,
+    Target,
+    library_path,
+    load_device,
+    load_library,
+)
 
 
 @click.group("sim", cls=TofmatGroup)
@@ -86,11 +95,9 @@ def evaluate_cmd(device: str, library: str, out_dir: Path, materials: str | None
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
     stage = np.arange(600.0, 1250.0 + 1e-9, step)
-    p = Path(library)
-    library_path = p if (p.suffix or p.parent != Path(".")) else data_dir() / "materials" / f"{library}.json"
 
     def fits() -> dict[str, Any]:  # the library file, read only for 'library'
-        return cast(dict[str, Any], json.loads(library_path.read_text()))
+        return cast(dict[str, Any], json.loads(library_path(library).read_text()))
 
     s0, s1 = _spread_option(session_offsets, "--session-offsets", "S0,S1", lambda: ev.session_offset_spread(fits()))
     spread = (s0, s1)

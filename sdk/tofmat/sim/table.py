@@ -15,14 +15,13 @@ carrying it lets tofmatd serve a material-corrected depth.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
 from .. import BinSpec, ExemplarTable
 from .._progress import Progress
-from .._tofmat import decode_frame
-from . import Renderer, Scene, data_dir
+from .._tofmat import DecodedFrame, decode_frame
+from . import Frame, Renderer, Scene, library_path
 
 ROWS = [(16, 120), (80, 120)]
 ROI = (232, 188, 280, 236)  # tofmatd's default handheld ROI: 48 x 48 at the centre
@@ -36,15 +35,21 @@ def database_bins(n_bins: int = 200) -> BinSpec:
     return BinSpec(600.0, (1200.0 - 600.0) / (n_bins - 1), n_bins)
 
 
+def _roi_frame(
+    renderer: Renderer, p0: np.ndarray, material: str, depth_mm: float, yaw_deg: float, seed: int
+) -> tuple[Frame, DecodedFrame, np.ndarray]:
+    """A centred target rendered in the ROI, its decode, and the mask of its valid pixels."""
+    x0, y0, x1, y1 = ROI
+    frame = renderer.render_region(Scene.centred_target(material, depth_mm, yaw_deg, 160), seed, True, ROI)
+    d = decode_frame(np.asarray(frame.raw).reshape(9, -1), np.ascontiguousarray(p0[:, y0:y1, x0:x1]).reshape(3, -1))
+    return frame, d, np.asarray(d.flags) == 0
+
+
 def roi_observation(
     renderer: Renderer, p0: np.ndarray, material: str, depth_mm: float, yaw_deg: float, seed: int
 ) -> tuple[float, np.ndarray] | None:
     """(combined depth, the two rows) averaged over the ROI's valid pixels; None if none is valid."""
-    x0, y0, x1, y1 = ROI
-    frame = renderer.render_region(Scene.centred_target(material, depth_mm, yaw_deg, 160), seed, True, ROI)
-    raw = np.asarray(frame.raw).reshape(9, -1)
-    d = decode_frame(raw, np.ascontiguousarray(p0[:, y0:y1, x0:x1]).reshape(3, -1))
-    ok = np.asarray(d.flags) == 0
+    _, d, ok = _roi_frame(renderer, p0, material, depth_mm, yaw_deg, seed)
     if not ok.any():
         return None
     features = np.asarray(d.features)[:, ok].astype(np.float64)
@@ -55,10 +60,8 @@ def library_fit_rms(library: str) -> dict[str, float]:
     """Each material's fit to the real database's relative rows, rms in mm, from a library file (by
     name or path): how far its simulated response, and so its absolute distortion, can be trusted.
     Empty for a library without fits (the examples)."""
-    p = Path(library)
-    path = p if (p.suffix or p.parent != Path(".")) else data_dir() / "materials" / f"{library}.json"
     out: dict[str, float] = {}
-    for m in json.loads(path.read_text()).get("materials", []):
+    for m in json.loads(library_path(library).read_text()).get("materials", []):
         fit = m.get("fit") or {}
         if isinstance(fit.get("rms_mm"), (int, float)):
             out[str(m["name"])] = float(fit["rms_mm"])
@@ -69,10 +72,7 @@ def roi_distortion(
     renderer: Renderer, p0: np.ndarray, material: str, depth_mm: float, yaw_deg: float, seed: int
 ) -> tuple[float, float] | None:
     """(combined depth, combined depth minus the true range) averaged over the ROI's valid pixels."""
-    x0, y0, x1, y1 = ROI
-    frame = renderer.render_region(Scene.centred_target(material, depth_mm, yaw_deg, 160), seed, True, ROI)
-    d = decode_frame(np.asarray(frame.raw).reshape(9, -1), np.ascontiguousarray(p0[:, y0:y1, x0:x1]).reshape(3, -1))
-    ok = np.asarray(d.flags) == 0
+    frame, d, ok = _roi_frame(renderer, p0, material, depth_mm, yaw_deg, seed)
     true_range = np.asarray(frame.range_mm).reshape(-1)
     ok &= np.isfinite(true_range)
     if ok.sum() < 10:
