@@ -663,7 +663,7 @@ def watch(address: str, token_file: Path | None, top: int, count: int) -> None:
 @main.command()
 @_client_options
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Folder to write labels.png, depth.png, points.ply and snapshot.json into.")  # fmt: skip
+              help="Folder to write labels.png, depth.png, corrected.png, points.ply and snapshot.json into.")  # fmt: skip
 @click.option("--timeout", "timeout_s", default=10.0, show_default=True, type=FiniteFloat(0.1, 3600),
               help="Seconds to wait for a frame.")  # fmt: skip
 @click.option("--intrinsics", type=NumberList(float, -1e6, 1e6),

@@ -9,6 +9,7 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any, cast
 
 import matplotlib.image
 import numpy as np
@@ -20,6 +21,7 @@ import tofmat
 from tofmat.client import DepthImage
 from tofmat.geometry import range_to_points
 from tofmat.tools.snapshot import NO_LABEL, Snapshot, SnapshotError, write_snapshot
+from tofmat.tools.snapshot import _snapshot as snapshot_of
 
 KINECT_LIKE = tofmat.Intrinsics(365.5, 365.2, 255.5, 211.7, k1=0.09, k2=-0.27, k3=0.1, p1=0.001, p2=-0.002)
 SIM = tofmat.Intrinsics(365.0, 365.0, 256.0, 212.0)  # the simulated camera's pinhole (no distortion)
@@ -72,6 +74,30 @@ def test_bad_intrinsics_and_missing_ones_are_clear_errors() -> None:
         write_snapshot(shot, Path("/nonexistent/never-made"))
 
 
+def test_points_take_the_corrected_depth_where_there_is_one(tmp_path: Path) -> None:
+    measured = np.full((4, 6), 1000.0, np.float32)
+    measured[0, 0] = np.nan
+    corrected = measured - 20.0
+    corrected[1, :] = np.nan  # a row the daemon did not correct (no label, or no distortion there)
+    depth = DepthImage(7, 0, "combined", 250, 200, measured, intrinsics=SIM)
+    labels = np.zeros((4, 6), np.uint8)
+    for fix, want in ((DepthImage(7, 0, "corrected", 250, 200, corrected), 17), (None, 0)):
+        out = tmp_path / ("with" if fix else "without")
+        write_snapshot(Snapshot(7, "handheld", ["cork"], labels, depth, True, fix), out)
+        cloud = trimesh.load(out / "points.ply")
+        raw = cloud.metadata["_ply_raw"]["vertex"]["data"]
+        fixed = raw["corrected"].astype(bool)
+        assert len(cloud.vertices) == 23 and fixed.sum() == want  # (the NaN pixel has no point)
+        ranges = np.linalg.norm(np.asarray(cloud.vertices), axis=1)
+        np.testing.assert_allclose(ranges[fixed], 980.0, rtol=1e-6)
+        np.testing.assert_allclose(ranges[~fixed], 1000.0, rtol=1e-6)
+        assert json.loads((out / "snapshot.json").read_text())["points_corrected"] == want
+        assert matplotlib.image.imread(out / "corrected.png").ndim == 3
+    bad = DepthImage(7, 0, "corrected", 250, 200, corrected[:2])
+    with pytest.raises(SnapshotError, match="corrected depth"):  # (checked before the labels are read)
+        snapshot_of("handheld", depth, cast(Any, None), bad)
+
+
 def test_depth_images_carry_the_cameras_intrinsics(start: Callable[..., Daemon], tmp_path: Path) -> None:
     d = start("sim:static,material=cork,depth=900,realtime=0")
     with d.client() as c:
@@ -103,33 +129,36 @@ def test_snapshot_of_the_segmentation_profile(start: Callable[..., Daemon], tmp_
     names = [m["name"] for m in meta["materials"]]
     assert sorted(names) == ["acryl", "cork", "paper"] and meta["simulated"] is True
     assert meta["intrinsics"]["fx"] == 365.0 and meta["region"] == {"x0": 0, "y0": 0, "width": 512, "height": 424}
-    for png in ("labels.png", "depth.png"):
+    for png in ("labels.png", "depth.png", "corrected.png"):
         img = matplotlib.image.imread(out / png)
         assert img.ndim == 3 and img.shape[0] > 300 and img.shape[1] > 500
 
     cloud = trimesh.load(out / "points.ply")
     assert isinstance(cloud, trimesh.PointCloud) and len(cloud.vertices) == meta["points"] > 50_000
     raw = cloud.metadata["_ply_raw"]["vertex"]["data"]
-    labels, xyz = raw["label"], np.asarray(cloud.vertices)
+    labels, xyz, fixed = raw["label"], np.asarray(cloud.vertices), raw["corrected"].astype(bool)
     rgb = np.stack([raw["red"], raw["green"], raw["blue"]], axis=1)
     for m in meta["materials"]:  # every point of a label has its material's colour
         assert (rgb[labels == m["label"]] == m["rgb"]).all()
+    # The table has the materials' depth distortion: every labelled point is at its corrected depth.
+    assert meta["points_corrected"] == fixed.sum() == (labels != NO_LABEL).sum() > 50_000
     # Each target is a plane at the scene's yaw (10 degrees) through its depth: the points turn the
-    # rays' ranges into that plane (taking the range for z, or no intrinsics, tilts it 12 to 22 degrees).
+    # rays' ranges into that plane (taking the range for z, or no intrinsics, tilts it 12 to 22 degrees),
+    # and the correction puts it at the target's true depth (measured, the materials' own distortion
+    # moves it by 13 to 30 mm here: Eq. (8)).
     u = SIM.fx * xyz[:, 0] / xyz[:, 2] + SIM.cx - 0.5
     expected = np.array([np.sin(np.radians(10)), 0.0, -np.cos(np.radians(10))])
     for (x0, x1), depth, name in zip(COLUMNS, DEPTHS, ("acryl", "cork", "paper"), strict=True):
         on = (u > x0 + 2) & (u < x1 - 3)
         assert on.sum() > 20_000
         assert np.bincount(labels[on][labels[on] != NO_LABEL]).argmax() == names.index(name)
-        pts = xyz[on]
+        pts = xyz[on & fixed]
         centre = pts.mean(axis=0)
         normal = np.linalg.svd(pts - centre, full_matrices=False)[2][2]
         angle = np.degrees(np.arccos(abs(normal @ expected)))
         rms = np.sqrt(np.mean(((pts - centre) @ normal) ** 2))
-        assert angle < 5.0 and rms < 4.0, (name, angle, rms)
-        # (the materials' own depth distortion moves the plane by up to about 30 mm: Eq. (8))
-        assert abs(centre[2] - depth) < 45.0, (name, centre)
+        assert angle < 5.0 and rms < 2.5, (name, angle, rms)
+        assert abs(centre[2] - depth) < 3.0, (name, centre)
 
     # A second snapshot into the same folder keeps the first unless asked.
     before = (out / "points.ply").read_bytes()

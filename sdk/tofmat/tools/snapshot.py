@@ -5,9 +5,14 @@ One frame's label map and depth image (the same frame number) are taken from the
 
 - ``labels.png``: the label map in the materials' colours, with a legend of their names;
 - ``depth.png``: the depth (range along each ray) colour-mapped, with a scale in mm;
+- ``corrected.png``: the material-corrected depth (each labelled pixel's combined depth less its
+  material's distortion, Eq. (8)) on the same colour scale, and its difference from the measured
+  depth; blank where the daemon corrects nothing (a table without depth distortion, a daemon
+  before protocol minor 9);
 - ``points.ply``: every valid pixel as a 3D point (mm, camera frame: x right, y down, z forward)
-  with its material's colour and label index (255: none); the label names are in the file's
-  comments and in ``snapshot.json``;
+  with its material's colour, label index (255: none) and whether the point is at its corrected
+  depth (1) or its measured one (0: no correction for the pixel); the label names are in the
+  file's comments and in ``snapshot.json``;
 - ``snapshot.json``: the frame, profile, materials with their colours, the intrinsics, the files.
 
 In the segmentation profile the label map is the daemon's per-pixel map; in the handheld and
@@ -28,11 +33,11 @@ import numpy.typing as npt
 
 from .._extras import require_pyplot
 from ..client import Client, DepthImage, Label, LabelMap
-from ..geometry import Intrinsics
+from ..geometry import Intrinsics, range_to_points
 
 NO_LABEL = LabelMap.NO_LABEL
 NONE_COLOUR = (64, 64, 64)  # pixels without a label (and the legend's "no label")
-FILES = ("labels.png", "depth.png", "points.ply", "snapshot.json")
+FILES = ("labels.png", "depth.png", "corrected.png", "points.ply", "snapshot.json")
 
 
 class SnapshotError(RuntimeError):
@@ -47,6 +52,7 @@ class Snapshot:
     labels: npt.NDArray[np.uint8]  # (height, width) of the depth image's region; 255 = no label
     depth: DepthImage
     simulated: bool
+    corrected: DepthImage | None = None  # the same frame's material-corrected depth, if served
 
 
 def palette(n: int) -> list[tuple[int, int, int]]:
@@ -71,42 +77,49 @@ def capture(client: Client, timeout: float) -> Snapshot:
     """The next frame for which the daemon sends both a depth image and its labels."""
     profile = client.status()["profile"]
     per_pixel = profile == "segmentation"
-    client.subscribe("depth:combined", "label_map" if per_pixel else "labels")
+    corrects = int(client.hello.get("minor", 0)) >= 9  # depth:corrected is served from protocol minor 9
+    client.subscribe("depth:combined", "label_map" if per_pixel else "labels",
+                     *(["depth:corrected"] if corrects else []))  # fmt: skip
     depths: dict[int, DepthImage] = {}
+    corrected: dict[int, DepthImage] = {}
     labels: dict[int, LabelMap | Label] = {}
     deadline = time.monotonic() + timeout
     while (left := deadline - time.monotonic()) > 0:
         e = client.next_event(timeout=left)
-        if isinstance(e, DepthImage) and e.kind == "combined":
-            depths[e.frame] = e
+        if isinstance(e, DepthImage) and e.kind in ("combined", "corrected"):
+            (depths if e.kind == "combined" else corrected)[e.frame] = e
         elif isinstance(e, LabelMap) or (isinstance(e, Label) and e.profile == profile):
             labels[e.frame] = e
         else:
             continue
-        both = sorted(set(depths) & set(labels))
-        if both:
-            return _snapshot(profile, depths[both[-1]], labels[both[-1]])
-        for seen in (depths, labels):  # keep the last few frames only
+        complete = set(depths) & set(labels) & (set(corrected) if corrects else set(depths))
+        if complete:
+            frame = max(complete)
+            return _snapshot(profile, depths[frame], labels[frame], corrected.get(frame))
+        for seen in (depths, corrected, labels):  # keep the last few frames only
             for frame in sorted(seen)[:-8]:
                 del seen[frame]
     hint = " (the sorting profile decodes frames only during a burst: trigger one)" if profile == "sorting" else ""
     raise SnapshotError(f"tofmatd sent no frame with both a depth image and labels within {timeout:g} s{hint}")
 
 
-def _snapshot(profile: str, depth: DepthImage, labelled: LabelMap | Label) -> Snapshot:
+def _snapshot(profile: str, depth: DepthImage, labelled: LabelMap | Label,
+              corrected: DepthImage | None = None) -> Snapshot:  # fmt: skip
     h, w = depth.depth_mm.shape
+    if corrected is not None and corrected.depth_mm.shape != (h, w):
+        raise SnapshotError(f"the corrected depth ({corrected.depth_mm.shape}) is not the depth image's region")
     if isinstance(labelled, LabelMap):
         labels = labelled.labels[depth.y0 : depth.y0 + h, depth.x0 : depth.x0 + w].copy()
         if labels.shape != (h, w):
             raise SnapshotError(f"the label map ({labelled.labels.shape}) does not hold the depth image's region")
-        return Snapshot(depth.frame, profile, labelled.materials, labels, depth, labelled.simulated)
+        return Snapshot(depth.frame, profile, labelled.materials, labels, depth, labelled.simulated, corrected)
     # A region profile: its one label over the region's valid pixels.
     labels = np.full((h, w), NO_LABEL, np.uint8)
     materials: list[str] = []
     if labelled.material is not None:
         materials = [labelled.material]
         labels[np.isfinite(depth.depth_mm)] = 0
-    return Snapshot(depth.frame, profile, materials, labels, depth, labelled.simulated)
+    return Snapshot(depth.frame, profile, materials, labels, depth, labelled.simulated, corrected)
 
 
 def label_colours(labels: npt.NDArray[np.uint8], colours: list[tuple[int, int, int]]) -> npt.NDArray[np.uint8]:
@@ -118,23 +131,25 @@ def label_colours(labels: npt.NDArray[np.uint8], colours: list[tuple[int, int, i
 
 
 def write_ply(path: Path, points: npt.NDArray[np.float32], rgb: npt.NDArray[np.uint8],
-              labels: npt.NDArray[np.uint8], comments: list[str]) -> None:  # fmt: skip
-    """A binary little-endian PLY of N points: x, y, z (float), red, green, blue, label (uchar)."""
+              labels: npt.NDArray[np.uint8], corrected: npt.NDArray[np.bool_],
+              comments: list[str]) -> None:  # fmt: skip
+    """A binary little-endian PLY of N points: x, y, z (float), red, green, blue, label, corrected (uchar)."""
     n = len(points)
-    if rgb.shape != (n, 3) or labels.shape != (n,) or points.shape != (n, 3):
-        raise ValueError("points (N, 3), colours (N, 3) and labels (N,) must agree")
+    if rgb.shape != (n, 3) or labels.shape != (n,) or points.shape != (n, 3) or corrected.shape != (n,):
+        raise ValueError("points (N, 3), colours (N, 3), labels (N,) and corrected (N,) must agree")
     for c in comments:
         if "\n" in c or "\r" in c:
             raise ValueError("a PLY comment must be one line")
     vertex = np.empty(n, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"),
-                                ("blue", "u1"), ("label", "u1")])  # fmt: skip
+                                ("blue", "u1"), ("label", "u1"), ("corrected", "u1")])  # fmt: skip
     vertex["x"], vertex["y"], vertex["z"] = points[:, 0], points[:, 1], points[:, 2]
     vertex["red"], vertex["green"], vertex["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     vertex["label"] = labels
+    vertex["corrected"] = corrected
     header = ["ply", "format binary_little_endian 1.0", *(f"comment {c}" for c in comments),
               f"element vertex {n}", "property float x", "property float y", "property float z",
               "property uchar red", "property uchar green", "property uchar blue", "property uchar label",
-              "end_header"]  # fmt: skip
+              "property uchar corrected", "end_header"]  # fmt: skip
     with path.open("wb") as f:
         f.write(("\n".join(header) + "\n").encode("ascii"))
         f.write(vertex.tobytes())
@@ -154,12 +169,17 @@ def write_snapshot(s: Snapshot, out_dir: Path, *, intrinsics: Intrinsics | None 
     colours = palette(len(s.materials))
     rgb = label_colours(s.labels, colours)
     _labels_png(paths[0], s, rgb, colours)
-    _depth_png(paths[1], s)
-    points = s.depth.points(intr)
+    scale = _depth_png(paths[1], s)
+    _corrected_png(paths[2], s, scale)
+    # Each point at its corrected depth where the daemon corrected the pixel, else at its measured one.
+    fixed = np.isfinite(s.corrected.depth_mm) if s.corrected is not None else np.zeros(s.labels.shape, bool)
+    ranges = np.where(fixed, s.corrected.depth_mm if s.corrected is not None else 0.0, s.depth.depth_mm)
+    points = range_to_points(ranges, intr, s.depth.x0, s.depth.y0)
     valid = np.isfinite(points).all(axis=-1)
-    write_ply(paths[2], points[valid], rgb[valid], s.labels[valid],
+    write_ply(paths[3], points[valid], rgb[valid], s.labels[valid], fixed[valid],
               [f"tofmat snapshot of frame {s.frame} ({s.profile} profile{', simulated' if s.simulated else ''})",
                "units mm, camera frame: x right, y down, z forward",
+               "corrected 1: the point is at its material-corrected depth, 0: at its measured depth",
                *(f"label {i} {name}" for i, name in enumerate(s.materials)), f"label {NO_LABEL} none"])  # fmt: skip
     meta = {
         "frame": s.frame,
@@ -176,9 +196,10 @@ def write_snapshot(s: Snapshot, out_dir: Path, *, intrinsics: Intrinsics | None 
         ],
         "intrinsics": vars(intr),
         "points": int(valid.sum()),
+        "points_corrected": int((valid & fixed).sum()),
         "files": list(FILES),
     }
-    paths[3].write_text(json.dumps(meta, indent=2) + "\n")
+    paths[4].write_text(json.dumps(meta, indent=2) + "\n")
     return paths
 
 
@@ -205,14 +226,42 @@ def _labels_png(path: Path, s: Snapshot, rgb: npt.NDArray[np.uint8], colours: li
     plt.close(fig)
 
 
-def _depth_png(path: Path, s: Snapshot) -> None:
+def _depth_axes(ax: Any, s: Snapshot, depth_mm: npt.NDArray[np.float32], cmap_name: str,
+                scale: tuple[float, float] | None, label: str) -> tuple[float, float]:  # fmt: skip
+    """One colour-mapped image (NaN in the no-label grey) with its colour bar; returns its scale."""
+    plt = _pyplot()
+    cmap = plt.get_cmap(cmap_name).with_extremes(bad=_unit_rgb(NONE_COLOUR))
+    shown = np.ma.masked_invalid(depth_mm)
+    if scale is None:
+        scale = (float(shown.min()), float(shown.max())) if shown.count() else (0.0, 1.0)
+    im = ax.imshow(shown, extent=_region_extent(s), cmap=cmap, vmin=scale[0], vmax=scale[1], interpolation="nearest")
+    ax.figure.colorbar(im, ax=ax, label=label)
+    return scale
+
+
+def _depth_png(path: Path, s: Snapshot) -> tuple[float, float]:
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(8, 5.5), layout="constrained")
-    cmap = plt.get_cmap("viridis").copy()
-    cmap.set_bad(_unit_rgb(NONE_COLOUR))
-    im = ax.imshow(np.ma.masked_invalid(s.depth.depth_mm), extent=_region_extent(s), cmap=cmap,
-                   interpolation="nearest")  # fmt: skip
+    scale = _depth_axes(ax, s, s.depth.depth_mm, "viridis", None, "mm")
     ax.set_title(f"depth (range along each ray), frame {s.frame}")
-    fig.colorbar(im, ax=ax, label="mm")
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return scale
+
+
+def _corrected_png(path: Path, s: Snapshot, scale: tuple[float, float]) -> None:
+    """The corrected depth on depth.png's scale, and the correction (measured less corrected)."""
+    plt = _pyplot()
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 9), layout="constrained")
+    h, w = s.labels.shape
+    corrected = s.corrected.depth_mm if s.corrected is not None else np.full((h, w), np.nan, np.float32)
+    _depth_axes(top, s, corrected, "viridis", scale, "mm")
+    n = int(np.isfinite(corrected).sum())
+    why = "" if n else ": none (the table has no depth distortion for these materials, or an older daemon)"
+    top.set_title(f"material-corrected depth, frame {s.frame}{why}")
+    delta = s.depth.depth_mm - corrected
+    reach = float(np.nanmax(np.abs(delta))) if n else 1.0
+    _depth_axes(bottom, s, delta, "coolwarm", (-reach, reach), "mm")
+    bottom.set_title(f"correction (measured less corrected), {n} pixels")
     fig.savefig(path, dpi=100)
     plt.close(fig)
