@@ -174,10 +174,12 @@ $(TABLE): check-db
 	$(TOFMAT) table import $(DB) -o $(TABLE)
 
 # tofmatd on the simulated camera (hand-held sweeps of five materials), watched
-# through the Python client; records the simulated camera's table once.
+# through the Python client; records the simulated camera's table once (and again when the
+# file there is an older tofmat's, without a depth distortion: --keep-current keeps a current one).
 SIM_TABLE := build/sim_table.tmx
+.PHONY: $(SIM_TABLE)
 $(SIM_TABLE):
-	$(TOFMAT) sim table -o $(SIM_TABLE)
+	$(TOFMAT) sim table --keep-current -o $(SIM_TABLE)
 
 demo: setup build-python $(SIM_TABLE)
 	$(TOFMAT) demo --table $(SIM_TABLE)

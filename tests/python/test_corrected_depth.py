@@ -76,6 +76,32 @@ def test_the_simulated_cameras_table_carries_each_materials_distortion(sim_table
     assert abs(np.median(corrected - np.asarray(f.range_mm).reshape(-1)[ok])) < 1.0  # ...and the table removes it
 
 
+def test_sim_table_records_the_range_asked_and_keeps_a_current_table(real_table: tofmat.ExemplarTable,
+                                                                     tmp_path: Path) -> None:  # fmt: skip
+    out = tmp_path / "far.tmx"
+
+    def sim_table(*extra: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "tofmat", "sim", "table", "--materials", "cork,paper", "--bins",
+                               "41", "--range", "1200,1600", "-o", str(out), *extra], capture_output=True, text=True,
+                              timeout=300)  # fmt: skip
+
+    p = sim_table()
+    assert p.returncode == 0, p.stderr
+    t = tofmat.ExemplarTable.load(str(out))
+    assert (t.bins.start_mm, t.bins.width_mm, t.bins.count) == (1200.0, 10.0, 41)
+    # The sweeps reach the whole range (a target at up to 1.6 m), not only the database's 600..1200 mm.
+    assert np.isfinite(t.features[:, :, 1:-1]).all()
+    assert np.isfinite(t.distortion_at("paper", [1250.0, 1550.0])).all()
+    before = out.read_bytes()
+    p = sim_table("--keep-current")
+    assert p.returncode == 0 and "kept" in p.stdout and out.read_bytes() == before
+    # A table of an older tofmat (no depth distortion) is recorded again.
+    _small(real_table, ["cork"]).save(str(out))
+    p = sim_table("--keep-current")
+    assert p.returncode == 0 and "kept" not in p.stdout
+    assert tofmat.ExemplarTable.load(str(out)).distortion_mm is not None
+
+
 def test_table_distortion_adds_the_calibrated_simulators(real_table: tofmat.ExemplarTable, tmp_path: Path) -> None:
     t = _small(real_table, ["cork", "acryl"])
     features = np.concatenate([t.features, t.features[:1]])

@@ -13,7 +13,7 @@ from typing import Any, cast
 import click
 import numpy as np
 
-from .._clikit import FiniteFloat, TofmatGroup, progress_bar
+from .._clikit import FiniteFloat, NumberList, TofmatGroup, progress_bar
 from .._extras import require, require_pyplot
 from . import (
     DEFAULT_DEVICE,
@@ -293,23 +293,51 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
     default=200,
     show_default=True,
     type=click.IntRange(2, 10000),
-    help="Depth bins from 600 mm (the real database's).",
+    help="Depth bins over the range (the real database's: 200 over 600..1200 mm).",
+)
+@click.option(
+    "--range",
+    "depth_range",
+    default="600,1200",
+    show_default=True,
+    type=NumberList(float, 300, 2400),
+    help="START,END: the first and last bins' depths, mm of combined depth (the range along each ray). "
+    "A scene's pixels get labels only within it: cover the ranges at the frame's corners too.",
 )
 @click.option("--yaw", default=10.0, show_default=True, type=FiniteFloat(-80, 80), help="Target orientation, degrees.")
 @click.option(
+    "--keep-current",
+    is_flag=True,
+    help="Leave OUTPUT as it is if it already holds a table with a depth distortion (a table of an older "
+    "tofmat, without one, is recorded again).",
+)
+@click.option(
     "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx)."
 )
-def table_cmd(device: str, library: str, materials: str | None, n_bins: int, yaw: float, output: Path) -> None:
+def table_cmd(device: str, library: str, materials: str | None, n_bins: int, depth_range: list[float], yaw: float,
+              keep_current: bool, output: Path) -> None:  # fmt: skip
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against)."""
+    from .. import ExemplarTable
     from .table import database_bins, simulated_table
 
+    if len(depth_range) != 2 or not depth_range[0] < depth_range[1]:
+        raise click.BadParameter("give START,END with START < END", param_hint="--range")
+    if keep_current and output.is_file():
+        try:
+            if ExemplarTable.load(str(output)).distortion_mm is not None:
+                click.echo(f"{output}: current (it has a depth distortion); kept")
+                return
+        except (OSError, ValueError) as e:  # (FormatError is a ValueError)
+            click.echo(f"{output}: not a table this tofmat reads ({e}); recording it again", err=True)
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
     t0 = time.perf_counter()
+    bins = database_bins(n_bins, depth_range[0], depth_range[1])
     with progress_bar("recording materials") as progress:
-        table = simulated_table(r, names, database_bins(n_bins), yaw_deg=yaw, progress=progress)
+        table = simulated_table(r, names, bins, yaw_deg=yaw, progress=progress)
     output.parent.mkdir(parents=True, exist_ok=True)
     table.save(str(output))
     click.echo(
-        f"{output}: {len(names)} materials x 2 rows x {n_bins} bins, recorded in {time.perf_counter() - t0:.1f} s"
+        f"{output}: {len(names)} materials x 2 rows x {n_bins} bins of {bins.width_mm:.3f} mm from "
+        f"{bins.start_mm:g} mm, recorded in {time.perf_counter() - t0:.1f} s"
     )

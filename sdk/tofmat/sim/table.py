@@ -30,9 +30,12 @@ ROI = (232, 188, 280, 236)  # tofmatd's default handheld ROI: 48 x 48 at the cen
 DISTORTION_GRID = BinSpec(450.0, 4.0, 500)
 
 
-def database_bins(n_bins: int = 200) -> BinSpec:
-    """The real database's binning: n bins of (1200 - 600) / (n - 1) mm from 600 mm (3.015 mm for 200)."""
-    return BinSpec(600.0, (1200.0 - 600.0) / (n_bins - 1), n_bins)
+def database_bins(n_bins: int = 200, first_mm: float = 600.0, last_mm: float = 1200.0) -> BinSpec:
+    """The real database's binning by default: n bins of (last - first) / (n - 1) mm from `first`
+    (3.015 mm for 200 over 600..1200 mm)."""
+    if n_bins < 2 or not last_mm > first_mm:
+        raise ValueError(f"bins need n >= 2 and last > first (got {n_bins}, {first_mm:g}..{last_mm:g} mm)")
+    return BinSpec(first_mm, (last_mm - first_mm) / (n_bins - 1), n_bins)
 
 
 def _roi_frame(
