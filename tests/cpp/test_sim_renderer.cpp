@@ -671,6 +671,46 @@ TEST(RendererTruth, BackgroundWallAndTargetOrder) {
   EXPECT_NEAR(f.depth_mm[px_index(f, 260, 260)], 800.0, 1e-3);
 }
 
+// An outline: the target covers the pixels whose centres lie inside the
+// polygon, within its rectangle; elsewhere what is behind it shows.
+TEST(RendererTruth, OutlinedTargetCoversThePixelsInsideItsPolygon) {
+  const Renderer r(DeviceProfile::ideal_kinect2(), library());
+  Target tri = target("grey", 800.0, 100, 100, 200, 200);
+  tri.outline = {{100.0, 100.0}, {200.0, 100.0}, {100.0, 200.0}};  // the upper left half
+  Target notch = target("white", 900.0, 250, 100, 350, 200);       // a C: a non-convex outline
+  notch.outline = {{250, 100}, {350, 100}, {350, 130}, {280, 130}, {280, 170}, {350, 170}, {350, 200}, {250, 200}};
+  const Frame f = r.render(scene_of({tri, notch}, "grey", 2800.0), 1, false);
+  std::size_t covered = 0;
+  for (int y = 100; y < 200; ++y)
+    for (int x = 100; x < 200; ++x) {
+      const bool inside = (x + 0.5 - 100.0) + (y + 0.5 - 100.0) < 100.0;
+      EXPECT_EQ(f.target[px_index(f, x, y)], inside ? 0 : -1) << x << "," << y;
+      covered += inside ? 1u : 0u;
+    }
+  EXPECT_EQ(covered, 4950u);                       // the pixels strictly below the diagonal: (100 * 100 - 100) / 2
+  EXPECT_EQ(f.target[px_index(f, 260, 150)], 1);   // the C's back
+  EXPECT_EQ(f.target[px_index(f, 300, 150)], -1);  // its opening shows the wall
+  EXPECT_EQ(f.target[px_index(f, 300, 110)], 1);
+  EXPECT_EQ(f.target[px_index(f, 300, 190)], 1);
+  // The plane is the rectangle's (through its centre's ray at its depth), whatever the outline.
+  EXPECT_NEAR(f.depth_mm[px_index(f, 110, 110)], 800.0, 1e-3);
+}
+
+TEST(RendererArgs, RejectsBadOutlines) {
+  const Renderer r(DeviceProfile::ideal_kinect2(), library());
+  Target t = target("white", 1000.0, 0, 0, 10, 10);
+  t.outline = {{0.0, 0.0}, {10.0, 0.0}};
+  EXPECT_THROW(r.render(scene_of({t}), 1, false), std::invalid_argument);
+  t.outline = {{0.0, 0.0}, {10.0, 0.0}, {NAN, 5.0}};
+  EXPECT_THROW(r.render(scene_of({t}), 1, false), std::invalid_argument);
+  t.outline.assign(Target::kMaxOutline + 1, {1.0, 1.0});
+  EXPECT_THROW(r.render(scene_of({t}), 1, false), std::invalid_argument);
+  // Vertices beyond the rectangle only clip: the rectangle bounds the target.
+  t.outline = {{-50.0, -50.0}, {60.0, -50.0}, {60.0, 60.0}, {-50.0, 60.0}};
+  const Frame f = r.render(scene_of({t}), 1, false);
+  EXPECT_EQ(std::count(f.target.begin(), f.target.end(), std::int16_t{0}), 100);
+}
+
 // A slab with refractive index 1 (validate accepts 1..4) at grazing
 // incidence: cos(theta_t) = 0 makes its response NaN (see
 // test_sim_material Response.FiniteAtGrazingIncidence). In the renderer the

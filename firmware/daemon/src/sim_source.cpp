@@ -74,6 +74,61 @@ class BeltSource : public Source {
 
 }  // namespace
 
+namespace {
+
+// The objects scene: a plane of the last material filling the frame, tilted
+// by yaw and pitch, at `far` through the centre; in front of it the other
+// materials as flat objects of irregular (non-convex) outlines, each turned
+// its own way, at depths from `near` to halfway to `far`.
+sim::Scene objects_scene(const SimSpec& spec) {
+  constexpr double kPi = 3.14159265358979323846;
+  constexpr int kVertices = 72;
+  constexpr double kRadius = 54.0;  // pixels; the lobes reach 1.37 times it
+  sim::Scene scene;
+  const std::size_t n_objects = spec.materials.size() - 1;
+  sim::Target plane;
+  plane.material = spec.materials.back();
+  plane.x0 = 0;
+  plane.y0 = 0;
+  plane.x1 = 512;
+  plane.y1 = 424;
+  plane.depth_mm = spec.far_mm;
+  plane.yaw_deg = spec.yaw_deg;
+  plane.pitch_deg = spec.pitch_deg;
+  scene.targets.push_back(plane);
+  for (std::size_t i = 0; i < n_objects; ++i) {
+    const int col = static_cast<int>(i % 3), row = static_cast<int>(i / 3);
+    const double cx = 96.0 + 160.0 * col + (row == 1 ? 80.0 : 0.0), cy = 120.0 + 190.0 * row;
+    const double k = static_cast<double>(i);
+    sim::Target t;
+    t.material = spec.materials[i];
+    double x_lo = 1e9, x_hi = -1e9, y_lo = 1e9, y_hi = -1e9;
+    for (int v = 0; v < kVertices; ++v) {
+      const double a = 2.0 * kPi * v / kVertices;
+      const double r = kRadius * (1.0 + 0.25 * std::sin(3.0 * a + 1.7 * k) + 0.12 * std::sin(5.0 * a + 0.9 + 2.3 * k));
+      const double x = cx + r * std::cos(a), y = cy + r * std::sin(a);
+      t.outline.push_back({x, y});
+      x_lo = std::min(x_lo, x);
+      x_hi = std::max(x_hi, x);
+      y_lo = std::min(y_lo, y);
+      y_hi = std::max(y_hi, y);
+    }
+    t.x0 = std::max(0, static_cast<int>(std::floor(x_lo)));
+    t.x1 = std::min(512, static_cast<int>(std::ceil(x_hi)) + 1);
+    t.y0 = std::max(0, static_cast<int>(std::floor(y_lo)));
+    t.y1 = std::min(424, static_cast<int>(std::ceil(y_hi)) + 1);
+    t.depth_mm = n_objects > 1
+                     ? spec.near_mm + 0.5 * (spec.far_mm - spec.near_mm) * k / static_cast<double>(n_objects - 1)
+                     : spec.near_mm;
+    t.yaw_deg = (i % 2 == 0 ? 15.0 : -15.0);
+    t.pitch_deg = (i % 3 == 0 ? -10.0 : 10.0);
+    scene.targets.push_back(t);
+  }
+  return scene;
+}
+
+}  // namespace
+
 SimSpec parse_sim_spec(const std::string& text) {
   SimSpec s;
   auto parts = split(text, ',');
@@ -82,8 +137,8 @@ SimSpec parse_sim_spec(const std::string& text) {
     if (!parts[0].empty()) s.scene = parts[0];
     first = 1;
   }
-  if (s.scene != "sweep" && s.scene != "static" && s.scene != "regions" && s.scene != "belt")
-    throw std::invalid_argument("sim: unknown scene \"" + s.scene + "\" (sweep, static, regions, belt)");
+  if (s.scene != "sweep" && s.scene != "static" && s.scene != "regions" && s.scene != "objects" && s.scene != "belt")
+    throw std::invalid_argument("sim: unknown scene \"" + s.scene + "\" (sweep, static, regions, objects, belt)");
   for (std::size_t i = first; i < parts.size(); ++i) {
     const auto eq = parts[i].find('=');
     if (eq == std::string::npos) throw std::invalid_argument("sim: \"" + parts[i] + "\" is not key=value");
@@ -106,6 +161,8 @@ SimSpec parse_sim_spec(const std::string& text) {
       s.depth_mm = to_number(key, value);
     } else if (key == "yaw") {
       s.yaw_deg = to_number(key, value);
+    } else if (key == "pitch") {
+      s.pitch_deg = to_number(key, value);
     } else if (key == "size") {
       s.size = to_int(key, value, 4, 424);
     } else if (key == "realtime") {
@@ -144,8 +201,11 @@ SimSpec parse_sim_spec(const std::string& text) {
   for (double d : {s.near_mm, s.far_mm, s.depth_mm})
     if (d < 300.0 || d > 8000.0) throw std::invalid_argument("sim: depths must lie in [300, 8000] mm");
   if (std::abs(s.yaw_deg) > 85.0) throw std::invalid_argument("sim: yaw must lie in [-85, 85] degrees");
+  if (std::abs(s.pitch_deg) > 85.0) throw std::invalid_argument("sim: pitch must lie in [-85, 85] degrees");
   if (s.scene == "regions" && s.materials.size() > 6)
     throw std::invalid_argument("sim: the regions scene holds at most 6 materials");
+  if (s.scene == "objects" && (s.materials.size() < 2 || s.materials.size() > 6))
+    throw std::invalid_argument("sim: the objects scene needs 2 to 6 materials (objects, then the plane's)");
   return s;
 }
 
@@ -172,6 +232,7 @@ sim::Scene sim_scene_at(const SimSpec& spec, std::uint64_t frame) {
     }
     return scene;
   }
+  if (spec.scene == "objects") return objects_scene(spec);
   const std::uint64_t period = static_cast<std::uint64_t>(spec.frames + spec.gap);
   const std::uint64_t k = frame / period, t = frame % period;
   if (t >= static_cast<std::uint64_t>(spec.frames)) return sim::Scene{};  // nothing in front of the camera

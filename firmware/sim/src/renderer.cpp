@@ -184,6 +184,7 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
   struct TargetPlanes {
     Plane left, right;
     double split_x;
+    std::vector<std::uint8_t> mask;  // the rectangle's pixels it covers (target_mask)
   };
   std::vector<TargetPlanes> planes;
   int n_planes = 0;
@@ -201,7 +202,8 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
     const Vec3 r = ray(cam, cxp, cyp);
     const Vec3 p{r.x * t.depth_mm / r.z, r.y * t.depth_mm / r.z, t.depth_mm};
     planes.push_back({Plane{p, normal(t.yaw_deg + 0.5 * t.fold_deg, t.pitch_deg), m, n_planes},
-                      Plane{p, normal(t.yaw_deg - 0.5 * t.fold_deg, t.pitch_deg), m, n_planes + 1}, cxp});
+                      Plane{p, normal(t.yaw_deg - 0.5 * t.fold_deg, t.pitch_deg), m, n_planes + 1}, cxp,
+                      target_mask(t)});
     n_planes += 2;
   }
   const bool has_wall = !scene.background_material.empty();
@@ -258,8 +260,10 @@ Frame Renderer::render_region(const Scene& scene, std::uint64_t seed, bool noise
         int target = -2;
         for (int k = static_cast<int>(scene.targets.size()) - 1; k >= 0; --k) {
           const auto& t = scene.targets[static_cast<std::size_t>(k)];
-          if (x >= t.x0 && x < t.x1 && y >= t.y0 && y < t.y1) {
-            const auto& tp = planes[static_cast<std::size_t>(k)];
+          if (x < t.x0 || x >= t.x1 || y < t.y0 || y >= t.y1) continue;
+          const auto& tp = planes[static_cast<std::size_t>(k)];
+          if (tp.mask[static_cast<std::size_t>(y - t.y0) * static_cast<std::size_t>(t.x1 - t.x0) +
+                      static_cast<std::size_t>(x - t.x0)]) {
             s = x < tp.split_x ? &tp.left : &tp.right;
             target = k;
             break;

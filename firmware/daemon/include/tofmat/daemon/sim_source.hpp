@@ -36,6 +36,7 @@ struct SimSpec {
   int gap = 15;
   double near_mm = 600.0, far_mm = 1200.0, depth_mm = 900.0;
   double yaw_deg = 10.0;
+  double pitch_deg = 20.0;  // objects: the plane's tilt about the horizontal axis
   int size = 160;
   bool realtime = true;
   std::uint64_t seed = 1;

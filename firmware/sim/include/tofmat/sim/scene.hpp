@@ -3,6 +3,8 @@
 // materials in front of a background, in the camera's pixel grid.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -21,7 +23,19 @@ struct Target {
   double fold_deg = 0.0;
   // Pixel rectangle it covers, [x0, x1) x [y0, y1); centre is its middle.
   int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  // An outline within the rectangle: a closed polygon (vertices in pixel
+  // coordinates, pixel (x, y)'s centre at (x + 0.5, y + 0.5)); the target
+  // covers the rectangle's pixels whose centres lie inside it (even-odd
+  // rule). Empty: the whole rectangle. At most kMaxOutline vertices.
+  std::vector<std::array<double, 2>> outline;
+  static constexpr std::size_t kMaxOutline = 4096;
 };
+
+// Which pixels of t's rectangle the target covers, row-major over the
+// rectangle (1: covered); every pixel without an outline. Throws
+// std::invalid_argument for an outline of fewer than 3 or more than
+// kMaxOutline vertices, or a vertex that is not finite.
+std::vector<std::uint8_t> target_mask(const Target& t);
 
 struct Scene {
   std::vector<Target> targets;  // later ones cover earlier ones
