@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar, cast
@@ -414,6 +415,85 @@ def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no
         click.echo(json.dumps({"labels": [asdict(s) for s in labels], "depth": [asdict(r) for r in results]}, indent=2))
     else:
         click.echo(format_labels_markdown(labels) + "\n\n" + format_markdown(results))
+
+
+@main.command("thickness")
+@click.argument("query", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--material", default="acryl3mm", show_default=True,
+              help="The slab material (of the simulator's calibrated library) the query is a slab of.")  # fmt: skip
+@click.option("--new-session", is_flag=True,
+              help="The query comes from another capture session than the model's (a real camera): fit "
+              "each row's offset too.")  # fmt: skip
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+def thickness_cmd(query: Path, material: str, new_session: bool, as_json: bool) -> None:
+    """A slab's thickness from QUERY.npy: its rows (2, 200) in the database's bins (600..1200 mm), or a
+    batch (n, 2, 200); NaN, or both rows exactly 0 (the database's files), is missing."""
+    from dataclasses import asdict
+
+    from .sim import load_device, load_library
+    from .sim.table import database_bins
+    from .sim.thickness import ThicknessEstimator, slab_materials
+
+    try:
+        with warnings.catch_warnings():  # (the database's files are Python 2's: numpy says so, once a file)
+            warnings.simplefilter("ignore", UserWarning)
+            q = np.asarray(np.load(query, allow_pickle=False), dtype=np.float64)
+    except (ValueError, EOFError, TypeError) as e:
+        raise click.BadParameter(f"{query}: not a readable .npy array of numbers: {e}", param_hint="QUERY") from e
+    bins = database_bins()
+    if q.shape[-2:] != (2, bins.count) or q.ndim not in (2, 3):
+        raise click.BadParameter(f"{query}: shape {q.shape}; expected (2, {bins.count}) or (n, 2, {bins.count})",
+                                 param_hint="QUERY")  # fmt: skip
+    library = load_library()
+    if material not in library.names or library[material].kind != "slab":
+        raise click.BadParameter(f"{material!r} is not a slab of the library; slabs: {', '.join(slab_materials(library))}",
+                                 param_hint="--material")  # fmt: skip
+    batch = q if q.ndim == 3 else q[None]
+    batch = np.where((batch == 0.0).all(axis=1, keepdims=True), np.nan, batch)  # the database's "missing"
+    estimator = ThicknessEstimator(load_device(), library, material, bins)
+    try:
+        results = [estimator.estimate(r, offsets=new_session) for r in batch]
+    except ValueError as e:
+        raise click.BadParameter(f"{query}: {e}", param_hint="QUERY") from e
+    if as_json:
+        out = [asdict(r) for r in results]
+        click.echo(json.dumps(out[0] if q.ndim == 2 else out, indent=2))
+        return
+    for i, r in enumerate(results):
+        prefix = "" if q.ndim == 2 else f"[{i}] "
+        if r.open_above and r.low_mm <= estimator.grid[0]:
+            said = "no thickness (the rows fit every thickness alike)"
+        elif r.open_above:
+            said = f"at least {r.low_mm:.2f} mm (the rows do not tell it from thicker slabs; best {r.thickness_mm:.2f})"
+        else:
+            said = f"{r.thickness_mm:.2f} mm (95 %: {r.low_mm:.2f}..{r.high_mm:.2f} mm)"
+        click.echo(f"{prefix}{material}: {said}, residual {r.residual_mm:.2f} mm over {r.values} values")
+
+
+@main.command("bench-thickness")
+@click.option("--material", default="acryl3mm", show_default=True, help="The slab material whose thickness varies.")
+@click.option("--thicknesses", type=NumberList(float, 0.2, 13.0),
+              help="Slab thicknesses, mm (default: 0.5,1,1.5,2,3,4,5,6,7,8,10).")  # fmt: skip
+@click.option("--sweeps", default=5, show_default=True, type=click.IntRange(1, 1000), help="Sweeps per thickness.")
+@click.option("--lengths", default="0,30", show_default=True, type=NumberList(int, 0, 200),
+              help="Sweep lengths in bins (0: the whole 600..1200 mm sweep).")  # fmt: skip
+@click.option("--json", "as_json", is_flag=True, help="Print JSON.")
+def bench_thickness_cmd(material: str, thicknesses: list[float] | None, sweeps: int, lengths: list[int],
+                        as_json: bool) -> None:  # fmt: skip
+    """Thickness estimates of simulated slabs against their truth: error by thickness, sweep length and
+    capture session."""
+    from .sim import load_library
+    from .sim.thickness import slab_materials
+    from .tools.thickness_bench import DEFAULT_THICKNESSES, bench_thickness, format_json, format_markdown
+
+    library = load_library()
+    if material not in library.names or library[material].kind != "slab":
+        raise click.BadParameter(f"{material!r} is not a slab of the library; slabs: {', '.join(slab_materials(library))}",
+                                 param_hint="--material")  # fmt: skip
+    with progress_bar("thicknesses") as progress:
+        rows = bench_thickness(material, tuple(thicknesses or DEFAULT_THICKNESSES), sweeps, tuple(lengths),
+                               progress=progress)  # fmt: skip
+    click.echo(format_json(rows) if as_json else format_markdown(rows))
 
 
 def _sim_table() -> Path:
