@@ -8,7 +8,7 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar, cast
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import click
 import numpy as np
@@ -18,6 +18,9 @@ from ._clikit import CliState, Failure, FiniteFloat, NumberList, TofmatGroup, pr
 from ._extras import require_pyplot
 from .client import Backend
 from .tools.tables import open_table
+
+if TYPE_CHECKING:
+    from .sim import MaterialLibrary
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -430,9 +433,9 @@ def thickness_cmd(query: Path, material: str, new_session: bool, as_json: bool) 
     batch (n, 2, 200); NaN, or both rows exactly 0 (the database's files), is missing."""
     from dataclasses import asdict
 
-    from .sim import load_device, load_library
+    from .sim import load_device
     from .sim.table import database_bins
-    from .sim.thickness import ThicknessEstimator, slab_materials
+    from .sim.thickness import ThicknessEstimator
 
     try:
         with warnings.catch_warnings():  # (the database's files are Python 2's: numpy says so, once a file)
@@ -444,10 +447,7 @@ def thickness_cmd(query: Path, material: str, new_session: bool, as_json: bool) 
     if q.shape[-2:] != (2, bins.count) or q.ndim not in (2, 3):
         raise click.BadParameter(f"{query}: shape {q.shape}; expected (2, {bins.count}) or (n, 2, {bins.count})",
                                  param_hint="QUERY")  # fmt: skip
-    library = load_library()
-    if material not in library.names or library[material].kind != "slab":
-        raise click.BadParameter(f"{material!r} is not a slab of the library; slabs: {', '.join(slab_materials(library))}",
-                                 param_hint="--material")  # fmt: skip
+    library = _slab_library(material)
     batch = q if q.ndim == 3 else q[None]
     batch = np.where((batch == 0.0).all(axis=1, keepdims=True), np.nan, batch)  # the database's "missing"
     estimator = ThicknessEstimator(load_device(), library, material, bins)
@@ -482,18 +482,25 @@ def bench_thickness_cmd(material: str, thicknesses: list[float] | None, sweeps: 
                         as_json: bool) -> None:  # fmt: skip
     """Thickness estimates of simulated slabs against their truth: error by thickness, sweep length and
     capture session."""
+    from .tools.thickness_bench import DEFAULT_THICKNESSES, bench_thickness, format_json, format_markdown
+
+    _slab_library(material)
+    with progress_bar("thicknesses") as progress:
+        rows = bench_thickness(material, tuple(thicknesses or DEFAULT_THICKNESSES), sweeps, tuple(lengths),
+                               progress=progress)  # fmt: skip
+    click.echo(format_json(rows) if as_json else format_markdown(rows))
+
+
+def _slab_library(material: str) -> MaterialLibrary:
+    """The simulator's calibrated library, if `material` is a slab of it (a usage error otherwise)."""
     from .sim import load_library
     from .sim.thickness import slab_materials
-    from .tools.thickness_bench import DEFAULT_THICKNESSES, bench_thickness, format_json, format_markdown
 
     library = load_library()
     if material not in library.names or library[material].kind != "slab":
         raise click.BadParameter(f"{material!r} is not a slab of the library; slabs: {', '.join(slab_materials(library))}",
                                  param_hint="--material")  # fmt: skip
-    with progress_bar("thicknesses") as progress:
-        rows = bench_thickness(material, tuple(thicknesses or DEFAULT_THICKNESSES), sweeps, tuple(lengths),
-                               progress=progress)  # fmt: skip
-    click.echo(format_json(rows) if as_json else format_markdown(rows))
+    return library
 
 
 def _sim_table() -> Path:

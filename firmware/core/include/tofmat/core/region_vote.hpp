@@ -7,8 +7,8 @@
 // `min_pixels` whose most frequent label holds at least half of its labelled
 // pixels gives that label to every valid pixel of it, those without a label
 // too (a depth outside the table's bins, say); other regions keep their
-// labels. Integers only: one scan of the frame with a union-find over the
-// ids it starts, then one pass to count and one to relabel.
+// labels. Integers only: one scan of the frame that counts each id's labels
+// with a union-find over the ids it starts, then one pass to relabel.
 #pragma once
 
 #include <cstddef>
@@ -39,12 +39,10 @@ class RegionVote {
   std::int32_t max_step_q8_;
   std::size_t min_pixels_;
   int classes_;
-  std::vector<std::uint32_t> id_;      // per pixel: its id (kNone: not valid)
+  std::vector<std::uint32_t> id_;      // per pixel: its id (0: not valid)
   std::vector<std::uint32_t> parent_;  // per id: the union-find's parent (an older id, or itself)
-  std::vector<std::uint32_t> region_;  // per id: its region
-  std::vector<std::uint32_t> size_;    // per region: its valid pixels
-  std::vector<std::uint32_t> counts_;  // per region, per class: its pixels with that label
-  std::vector<std::uint8_t> winner_;   // per region: its label, or classes_ (no vote)
+  std::vector<std::uint32_t> counts_;  // per id, per class and one more (no label): its pixels
+  std::vector<std::uint8_t> winner_;   // per id: its region's label, or classes_ (no vote)
   std::size_t voted_ = 0;
 };
 
