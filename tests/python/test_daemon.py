@@ -386,12 +386,28 @@ def test_bad_flags_are_refused(tmp_path: Path, sim_table: Path) -> None:
     base = [str(daemon_binary()), "--table", str(sim_table), "--socket", str(tmp_path / "s")]
     for args, word in ((["--profile", "nope"], "profile"), (["--source", "usb"], "source"),
                        (["--roi", "1,2,3"], "roi"), (["--candidates", "unobtainium"], "unobtainium"),
-                       (["--source", "sim:sweep,materials=unobtainium"], "unobtainium")):  # fmt: skip
+                       (["--source", "sim:sweep,materials=unobtainium"], "unobtainium"),
+                       (["--log-level", "usb=debug"], "log category"), (["--log-level", "loud"], "log level")):  # fmt: skip
         p = subprocess.run(base + args, capture_output=True, text=True, timeout=30)
         assert p.returncode != 0 and word in (p.stderr + p.stdout).lower(), (args, p.stderr)
     p = subprocess.run([str(daemon_binary()), "--table", str(tmp_path / "missing.tmx"), "--socket",
                         str(tmp_path / "s")], capture_output=True, text=True, timeout=30)  # fmt: skip
     assert p.returncode != 0 and "missing.tmx" in p.stderr
+
+
+def test_log_levels_by_category(start: Callable[..., Daemon]) -> None:
+    d = start("sim:static,material=cork,realtime=0", "--log-level", "server=debug,profile=info,*=warn")
+    with d.client() as c:
+        c.set_profile("segmentation")
+        c.set_profile("handheld")
+    d.stop()
+    lines = d.log.read_text().splitlines()
+    said = [line.split(" ", 2)[2] for line in lines]  # (after the date and the time)
+    assert any(s.startswith("debug server: client 1 (") and "hello done, protocol 1." in s for s in said), said
+    assert "info profile: profile segmentation" in said and "info profile: profile handheld" in said, said
+    assert any(s.startswith("warning daemon: the source is SIMULATED") for s in said), said
+    # Below the others' level (warn): the daemon's start and the source's states are not written.
+    assert not any(" serving: " in s or s.startswith("info kinect: device") for s in said), said
 
 
 # --- the client's errors and reconnection -----------------------------------------------------

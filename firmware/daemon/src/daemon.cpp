@@ -6,11 +6,10 @@
 #include <signal.h>
 #include <unistd.h>
 
-#include <spdlog/spdlog.h>
-
 #include <filesystem>
 
 #include "tofmat/core/table_file.hpp"
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/gpio/sim_gpio.hpp"
 
 namespace tofmat::daemon {
@@ -150,7 +149,7 @@ void Daemon::start() {
       try {
         button_->run(stop_);
       } catch (const std::exception& e) {
-        spdlog::error("the reset button stopped: {}", e.what());
+        logger(LogCategory::kGpio).error("the reset button stopped: {}", e.what());
         button_->stopped(e.what());
       }
     });
@@ -174,7 +173,7 @@ void Daemon::start() {
         device_message_ = message;
         ++device_changes_;
       }
-      spdlog::info("device {}: {}", device_state_name(s), message);
+      logger(LogCategory::kKinect).info("device {}: {}", device_state_name(s), message);
       if (line_) line_->camera(s == DeviceState::kStreaming);
       protocol::Message m;
       m.meta = {{"event", "device"},
@@ -186,14 +185,16 @@ void Daemon::start() {
     try {
       source_->run(cb, stop_);
     } catch (const std::exception& e) {
-      spdlog::error("the source stopped: {}", e.what());
+      logger(LogCategory::kKinect).error("the source stopped: {}", e.what());
       cb.state(DeviceState::kFailed, e.what());
     }
   });
-  spdlog::info("{} serving: source {}, profile {}, table {}", kVersion, source_->describe(), options_.profile.name,
-               options_.table);
+  logger(LogCategory::kDaemon)
+      .info("{} serving: source {}, profile {}, table {}", kVersion, source_->describe(), options_.profile.name,
+            options_.table);
   if (source_->simulated())
-    spdlog::warn("the source is SIMULATED: its labels are not a camera's (every label and status say so)");
+    logger(LogCategory::kDaemon)
+        .warn("the source is SIMULATED: its labels are not a camera's (every label and status say so)");
 }
 
 void Daemon::publish_reset(const char* by, std::uint64_t timestamp_ns) {
@@ -203,7 +204,7 @@ void Daemon::publish_reset(const char* by, std::uint64_t timestamp_ns) {
 }
 
 void Daemon::fail(const std::string& why) {
-  spdlog::critical("{}", why);
+  logger(LogCategory::kDaemon).critical("{}", why);
   failed_ = true;
   ::kill(::getpid(), SIGTERM);  // main's sigwait takes it: a clean stop, then exit status 1
 }
@@ -221,12 +222,12 @@ bool Daemon::reload_table() {
   const std::string path = pipeline_->table_path();
   try {
     pipeline_->set_table(load_table_file(path), path);
-    spdlog::info("reloaded table {}", path);
+    logger(LogCategory::kDaemon).info("reloaded table {}", path);
     std::lock_guard<std::mutex> lock(state_mutex_);
     last_reload_ = {{"ok", true}, {"path", path}};
     return true;
   } catch (const std::exception& e) {
-    spdlog::error("table {} not reloaded, the old one keeps serving: {}", path, e.what());
+    logger(LogCategory::kDaemon).error("table {} not reloaded, the old one keeps serving: {}", path, e.what());
     std::lock_guard<std::mutex> lock(state_mutex_);
     last_reload_ = {{"ok", false}, {"path", path}, {"error", e.what()}};
     return false;

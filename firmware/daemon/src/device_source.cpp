@@ -2,11 +2,10 @@
 // DeviceSource: opens the Kinect v2 through the driver, streams its frames, and reopens it after it goes away.
 #include "tofmat/daemon/device_source.hpp"
 
-#include <spdlog/spdlog.h>
-
 #include <chrono>
 #include <thread>
 
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/kinect/device.hpp"
 #include "tofmat/kinect/raw_unpack.hpp"
 #include "tofmat/protocol/socket.hpp"
@@ -96,7 +95,7 @@ void DeviceSource::run(const SourceCallbacks& callbacks, const std::atomic<bool>
       }
       // Say it once per distinct problem (a missing camera is retried quietly).
       if (message != reported) {
-        spdlog::warn("{}: {}; retrying every {} ms", description_, message, retry_ms_);
+        logger(LogCategory::kKinect).warn("{}: {}; retrying every {} ms", description_, message, retry_ms_);
         reported = message;
       }
       callbacks.state(DeviceState::kDisconnected, message);

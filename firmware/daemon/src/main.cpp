@@ -4,21 +4,20 @@
 // reloads the table.
 #include <signal.h>
 
-#include <spdlog/sinks/stdout_color_sinks.h>
-#include <spdlog/spdlog.h>
-
 #include <cstdio>
 
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/daemon/options.hpp"
 
 int main(int argc, char** argv) {
   int exit_code = 0;
   auto cl = tofmat::daemon::parse_command_line(argc, argv, exit_code);
   if (!cl) return exit_code;
-  // Logs on stderr (journald adds its own timestamps under systemd).
-  spdlog::set_default_logger(spdlog::stderr_color_mt("tofmatd"));
-  spdlog::set_level(spdlog::level::from_str(cl->log_level));
-  spdlog::set_pattern("%Y-%m-%d %H:%M:%S.%e %^%l%$ %v");
+  // Logs on stderr by category (the levels were checked with the options);
+  // under systemd with syslog priorities and the journal's own timestamps.
+  using tofmat::daemon::LogCategory;
+  tofmat::daemon::setup_logging(tofmat::daemon::parse_log_levels(cl->log_level), tofmat::daemon::stderr_is_journal());
+  auto& log = tofmat::daemon::logger(LogCategory::kDaemon);
 
   sigset_t signals;
   sigemptyset(&signals);
@@ -31,7 +30,7 @@ int main(int argc, char** argv) {
     daemon = std::make_unique<tofmat::daemon::Daemon>(cl->daemon);
     daemon->start();
   } catch (const std::exception& e) {
-    spdlog::critical("cannot start: {}", e.what());
+    log.critical("cannot start: {}", e.what());
     return 1;
   }
   for (;;) {
@@ -41,12 +40,12 @@ int main(int argc, char** argv) {
       daemon->reload_table();
       continue;
     }
-    spdlog::info("{}: stopping", daemon->failed() ? "a thread failed" : sig == SIGTERM ? "SIGTERM" : "SIGINT");
+    log.info("{}: stopping", daemon->failed() ? "a thread failed" : sig == SIGTERM ? "SIGTERM" : "SIGINT");
     break;
   }
   daemon->stop();
   const bool failed = daemon->failed();
   daemon.reset();
-  spdlog::info("stopped");
+  log.info("stopped");
   return failed ? 1 : 0;
 }

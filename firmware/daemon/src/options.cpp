@@ -17,6 +17,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "tofmat/daemon/log.hpp"
+
 namespace tofmat::daemon {
 namespace {
 
@@ -291,9 +293,20 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--reset-button-debounce-ms", button.debounce_ms, "a press counts when held this long")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1000.0));
-  app.add_option("--log-level", cl.log_level, "trace | debug | info | warn | error")
+  app.add_option("--log-level", cl.log_level,
+                 "LEVEL for every category, or CATEGORY=LEVEL,...[,*=LEVEL]: levels trace | debug | info | warn | "
+                 "error; categories daemon, kinect, server, pipeline, profile, gpio, line")
       ->capture_default_str()
-      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error"}));
+      ->check(
+          [](const std::string& text) {
+            try {
+              parse_log_levels(text);
+              return std::string();
+            } catch (const std::invalid_argument& e) {
+              return std::string(e.what());
+            }
+          },
+          "LEVEL or CATEGORY=LEVEL,...");
   std::string config_file;
   try {
     config_file = check_config_file(argc, argv);

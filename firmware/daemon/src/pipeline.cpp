@@ -2,10 +2,11 @@
 // Pipeline: the processing thread's frame loop, and the commands that change its profile, ROI, candidates or table.
 #include "tofmat/daemon/pipeline.hpp"
 
-#include <spdlog/spdlog.h>
+#include <spdlog/fmt/ranges.h>
 
 #include <chrono>
 
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/protocol/socket.hpp"
 
 namespace tofmat::daemon {
@@ -49,6 +50,15 @@ std::vector<std::int16_t> Pipeline::raw_buffer() {
   return std::vector<std::int16_t>(9 * kPixels);
 }
 
+void Pipeline::push(RawFrame&& frame) {
+  const std::uint64_t sequence = frame.sequence, before = queue_.dropped();
+  queue_.push(std::move(frame));
+  if (queue_.dropped() != before)
+    logger(LogCategory::kPipeline)
+        .debug("frame {} queued, an older one dropped: processing is behind the camera ({} dropped so far)", sequence,
+               queue_.dropped());
+}
+
 void Pipeline::run(const std::atomic<bool>& stop) {
   while (!stop.load()) {
     auto frame = queue_.pop(std::chrono::milliseconds(100));
@@ -70,7 +80,8 @@ void Pipeline::run(const std::atomic<bool>& stop) {
         } catch (const std::exception& e) {
           // One bad frame costs itself only; say it once per distinct reason.
           ++errors_;
-          if (last_error_ != e.what()) spdlog::error("processing frame {}: {}", frame->sequence, e.what());
+          if (last_error_ != e.what())
+            logger(LogCategory::kPipeline).error("processing frame {}: {}", frame->sequence, e.what());
           last_error_ = e.what();
         }
         const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -98,6 +109,7 @@ void Pipeline::set_profile(const std::string& name) {
   auto c = config();
   c.name = name;
   apply(c, table(), table_path());
+  logger(LogCategory::kProfile).info("profile {}", name);
 }
 
 void Pipeline::set_roi(const PixelRegion& roi) {
@@ -105,6 +117,7 @@ void Pipeline::set_roi(const PixelRegion& roi) {
   auto c = config();
   c.roi = roi;
   apply(c, table(), table_path());
+  logger(LogCategory::kProfile).info("region of interest {},{},{},{}", roi.x0, roi.y0, roi.x1, roi.y1);
 }
 
 void Pipeline::set_candidates(const std::vector<std::string>& names) {
@@ -112,6 +125,10 @@ void Pipeline::set_candidates(const std::vector<std::string>& names) {
   auto c = config();
   c.candidates = names;
   apply(c, table(), table_path());
+  if (names.empty())
+    logger(LogCategory::kProfile).info("candidates: all of the table's");
+  else
+    logger(LogCategory::kProfile).info("candidates: {}", fmt::join(names, ","));
 }
 
 void Pipeline::set_table(std::shared_ptr<const ExemplarTable> table, const std::string& path) {

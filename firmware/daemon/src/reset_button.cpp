@@ -4,14 +4,13 @@
 
 #include <poll.h>
 
-#include <spdlog/spdlog.h>
-
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
 
 #include "spec_text.hpp"
+#include "tofmat/daemon/log.hpp"
 
 namespace tofmat::daemon {
 
@@ -53,7 +52,7 @@ void ResetButton::run(const std::atomic<bool>& stop) {
         continue;
       }
       ++presses_;
-      spdlog::info("reset button ({}): the accumulation starts over", options_.line);
+      logger(LogCategory::kGpio).info("reset button ({}): the accumulation starts over", options_.line);
       on_press_(p.timestamp_ns);
     }
   }

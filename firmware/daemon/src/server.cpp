@@ -14,6 +14,7 @@
 #include <cerrno>
 #include <deque>
 
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/protocol/schema.hpp"
 
 namespace tofmat::daemon {
@@ -107,10 +108,11 @@ Server::Server(ServerOptions options, Handler handler)
     tcp_ = protocol::listen_tcp(a.host, any_port ? 0 : a.port);
     tcp_port_ = protocol::local_port(tcp_.get());
     if (a.host != "localhost" && a.host.rfind("127.", 0) != 0)
-      spdlog::warn(
-          "TCP listens on {}: reachable from the network, where the token is all that stands between the "
-          "box and anyone (use 127.0.0.1 and a tunnel unless you mean it)",
-          options_.tcp);
+      logger(LogCategory::kServer)
+          .warn(
+              "TCP listens on {}: reachable from the network, where the token is all that stands between the "
+              "box and anyone (use 127.0.0.1 and a tunnel unless you mean it)",
+              options_.tcp);
   }
   if (!unix_ && !tcp_) throw std::invalid_argument("no socket to listen on (give a socket path or tcp)");
 }
@@ -166,9 +168,9 @@ void Server::note(const char* kind, spdlog::level::level_enum level, const std::
     return;
   }
   if (held_back > 0) {
-    spdlog::log(level, "{} ({} more like it in the last interval not logged)", text, held_back);
+    logger(LogCategory::kServer).log(level, "{} ({} more like it in the last interval not logged)", text, held_back);
   } else {
-    spdlog::log(level, "{}", text);
+    logger(LogCategory::kServer).log(level, "{}", text);
   }
 }
 
@@ -322,6 +324,9 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       }
     }
     c.ready = true;
+    logger(LogCategory::kServer)
+        .debug("client {} ({}): hello done, protocol {}.{}, role {}", c.id, c.peer.key(), protocol::kProtocolVersion,
+               protocol::kProtocolMinor, role_name(c.role));
     r.result = {{"protocol", protocol::kProtocolVersion},
                 {"minor", protocol::kProtocolMinor},
                 {"client_id", c.id},

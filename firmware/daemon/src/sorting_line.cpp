@@ -5,14 +5,13 @@
 #include <poll.h>
 #include <unistd.h>
 
-#include <spdlog/spdlog.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <set>
 
 #include "spec_text.hpp"
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/gpio/sim_gpio.hpp"
 
 namespace tofmat::daemon {
@@ -214,9 +213,9 @@ void SortingLine::publish_sort(const line::SortEvent& e) {
 
 void SortingLine::publish_line(const std::string& kind, const std::string& message) {
   if (kind == "alarm")
-    spdlog::warn("sorting line: alarm {}", message);
+    logger(LogCategory::kLine).warn("sorting line: alarm {}", message);
   else
-    spdlog::warn("sorting line: {}: {}", kind, message);
+    logger(LogCategory::kLine).warn("sorting line: {}: {}", kind, message);
   protocol::Message m;
   m.meta = {{"event", "line"},
             {"kind", kind},

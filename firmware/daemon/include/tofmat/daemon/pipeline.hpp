@@ -26,7 +26,9 @@ class Pipeline {
            std::size_t queue_frames = 2);
 
   void set_emitter(Emitter emit) { emit_ = std::move(emit); }  // before run()
-  void push(RawFrame&& frame) { queue_.push(std::move(frame)); }
+  // Queues a frame, dropping the oldest waiting one if the queue is full
+  // (said at debug level: a dropped frame is processing behind the camera).
+  void push(RawFrame&& frame);
   // What a camera source should unpack from its next packet: the active
   // profile's input region, nothing between sorting bursts (any thread).
   std::optional<PixelRegion> wanted_region() const;
