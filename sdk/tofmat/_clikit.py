@@ -240,3 +240,14 @@ __all__ = [
     "setup_logging",
     "state",
 ]
+
+
+def strict_json(value: Any) -> Any:
+    """``value`` with every infinite or NaN float as a string ("inf", "nan"): JSON has no such numbers."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(v) for v in value]
+    return value

@@ -710,33 +710,53 @@ def panel_cmd(address: str, token_file: Path | None, bus: str | None, oled_addre
 @click.option(
     "--count", default=0, type=click.IntRange(0, None), help="Stop after this many labels (0: until interrupted)."
 )
-def watch(address: str, token_file: Path | None, top: int, count: int) -> None:
+@click.option("--json", "as_json", is_flag=True,
+              help="One JSON object a line: the daemon first, then each label and device event as the protocol's "
+              "fields (for a program to read).")  # fmt: skip
+def watch(address: str, token_file: Path | None, top: int, count: int, as_json: bool) -> None:
     """Live labels from tofmatd with their ranking, in the terminal."""
+    from dataclasses import asdict
+
+    from ._clikit import strict_json
     from .client import ClientError, DeviceEvent, Label
 
-    redraw = sys.stdout.isatty()
+    def emit_json(kind: str, fields: dict[str, Any]) -> None:
+        click.echo(json.dumps(strict_json({"event": kind, **fields})))
+
+    redraw = sys.stdout.isatty() and not as_json
     n = 0
     with _connect(address, token_file) as client:
-        click.echo(f"{client.hello['server']} at {address}: profile {client.status()['profile']}")
+        profile = client.status()["profile"]
+        if as_json:
+            emit_json("daemon", {"server": client.hello["server"], "address": address, "profile": profile,
+                                 "minor": client.hello.get("minor", 0)})  # fmt: skip
+        else:
+            click.echo(f"{client.hello['server']} at {address}: profile {profile}")
         client.subscribe("labels", "device")
         try:
             for e in client.events(timeout=None):
                 if isinstance(e, DeviceEvent):
-                    click.echo(f"\ndevice {e.state}: {e.message}")
+                    if as_json:
+                        emit_json("device", asdict(e))
+                    else:
+                        click.echo(f"\ndevice {e.state}: {e.message}")
                     continue
                 if not isinstance(e, Label):
                     continue
-                if e.state == "no_target":
-                    line = f"frame {e.frame:6d}  (no target)"
-                else:
-                    ranks = "  ".join(f"{r.material} {r.distance:.2f}" for r in e.ranking[:top])
-                    line = f"frame {e.frame:6d}  bins {e.bins_covered:3d}  {e.material:12s}  | {ranks} mm^2"
-                if e.truth is not None and e.truth.material:
-                    line += f"  [truth {e.truth.material}]"
-                if e.simulated:
-                    line += "  [SIMULATED]"
-                click.echo(("\r\033[K" + line) if redraw else line, nl=not redraw)
                 n += 1
+                if as_json:
+                    emit_json("label", asdict(e))
+                else:
+                    if e.state == "no_target":
+                        line = f"frame {e.frame:6d}  (no target)"
+                    else:
+                        ranks = "  ".join(f"{r.material} {r.distance:.2f}" for r in e.ranking[:top])
+                        line = f"frame {e.frame:6d}  bins {e.bins_covered:3d}  {e.material:12s}  | {ranks} mm^2"
+                    if e.truth is not None and e.truth.material:
+                        line += f"  [truth {e.truth.material}]"
+                    if e.simulated:
+                        line += "  [SIMULATED]"
+                    click.echo(("\r\033[K" + line) if redraw else line, nl=not redraw)
                 if count and n >= count:
                     break
         except KeyboardInterrupt:

@@ -771,6 +771,16 @@ def test_watch_and_status_on_the_command_line(start: Callable[..., Daemon]) -> N
     lines = [ln for ln in p.stdout.splitlines() if ln.startswith("frame")]
     assert len(lines) == 8 and any("[truth paper]" in ln for ln in lines)
     assert "mm^2" in p.stdout or "(no target)" in p.stdout
+    # For a program: one JSON object a line, the daemon first, then each label with the protocol's fields.
+    p = subprocess.run(["python3", "-m", "tofmat", "watch", "--address", str(d.socket), "--count", "5", "--json"],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    objects = [json.loads(line) for line in p.stdout.splitlines()]
+    assert objects[0]["event"] == "daemon" and objects[0]["profile"] == "handheld" and objects[0]["minor"] >= 9
+    labels = [o for o in objects if o["event"] == "label"]
+    assert len(labels) == 5 and all(o["profile"] == "handheld" and o["simulated"] for o in labels)
+    assert all(isinstance(o["frame"], int) and isinstance(o["ranking"], list) for o in labels)
+    assert any(o["truth"] and o["truth"]["material"] == "paper" for o in labels)
     p = subprocess.run(["python3", "-m", "tofmat", "status", "--address", str(d.socket)], capture_output=True,
                        text=True, timeout=60)  # fmt: skip
     assert p.returncode == 0 and json.loads(p.stdout)["profile"] == "handheld"

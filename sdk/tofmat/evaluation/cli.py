@@ -5,14 +5,13 @@ group by ``main.add_command(evaluate)``."""
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import click
 
-from .._clikit import TofmatCommand, UserError, progress_bar
+from .._clikit import TofmatCommand, UserError, progress_bar, strict_json
 from ..report.cli import resolve_table, table_option
 
 
@@ -143,7 +142,7 @@ def evaluate(
                 raise UserError(str(e)) from e
     text = (
         json.dumps(
-            _strict_json([{**asdict(r), "tuning": [[asdict(p), s] for p, s in r.tuning]} for r in results]), indent=2
+            strict_json([{**asdict(r), "tuning": [[asdict(p), s] for p, s in r.tuning]} for r in results]), indent=2
         )
         if as_json
         else format_markdown(results, confusions=confusion)
@@ -157,13 +156,3 @@ def evaluate(
         out.write_text(text + "\n")
     click.echo(text)
 
-
-def _strict_json(value: Any) -> Any:
-    """``value`` with every infinite or NaN float as a string ("inf", "nan"): JSON has no such numbers."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    if isinstance(value, dict):
-        return {k: _strict_json(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_strict_json(v) for v in value]
-    return value
