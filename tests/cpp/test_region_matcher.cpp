@@ -272,6 +272,32 @@ TEST_P(RegionMatcherBackends, ResetForgetsEveryObservation) {
   EXPECT_LT(c->best().distance, 0.05);
 }
 
+// A twin (the sorting profile's per-frame matcher) has the same candidates
+// and method but an accumulation of its own: neither sees the other's frames.
+TEST_P(RegionMatcherBackends, ATwinMatchesLikeItsOriginalWithItsOwnFrames) {
+  const auto table = real_table();
+  const std::vector<std::uint32_t> candidates = {material_index(*table, "acryl"), material_index(*table, "copper"),
+                                                 material_index(*table, "cork")};
+  for (auto method : {tofmat::daemon::Method::kEq12, tofmat::daemon::Method::kSession}) {
+    RegionMatcher m(table, candidates, GetParam(), method);
+    sweep(m, "copper", 50, 10);
+    RegionMatcher t = m.twin();
+    EXPECT_EQ(t.bins_covered(), 0u);
+    EXPECT_FALSE(t.classify());
+    sweep(t, "acryl", 120, 6);
+    ASSERT_TRUE(t.classify());
+    ASSERT_TRUE(m.classify());
+    EXPECT_EQ(table->materials()[t.classify()->best().index], "acryl");
+    EXPECT_EQ(table->materials()[m.classify()->best().index], "copper");  // (its own ten frames, untouched)
+    EXPECT_EQ(m.bins_covered(), 10u);
+    EXPECT_EQ(t.classify()->ranking.size(), candidates.size());  // the same candidates
+    // The same query gives the same ranking in both (one classifier).
+    RegionMatcher fresh = m.twin();
+    sweep(fresh, "acryl", 120, 6);
+    EXPECT_EQ(fresh.classify()->best().distance, t.classify()->best().distance);
+  }
+}
+
 TEST_P(RegionMatcherBackends, CandidateSubsetRanksOnlyTheCandidatesInTheFullTablesOrder) {
   const auto table = real_table();
   const std::vector<std::uint32_t> subset = {material_index(*table, "silicone"), material_index(*table, "pvc"),

@@ -301,6 +301,22 @@ def test_tofmatd_labels_with_a_model(start: Callable[..., Daemon], db_dir: Path)
         assert e.ranking[0].material == e.material
 
 
+@pytest.mark.board
+def test_the_sorting_profile_labels_bursts_with_a_model(start: Callable[..., Daemon], db_dir: Path) -> None:
+    # The sorting profile matches each burst and each of its frames (two matchers, one loaded model).
+    d = start("sim:static,material=cork,depth=850,realtime=0", "--profile", "sorting", "--burst", "4", *onnx_flags(),
+              table=db_dir)  # fmt: skip
+    materials = sorted(p.stem for p in db_dir.glob("*.npy"))
+    with d.client() as c:
+        assert c.status()["classifier"] == "onnx"
+        c.subscribe("labels")
+        for _ in range(2):
+            n = c.trigger()
+            label = next(c.labels(timeout=60))
+            assert label.trigger == n and label.state in ("final", "mixed"), label
+            assert label.material in materials and label.confidence is not None
+
+
 def _replay_labels(binary: Path, library: Path, recording: Path, table: Path, tmp_path: Path) -> list[Any]:
     """The labels of the second whole loop of a lossless replay through a model."""
     tmp_path.mkdir(exist_ok=True)

@@ -34,18 +34,24 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
       float_acc_(table_->bins(), table_->n_rows()) {
   if (!open_set) calibration_.unknown_fits.clear();  // never unknown
   if (method == Method::kOnnx) {
-    onnx_ = std::make_unique<learn::OnnxClassifier>(table_, model.path, std::move(candidates), model.library);
+    onnx_ = std::make_shared<const learn::OnnxClassifier>(table_, model.path, std::move(candidates), model.library);
     if (!onnx_->contract().temperatures.empty()) calibration_.temperatures = onnx_->contract().temperatures;
   } else if (method == Method::kSession && backend_ == Backend::kFixed)
-    fixed_session_ = std::make_unique<FixedSessionClassifier>(table_, SessionPrior::tuned(*table_),
-                                                              std::vector<double>{}, std::move(candidates));
+    fixed_session_ = std::make_shared<const FixedSessionClassifier>(table_, SessionPrior::tuned(*table_),
+                                                                    std::vector<double>{}, std::move(candidates));
   else if (method == Method::kSession)
-    session_ = std::make_unique<SessionClassifier>(table_, SessionPrior::tuned(*table_), std::vector<double>{},
-                                                   std::move(candidates));
+    session_ = std::make_shared<const SessionClassifier>(table_, SessionPrior::tuned(*table_), std::vector<double>{},
+                                                         std::move(candidates));
   else if (backend_ == Backend::kFixed)
-    fixed_ = std::make_unique<FixedClassifier>(table_, std::move(candidates));
+    fixed_ = std::make_shared<const FixedClassifier>(table_, std::move(candidates));
   else
-    float_ = std::make_unique<FloatClassifier>(table_, std::move(candidates));
+    float_ = std::make_shared<const FloatClassifier>(table_, std::move(candidates));
+}
+
+RegionMatcher RegionMatcher::twin() const {
+  RegionMatcher t(*this);  // (the classifiers' pointers are shared; they never change)
+  t.reset();
+  return t;
 }
 
 RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelRegion& region) const {

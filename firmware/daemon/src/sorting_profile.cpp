@@ -26,7 +26,7 @@ class SortingProfile : public Profile {
       : config_(c),
         table_(table),
         matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model),
-        frame_matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model) {}
+        frame_matcher_(matcher_.twin()) {}  // (one classifier for both: a learned model is loaded once)
 
   std::uint64_t trigger(int burst) override {
     matcher_.reset();

@@ -29,6 +29,10 @@ class RegionMatcher {
   RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend,
                 Method method = Method::kEq12, bool open_set = false, const LearnedModel& model = {});
 
+  // A matcher of the same table, candidates and method with an accumulation
+  // of its own, sharing this one's classifier (a learned model is loaded once).
+  RegionMatcher twin() const;
+
   struct Decoded {
     std::variant<DecodedFrame, FixedDecodedFrame> frame;
     PixelRegion region;
@@ -61,11 +65,12 @@ class RegionMatcher {
   std::shared_ptr<const ExemplarTable> table_;
   Backend backend_;
   tofmat::Calibration calibration_;  // (the confidence's, not the camera's)
-  std::unique_ptr<FixedClassifier> fixed_;
-  std::unique_ptr<FloatClassifier> float_;
-  std::unique_ptr<SessionClassifier> session_;             // Method::kSession, the float backend
-  std::unique_ptr<FixedSessionClassifier> fixed_session_;  // Method::kSession, the fixed-point backend
-  std::unique_ptr<learn::OnnxClassifier> onnx_;            // Method::kOnnx, either backend's query
+  // The method's classifier (one of them; immutable, so a twin shares it).
+  std::shared_ptr<const FixedClassifier> fixed_;
+  std::shared_ptr<const FloatClassifier> float_;
+  std::shared_ptr<const SessionClassifier> session_;             // Method::kSession, the float backend
+  std::shared_ptr<const FixedSessionClassifier> fixed_session_;  // Method::kSession, the fixed-point backend
+  std::shared_ptr<const learn::OnnxClassifier> onnx_;            // Method::kOnnx, either backend's query
   FixedDepthBinAccumulator fixed_acc_;
   DepthBinAccumulator float_acc_;
 };
