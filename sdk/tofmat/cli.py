@@ -397,8 +397,10 @@ def bench_daemon_cmd(table_path: Path | None, profiles: str, clients: list[int],
               "3 and with 6 materials at 600..1200 mm).")  # fmt: skip
 @click.option("--frames", default=5, show_default=True, type=click.IntRange(1, 1000), help="Frames per scene.")
 @click.option("--no-region-vote", is_flag=True, help="Run tofmatd with --no-region-vote.")
+@click.option("--accumulate", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Run tofmatd with --accumulate N (each pixel's features averaged over N frames).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print JSON.")
-def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no_region_vote: bool,
+def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no_region_vote: bool, accumulate: int,
                     as_json: bool) -> None:  # fmt: skip
     """tofmatd's segmentation on simulated scenes against their truth: the label map's accuracy (away
     from the targets' edges and near them), and the material-corrected depth's error per material."""
@@ -410,8 +412,8 @@ def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no
     specs = [s.strip() for s in scenes.split(";") if s.strip()] if scenes else list(DEFAULT_SCENES)
     try:
         with progress_bar("scenes") as progress:
-            labels, results = bench_depth(table, specs, frames, progress,
-                                          ["--no-region-vote"] if no_region_vote else None)  # fmt: skip
+            extra = [*(["--no-region-vote"] if no_region_vote else []), "--accumulate", str(accumulate)]
+            labels, results = bench_depth(table, specs, frames, progress, extra)
     except (RuntimeError, ValueError) as e:
         raise click.ClickException(str(e)) from e
     if as_json:

@@ -7,6 +7,7 @@
 //   tofmat_bench_profiles [--profile all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|
 //                                    smooth-box|smooth-majority]
 //                         [--reps R] [--kernel best|scalar] [--smooth N] [--no-truth] [--no-region-vote]
+//                         [--accumulate N]
 //                         [--table DIR|FILE.tmx] [--sim-data DIR] [--candidates a,b,c]
 //
 // The path measured, per frame, as tofmatd runs it (docs/daemon.md):
@@ -119,6 +120,7 @@ struct Options {
   int threads = 1;  // segmentation: threads sharing each frame (one core unless told)
   bool truth = true;
   bool region_vote = true;  // segmentation: --no-region-vote leaves it out
+  int accumulate = 1;       // segmentation: --accumulate N (frames each pixel's features are averaged over)
   std::vector<std::string> candidates;
   std::string classifier;  // empty: the daemon's default
 };
@@ -132,7 +134,7 @@ const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting"
       "error: %s\nusage: tofmat_bench_profiles [--profile "
       "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
       "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
-      "                             [--no-region-vote]\n"
+      "                             [--no-region-vote] [--accumulate N]\n"
       "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c] [--classifier "
       "eq12|session]\n",
       why);
@@ -175,6 +177,9 @@ Options parse(int argc, char** argv) {
     } else if (a == "--smooth") {
       o.smooth = static_cast<int>(std::strtol(v.c_str(), &end, 10));
       if (*end != '\0') usage("--smooth takes an odd number of pixels");
+    } else if (a == "--accumulate") {
+      o.accumulate = static_cast<int>(std::strtol(v.c_str(), &end, 10));
+      if (*end != '\0' || o.accumulate < 1 || o.accumulate > 256) usage("--accumulate takes 1..256 frames");
     } else if (a == "--threads") {
       o.threads = static_cast<int>(std::strtol(v.c_str(), &end, 10));
       if (*end != '\0' || o.threads < 0) usage("--threads takes a count >= 0 (0: every core)");
@@ -465,6 +470,7 @@ ProfileConfig config_of(const Options& o, const std::string& profile, Backend ba
   if (!o.classifier.empty()) c.method = parse_method(o.classifier);
   if (o.smooth > 0) c.smooth = o.smooth;
   c.region_vote = o.region_vote;
+  c.accumulate = o.accumulate;
   c.threads = o.threads;
   kernel_applied = set_profile_kernel(c, fixed_kernel(o.kernel));
   return c;

@@ -89,9 +89,9 @@ TEST(Options, EveryFlagReachesItsOption) {
                         "--control-token-file", control.string(), "--control-group", "root",
                         "--max-tcp-clients", "5", "--max-clients-per-peer", "3", "--idle-timeout", "12",
                         "--peer-request-rate", "50", "--peer-connect-rate", "2.5", "--roi", "10,20,60,70",
-                        "--candidates", "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--no-region-vote",
+                        "--candidates", "pvc,epvc", "--top-k", "3", "--burst", "12", "--smooth", "5", "--no-region-vote", "--accumulate", "8",
                         "--threads", "3", "--queue-frames", "4", "--max-clients", "9",
-                        "--sim-data", "/opt/sim", "--log-level", "debug"});
+                        "--sim-data", "/opt/sim", "--log-level", "server=debug,*=warn"});
   // clang-format on
   std::filesystem::remove(token);
   std::filesystem::remove(control);
@@ -119,11 +119,12 @@ TEST(Options, EveryFlagReachesItsOption) {
   EXPECT_EQ(o.profile.burst, 12);
   EXPECT_EQ(o.profile.smooth, 5);
   EXPECT_FALSE(o.profile.region_vote);
+  EXPECT_EQ(o.profile.accumulate, 8);
   EXPECT_EQ(o.profile.threads, 3);
   EXPECT_EQ(o.queue_frames, 4u);
   EXPECT_EQ(o.server.max_clients, 9u);
   EXPECT_EQ(o.source_options.sim_data_dir, "/opt/sim");
-  EXPECT_EQ(p.cl->log_level, "debug");
+  EXPECT_EQ(p.cl->log_level, "server=debug,*=warn");
 }
 
 TEST(Options, TheResetButtonReachesItsOptionsWithOrWithoutALine) {
@@ -198,18 +199,22 @@ TEST(Options, HelpAndVersionExitWithZero) {
 
 TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
   const auto short_token = token_file("short_token", "too short\n");
-  expect_usage_error({});                                         // no table
-  expect_usage_error({"--table", "t", "--no-such-flag"});         // unknown flag
-  expect_usage_error({"--table", "t", "stray"});                  // stray argument
-  expect_usage_error({"--table"});                                // a flag without its value
-  expect_usage_error({"--table", "t", "--top-k", "many"});        // not a number
-  expect_usage_error({"--table", "t", "--queue-frames", "0"});    // out of range
-  expect_usage_error({"--table", "t", "--max-clients", "5000"});  // out of range
-  expect_usage_error({"--table", "t", "--threads", "-1"});        // out of range
-  expect_usage_error({"--config", "/dev/zero"});                  // not a regular file (endless)
-  expect_usage_error({"--table", "t", "--log-level", "chatty"});  // not a level
-  expect_usage_error({"--table", "t", "--backend", "gpu"});       // not a backend
-  expect_usage_error({"--table", "t", "--classifier", "knn"});    // not a classifier
+  expect_usage_error({});                                                 // no table
+  expect_usage_error({"--table", "t", "--no-such-flag"});                 // unknown flag
+  expect_usage_error({"--table", "t", "stray"});                          // stray argument
+  expect_usage_error({"--table"});                                        // a flag without its value
+  expect_usage_error({"--table", "t", "--top-k", "many"});                // not a number
+  expect_usage_error({"--table", "t", "--queue-frames", "0"});            // out of range
+  expect_usage_error({"--table", "t", "--max-clients", "5000"});          // out of range
+  expect_usage_error({"--table", "t", "--threads", "-1"});                // out of range
+  expect_usage_error({"--config", "/dev/zero"});                          // not a regular file (endless)
+  expect_usage_error({"--table", "t", "--log-level", "chatty"});          // not a level
+  expect_usage_error({"--table", "t", "--log-level", "usb=debug"});       // not a category
+  expect_usage_error({"--table", "t", "--log-level", "server=debug,x"});  // not CATEGORY=LEVEL
+  expect_usage_error({"--table", "t", "--accumulate", "0"});              // out of range
+  expect_usage_error({"--table", "t", "--accumulate", "257"});            // out of range
+  expect_usage_error({"--table", "t", "--backend", "gpu"});               // not a backend
+  expect_usage_error({"--table", "t", "--classifier", "knn"});            // not a classifier
   // The open set needs the session matcher's noise model; it reaches its option.
   expect_usage_error({"--table", "t", "--classifier", "eq12", "--open-set"});
   {

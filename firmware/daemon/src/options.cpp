@@ -216,6 +216,11 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
   app.add_option("--burst", o.profile.burst, "sorting: frames per trigger")->capture_default_str();
   app.add_option("--smooth", o.profile.smooth, "segmentation: window side (odd pixels)")->capture_default_str();
+  app.add_option("--accumulate", o.profile.accumulate,
+                 "segmentation: frames each pixel's features are averaged over, starting over where its depth "
+                 "jumps (1: each frame on its own)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 256));
   app.add_flag_callback(
       "--no-region-vote", [&o] { o.profile.region_vote = false; },
       "segmentation: leave out the region vote (each surface of steady depth taking its majority label)");

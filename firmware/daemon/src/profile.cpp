@@ -61,6 +61,7 @@ void validate(const ProfileConfig& c, const ExemplarTable& table) {
   if (c.burst < 1 || c.burst > 300) throw std::invalid_argument("burst must lie in [1, 300] frames");
   if (c.smooth < 1 || c.smooth > 15 || c.smooth % 2 == 0)
     throw std::invalid_argument("smooth must be an odd number of pixels in [1, 15]");
+  if (c.accumulate < 1 || c.accumulate > 256) throw std::invalid_argument("accumulate must be 1..256 frames");
   if (c.threads < 0 || c.threads > 64) throw std::invalid_argument("threads must lie in [0, 64] (0: every core)");
   if (!(c.min_valid_fraction > 0.0 && c.min_valid_fraction <= 1.0))
     throw std::invalid_argument("min_valid_fraction must lie in (0, 1]");

@@ -4,7 +4,9 @@
 // the pixel's own depth) among a short candidate list. The features are
 // averaged over a small window of valid pixels first (a single pixel's
 // features are a few mm noisy) and the label map is cleaned with a majority
-// filter, both in integers (frame_smoothing.hpp). Runs on the fixed-point
+// filter, both in integers (frame_smoothing.hpp); with --accumulate, over the
+// pixel's last frames too (frame_accumulator.hpp), and each surface of steady
+// depth takes its majority label (region_vote.hpp). Runs on the fixed-point
 // decode and the per-pixel classifier (PixelClassifier: AVX2, NEON or
 // scalar, the same labels). The frame is split into bands of rows over the
 // configured threads; every step gives the same values whatever the split.
@@ -13,6 +15,7 @@
 
 #include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/fixed_decode.hpp"
+#include "tofmat/core/frame_accumulator.hpp"
 #include "tofmat/core/frame_smoothing.hpp"
 #include "tofmat/core/pixel_classifier.hpp"
 #include "tofmat/core/region_vote.hpp"
@@ -35,7 +38,10 @@ class SegmentationProfile : public Profile {
         workers_(std::min(BandWorkers::bands_for(c.threads), kHeight)),
         mean_{std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)},
         unclean_(kPixels),
+        accumulator_(c.accumulate > 1 ? kPixels : 0, c.accumulate, kAccumulateJumpQ8),  // (no memory unless used)
         vote_(kWidth, kHeight, kRegionStepQ8, kRegionMinPixels, static_cast<int>(compact_.candidates().size())) {
+    if (c.accumulate > 1)
+      for (auto& plane : accumulated_) plane.resize(kPixels);
     for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
     for (int b = 0; b < workers_.bands() && config_.smooth > 1; ++b) {
       box_.emplace_back(kWidth, kHeight, config_.smooth);
@@ -71,7 +77,7 @@ class SegmentationProfile : public Profile {
     emit.label_map(e);
   }
 
-  void reset() override {}
+  void reset() override { accumulator_.reset(); }
 
  private:
   // Rows [y0, y1) of band b.
@@ -86,23 +92,31 @@ class SegmentationProfile : public Profile {
   // before the next, since the windows reach into the neighbouring bands.
   void label(const RawFrame& frame, std::uint8_t* labels) {
     size_fixed_frame(frame_, kPixels);  // (no allocation once sized; restores a frame an exception left lent)
+    const bool accumulate = config_.accumulate > 1;
     workers_.run([&](int b) {
       const auto [y0, y1] = rows(b);
       decode_pixels_fixed(frame.raw.data(), frame.calibration->fixed_tables, at(y0), at(y1) - at(y0), thresholds_,
                           planes_of(frame_, at(y0)));
+      // Each pixel's means over its last frames (its own rows only: no window reaches across bands).
+      if (accumulate)
+        accumulator_.add(frame_.combined_q8.data(), frame_.flags.data(), frame_.features_q16[0].data(),
+                         frame_.features_q16[1].data(), at(y0), at(y1), accumulated_[0].data(), accumulated_[1].data(),
+                         accumulated_[2].data());
     });
     const bool smooth = config_.smooth > 1;
     workers_.run([&](int b) {
       const auto [y0, y1] = rows(b);
-      const std::int32_t* f0 = frame_.features_q16[0].data();
-      const std::int32_t* f1 = frame_.features_q16[1].data();
+      // The depth that picks a pixel's bin and its features: this frame's, or the means over frames.
+      const std::int32_t* depth = accumulate ? accumulated_[0].data() : frame_.combined_q8.data();
+      const std::int32_t* f0 = accumulate ? accumulated_[1].data() : frame_.features_q16[0].data();
+      const std::int32_t* f1 = accumulate ? accumulated_[2].data() : frame_.features_q16[1].data();
       if (smooth) {
         box_[static_cast<std::size_t>(b)].apply(f0, f1, frame_.flags.data(), y0, y1, mean_[0].data(), mean_[1].data());
         f0 = mean_[0].data();
         f1 = mean_[1].data();
       }
-      pixels_.classify_range(frame_.combined_q8.data() + at(y0), frame_.flags.data() + at(y0), f0 + at(y0), f1 + at(y0),
-                             at(y1) - at(y0), (smooth ? unclean_.data() : labels) + at(y0));
+      pixels_.classify_range(depth + at(y0), frame_.flags.data() + at(y0), f0 + at(y0), f1 + at(y0), at(y1) - at(y0),
+                             (smooth ? unclean_.data() : labels) + at(y0));
     });
     if (smooth) {
       workers_.run([&](int b) {
@@ -146,8 +160,14 @@ class SegmentationProfile : public Profile {
   // (a plane at 60 degrees to the rays steps about 6 mm a pixel at 1.2 m);
   // a surface of 100 pixels or more votes.
   static constexpr std::int32_t kRegionStepQ8 = 10 * 256;
+  // A pixel's depth this far from its mean over frames starts its accumulation over.
+  static constexpr std::int32_t kAccumulateJumpQ8 = 16 * 256;
   static constexpr std::size_t kRegionMinPixels = 100;
   std::vector<std::uint8_t> unclean_;  // the labels before the majority filter
+  FrameAccumulator accumulator_;
+  // Its means (depth Q8, two features Q16), written only with --accumulate above 1.
+  std::array<std::vector<std::int32_t>, 3> accumulated_{
+      std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)};
   RegionVote vote_;
   std::vector<std::string> names_;
 };

@@ -45,7 +45,8 @@ class SceneLabels:
     interior: float
     band: float
     band_share: float  # of the target pixels, the share in the band
-    first_frame: float  # the first frame taken (frames are labelled each on its own)
+    first_frame: float  # the first frame taken (the third the daemon labels)
+    last_frame: float  # the last one (with --accumulate, the pixels' means hold the most frames there)
 
 
 def boundary_band(target: npt.NDArray[np.int16], px: int = BAND_PX) -> npt.NDArray[np.bool_]:
@@ -146,7 +147,7 @@ def bench_scene(table: Path, spec: str, frames: int, timeout_s: float = 120.0,
     acc = np.array(per_frame)
     mean = acc.mean(axis=0)
     labels = SceneLabels(spec, len(taken), float(mean[0]), float(mean[1]), float(mean[2]),
-                         float(band.sum() / on_target.sum()), float(acc[0, 0]))  # fmt: skip
+                         float(band.sum() / on_target.sum()), float(acc[0, 0]), float(acc[-1, 0]))  # fmt: skip
     out = []
     for i, name in enumerate(materials):
         on = (target == i) & np.isfinite(true_range)
@@ -187,12 +188,14 @@ def bench_depth(table: Path, scenes: list[str], frames: int, progress: Progress 
 
 def format_labels_markdown(labels: list[SceneLabels]) -> str:
     lines = [
-        f"| scene | frames | target pixels right | away from edges | within {BAND_PX} px of an edge (share) | first frame |",
-        "|---|---:|---:|---:|---:|---:|",
+        f"| scene | frames | target pixels right | away from edges | within {BAND_PX} px of an edge (share) | first frame "
+        "| last frame |",
+        "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for s in labels:
         lines.append(f"| {s.scene} | {s.frames} | {100 * s.accuracy:.1f} % | {100 * s.interior:.1f} % | "
-                     f"{100 * s.band:.1f} % ({100 * s.band_share:.1f} %) | {100 * s.first_frame:.1f} % |")  # fmt: skip
+                     f"{100 * s.band:.1f} % ({100 * s.band_share:.1f} %) | {100 * s.first_frame:.1f} % | "
+                     f"{100 * s.last_frame:.1f} % |")  # fmt: skip
     return "\n".join(lines)
 
 

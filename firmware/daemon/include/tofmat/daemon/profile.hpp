@@ -66,6 +66,7 @@ struct ProfileConfig {
   double jump_mm = 150.0;               // handheld: a depth jump between frames is a new target
   int smooth = 9;                       // segmentation: window side of the features' mean and the labels' majority
   bool region_vote = true;              // segmentation: each depth-continuous surface takes its majority label
+  int accumulate = 1;                   // segmentation: frames each pixel's features are averaged over (1: none)
   int threads = 0;                      // segmentation: threads sharing each frame (0: every core)
 };
 
