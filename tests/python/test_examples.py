@@ -81,6 +81,22 @@ def test_segmentation_map(start: Callable[..., Daemon], tmp_path: Path) -> None:
     assert_one_line_error(run("segmentation_map.py", "--address", address, "--expect"), "not segmentation")
 
 
+def test_corrected_points(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    d = start("sim:regions,materials=acryl+cork+paper,near=700,far=1000,realtime=0", "--candidates", "cork,paper,acryl")
+    out = ok(run("corrected_points.py", "--address", listening(d), "--npy", str(tmp_path / "pts")))
+    rows = {m: (int(n), float(a), float(b), float(c)) for m, n, a, b, c in
+            re.findall(r"^(\w+) +(\d+) +([\d.]+)mm +([\d.]+)mm +([+-][\d.]+)mm$", out, re.M)}  # fmt: skip
+    assert sorted(rows) == ["acryl", "cork", "paper"], out
+    for name, (n, measured, corrected, correction) in rows.items():
+        assert n > 20_000 and abs(measured - corrected - correction) < 1.0, (name, out)
+        assert 5.0 < abs(correction) < 100.0, (name, out)  # each material's own distortion, taken off
+    points, labels = np.load(tmp_path / "pts_points.npy"), np.load(tmp_path / "pts_labels.npy")
+    assert points.shape == (len(labels), 3) and len(labels) == sum(r[0] for r in rows.values())
+    with d.client() as c:
+        assert c.status()["profile"] == "handheld"  # switched back
+    assert_one_line_error(run("corrected_points.py", "--address", str(tmp_path / "none.sock")), "none.sock")
+
+
 def test_sorting_trigger(start: Callable[..., Daemon]) -> None:
     d = start(STATIC_ACRYL)
     address = listening(d)

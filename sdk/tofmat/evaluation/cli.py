@@ -155,4 +155,3 @@ def evaluate(
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text + "\n")
     click.echo(text)
-
