@@ -14,7 +14,7 @@ depths (rms mm): where more frames do not raise the share, the pixels' error is 
     python3 tests/bench/pixel_accumulation.py --table build/sim_table_wide.tmx \\
         --scene objects,materials=cork+paper+acryl,far=1000
 
-Runs in about 20 s on one core.
+Runs in a few seconds.
 """
 
 from __future__ import annotations

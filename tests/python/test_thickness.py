@@ -15,7 +15,7 @@ import pytest
 
 from tofmat.sim import load_device, load_library
 from tofmat.sim.table import database_bins
-from tofmat.sim.thickness import ThicknessEstimator, slab_materials
+from tofmat.sim.thickness import ThicknessEstimator, slab_materials, slab_params
 from tofmat.tools.thickness_bench import bench_thickness, sweep_rows, window
 
 
@@ -98,9 +98,10 @@ def test_the_thickness_command_reads_queries_and_refuses_bad_ones(tmp_path: Path
 
     lib = load_library()
     d = lib.to_dict()
-    d["materials"].append({**lib["acryl3mm"].to_dict(), "name": "plate", "thickness_mm": 2.5})
+    (plate,) = slab_params(lib, "acryl3mm", [2.5])
+    d["materials"].append(plate)
     r = Renderer(load_device(), MaterialLibrary.from_dict(d), 1)
-    q = sweep_rows(r, "plate", database_bins(), seed=3)
+    q = sweep_rows(r, plate["name"], database_bins(), seed=3)
     np.save(tmp_path / "q.npy", q)
     p = _thickness(str(tmp_path / "q.npy"), "--json")
     assert p.returncode == 0, p.stderr

@@ -33,11 +33,18 @@ void FrameAccumulator::add(const std::int32_t* depth_q8, const std::uint8_t* fla
                            std::int32_t* mean_f0_q16, std::int32_t* mean_f1_q16) {
   const auto full = static_cast<std::int64_t>(frames_);
   for (std::size_t i = begin; i < end; ++i) {
+    if (flags[i] != 0) {  // no value: it starts over, and its outputs are its inputs
+      count_[i] = 0;
+      mean_depth_q8[i] = depth_q8[i];
+      mean_f0_q16[i] = f0_q16[i];
+      mean_f1_q16[i] = f1_q16[i];
+      continue;
+    }
     std::int64_t n = count_[i];
-    if (n == 0 || flags[i] != 0 || frames_ == 1 ||
+    if (n == 0 || frames_ == 1 ||
         std::llabs(static_cast<long long>(depth_q8[i]) - mean_of(sum_depth_[i], n)) > max_jump_q8_) {
-      // Start over: nothing yet (or a reset), an invalid pixel, or a jump in
-      // depth (something else is in front of it now).
+      // Start over: nothing yet (a start, a reset, an invalid frame before), or
+      // a jump in depth (something else is in front of it now).
       n = 0;
       sum_depth_[i] = sum_f0_[i] = sum_f1_[i] = 0;
     }
@@ -46,13 +53,6 @@ void FrameAccumulator::add(const std::int32_t* depth_q8, const std::uint8_t* fla
       sum_f0_[i] -= mean_of(sum_f0_[i], full);
       sum_f1_[i] -= mean_of(sum_f1_[i], full);
       --n;
-    }
-    if (flags[i] != 0) {
-      count_[i] = 0;
-      mean_depth_q8[i] = depth_q8[i];
-      mean_f0_q16[i] = f0_q16[i];
-      mean_f1_q16[i] = f1_q16[i];
-      continue;
     }
     sum_depth_[i] += depth_q8[i];
     sum_f0_[i] += f0_q16[i];

@@ -2,10 +2,12 @@
 // tofmatd's logs by category (log.hpp): the levels' syntax, the loggers, the journal's prefix.
 #include "tofmat/daemon/log.hpp"
 
+#include <spdlog/fmt/ranges.h>
 #include <spdlog/pattern_formatter.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <stdexcept>
 #include <string>
@@ -75,11 +77,9 @@ LogLevels parse_log_levels(const std::string& text) {
       out.others = level;
       continue;
     }
-    bool known = false;
-    for (const char* c : kLogCategories) known = known || name == c;
-    if (!known)
-      throw std::invalid_argument("log category \"" + name +
-                                  "\": one of daemon, kinect, server, pipeline, profile, gpio, line, *");
+    if (std::find(kLogCategories.begin(), kLogCategories.end(), name) == kLogCategories.end())
+      throw std::invalid_argument(
+          fmt::format("log category \"{}\": one of {}, *", name, fmt::join(kLogCategories, ", ")));
     if (!out.by_category.emplace(name, level).second)
       throw std::invalid_argument("log category \"" + name + "\" given twice");
   }

@@ -160,14 +160,13 @@ class SegmentationProfile : public Profile {
   // (a plane at 60 degrees to the rays steps about 6 mm a pixel at 1.2 m);
   // a surface of 100 pixels or more votes.
   static constexpr std::int32_t kRegionStepQ8 = 10 * 256;
+  static constexpr std::size_t kRegionMinPixels = 100;
   // A pixel's depth this far from its mean over frames starts its accumulation over.
   static constexpr std::int32_t kAccumulateJumpQ8 = 16 * 256;
-  static constexpr std::size_t kRegionMinPixels = 100;
   std::vector<std::uint8_t> unclean_;  // the labels before the majority filter
   FrameAccumulator accumulator_;
-  // Its means (depth Q8, two features Q16), written only with --accumulate above 1.
-  std::array<std::vector<std::int32_t>, 3> accumulated_{
-      std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels), std::vector<std::int32_t>(kPixels)};
+  // Its means (depth Q8, two features Q16): sized and written only with --accumulate above 1.
+  std::array<std::vector<std::int32_t>, 3> accumulated_;
   RegionVote vote_;
   std::vector<std::string> names_;
 };

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "spec_text.hpp"
+#include "tofmat/core/decode.hpp"
 #include "tofmat/daemon/belt_sim.hpp"
 #include "tofmat/daemon/device_source.hpp"
 #include "tofmat/protocol/socket.hpp"
@@ -81,7 +82,6 @@ namespace {
 // materials as flat objects of irregular (non-convex) outlines, each turned
 // its own way, at depths from `near` to halfway to `far`.
 sim::Scene objects_scene(const SimSpec& spec) {
-  constexpr double kPi = 3.14159265358979323846;
   constexpr int kVertices = 72;
   constexpr double kRadius = 54.0;  // pixels; the lobes reach 1.37 times it
   sim::Scene scene;
@@ -90,8 +90,8 @@ sim::Scene objects_scene(const SimSpec& spec) {
   plane.material = spec.materials.back();
   plane.x0 = 0;
   plane.y0 = 0;
-  plane.x1 = 512;
-  plane.y1 = 424;
+  plane.x1 = kWidth;
+  plane.y1 = kHeight;
   plane.depth_mm = spec.far_mm;
   plane.yaw_deg = spec.yaw_deg;
   plane.pitch_deg = spec.pitch_deg;
@@ -104,7 +104,7 @@ sim::Scene objects_scene(const SimSpec& spec) {
     t.material = spec.materials[i];
     double x_lo = 1e9, x_hi = -1e9, y_lo = 1e9, y_hi = -1e9;
     for (int v = 0; v < kVertices; ++v) {
-      const double a = 2.0 * kPi * v / kVertices;
+      const double a = 2.0 * tofmat::kPi * v / kVertices;
       const double r = kRadius * (1.0 + 0.25 * std::sin(3.0 * a + 1.7 * k) + 0.12 * std::sin(5.0 * a + 0.9 + 2.3 * k));
       const double x = cx + r * std::cos(a), y = cy + r * std::sin(a);
       t.outline.push_back({x, y});
@@ -114,9 +114,9 @@ sim::Scene objects_scene(const SimSpec& spec) {
       y_hi = std::max(y_hi, y);
     }
     t.x0 = std::max(0, static_cast<int>(std::floor(x_lo)));
-    t.x1 = std::min(512, static_cast<int>(std::ceil(x_hi)) + 1);
+    t.x1 = std::min(kWidth, static_cast<int>(std::ceil(x_hi)) + 1);
     t.y0 = std::max(0, static_cast<int>(std::floor(y_lo)));
-    t.y1 = std::min(424, static_cast<int>(std::ceil(y_hi)) + 1);
+    t.y1 = std::min(kHeight, static_cast<int>(std::ceil(y_hi)) + 1);
     t.depth_mm = n_objects > 1
                      ? spec.near_mm + 0.5 * (spec.far_mm - spec.near_mm) * k / static_cast<double>(n_objects - 1)
                      : spec.near_mm;

@@ -18,7 +18,9 @@ says so with an interval: the thicknesses whose mismatch is within a chi-square 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -63,9 +65,7 @@ class ThicknessEstimator:
         self.bins = bins
         self.model_error_mm = model_error_mm
         self.grid = np.round(np.arange(first, last + 0.5 * step, step), 6)
-        params = base.to_dict()
-        slabs = [Material.from_dict({**params, "name": f"{material}@{t:g}", "thickness_mm": float(t)})
-                 for t in self.grid]  # fmt: skip
+        slabs = [Material.from_dict(p) for p in slab_params(library, material, self.grid)]
         # (grid, 2, bins): each thickness's noise-free rows, NaN where the model has none
         self.curves = np.asarray(distortion_curves(device, slabs, bins, incidence_deg), dtype=np.float64)
 
@@ -122,6 +122,13 @@ def _independence(residual: npt.NDArray[np.float64], offsets: bool) -> float:
         den += float((x[ok] ** 2).sum())
     rho = min(max(num / den, 0.0), 0.99) if den > 0.0 else 0.0
     return (1.0 - rho) / (1.0 + rho)
+
+
+def slab_params(library: MaterialLibrary, material: str, thicknesses: Iterable[float]) -> list[dict[str, Any]]:
+    """The material's parameters with each of the thicknesses, named MATERIAL@Tmm (for
+    Material.from_dict, or to add to a library's to_dict() for a renderer)."""
+    params = library[material].to_dict()
+    return [{**params, "name": f"{material}@{t:g}mm", "thickness_mm": float(t)} for t in thicknesses]
 
 
 def slab_materials(library: MaterialLibrary) -> list[str]:

@@ -54,6 +54,14 @@ class Snapshot:
     simulated: bool
     corrected: DepthImage | None = None  # the same frame's material-corrected depth, if served
 
+    @property
+    def corrected_mm(self) -> npt.NDArray[np.float32]:
+        """The corrected depth over the region, NaN where the daemon corrected nothing (all of it
+        when it served no corrected image)."""
+        if self.corrected is not None:
+            return self.corrected.depth_mm
+        return np.full(self.labels.shape, np.nan, np.float32)
+
 
 def palette(n: int) -> list[tuple[int, int, int]]:
     """n distinct RGB colours for label indices 0..n-1 (matplotlib's tab20, then tab20b, repeating)."""
@@ -172,8 +180,8 @@ def write_snapshot(s: Snapshot, out_dir: Path, *, intrinsics: Intrinsics | None 
     scale = _depth_png(paths[1], s)
     _corrected_png(paths[2], s, scale)
     # Each point at its corrected depth where the daemon corrected the pixel, else at its measured one.
-    fixed = np.isfinite(s.corrected.depth_mm) if s.corrected is not None else np.zeros(s.labels.shape, bool)
-    ranges = np.where(fixed, s.corrected.depth_mm if s.corrected is not None else 0.0, s.depth.depth_mm)
+    fixed = np.isfinite(s.corrected_mm)
+    ranges = np.where(fixed, s.corrected_mm, s.depth.depth_mm)
     points = range_to_points(ranges, intr, s.depth.x0, s.depth.y0)
     valid = np.isfinite(points).all(axis=-1)
     write_ply(paths[3], points[valid], rgb[valid], s.labels[valid], fixed[valid],
@@ -253,8 +261,7 @@ def _corrected_png(path: Path, s: Snapshot, scale: tuple[float, float]) -> None:
     """The corrected depth on depth.png's scale, and the correction (measured less corrected)."""
     plt = _pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 9), layout="constrained")
-    h, w = s.labels.shape
-    corrected = s.corrected.depth_mm if s.corrected is not None else np.full((h, w), np.nan, np.float32)
+    corrected = s.corrected_mm
     _depth_axes(top, s, corrected, "viridis", scale, "mm")
     n = int(np.isfinite(corrected).sum())
     why = "" if n else ": none (the table has no depth distortion for these materials, or an older daemon)"

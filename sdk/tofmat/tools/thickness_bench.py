@@ -25,11 +25,12 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import BinSpec
+from .._clikit import strict_json
 from .._progress import Progress
 from ..sim import MaterialLibrary, Renderer, library_path, load_device, load_library
 from ..sim.evaluate import session_offset_spread
 from ..sim.table import database_bins, roi_observation
-from ..sim.thickness import ThicknessEstimate, ThicknessEstimator
+from ..sim.thickness import ThicknessEstimate, ThicknessEstimator, slab_params
 
 DEFAULT_THICKNESSES = (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0)
 SWEEP_STEP_MM = 3.0  # one frame every 3 mm of the stage: a bin of the database's about every frame
@@ -87,11 +88,10 @@ def bench_thickness(material: str = "acryl3mm", thicknesses: tuple[float, ...] =
     device, library = load_device(), load_library()
     bins = database_bins()
     estimator = ThicknessEstimator(device, library, material, bins)
-    params = library[material].to_dict()
+    slabs = slab_params(library, material, thicknesses)
+    names = [p["name"] for p in slabs]
     lib = library.to_dict()
-    names = [f"{material}@{t:g}mm" for t in thicknesses]
-    lib["materials"] = [*lib["materials"], *({**params, "name": n, "thickness_mm": float(t)}
-                                              for n, t in zip(names, thicknesses, strict=True))]  # fmt: skip
+    lib["materials"] = [*lib["materials"], *slabs]
     renderer = Renderer(device, MaterialLibrary.from_dict(lib), 1)
     spread = session_offset_spread(json.loads(library_path("tanaka2017").read_text()))
     rng = np.random.default_rng(seed)
@@ -134,6 +134,4 @@ def format_markdown(rows: list[ThicknessRow]) -> str:
 
 
 def format_json(rows: list[ThicknessRow]) -> str:
-    """JSON with null for a width without closed intervals (strict JSON has no NaN)."""
-    out = [{k: (None if isinstance(v, float) and np.isnan(v) else v) for k, v in asdict(r).items()} for r in rows]
-    return json.dumps(out, indent=2)
+    return json.dumps(strict_json([asdict(r) for r in rows]), indent=2)
