@@ -6,6 +6,8 @@
 #include <cstring>
 
 #include "bindings.hpp"
+#include "tofmat/core/depth_bins.hpp"
+#include "tofmat/core/fixed_depth_bins.hpp"
 #include "tofmat/core/frame_decode.hpp"
 
 namespace tofmat::py {
@@ -65,6 +67,19 @@ void register_decode(pyb::module_& m) {
            }),
            pyb::arg("p0_rad"))
       .def_readonly("pixels", &DecodeTables::pixels);
+  m.attr("SURFACE_BAND_MM") = kSurfaceBandMm;
+  m.def(
+      "surface_mean",
+      [](const DecodedFrame& f, double centre_mm, double band_mm) {
+        const SurfaceMean s = surface_mean(f, centre_mm, band_mm);
+        pyb::array_t<double> sums(2);
+        sums.mutable_data()[0] = s.sum_mm[0];
+        sums.mutable_data()[1] = s.sum_mm[1];
+        return pyb::make_tuple(s.depth_mm, sums, s.pixels);
+      },
+      pyb::arg("frame"), pyb::arg("centre_mm"), pyb::arg("band_mm") = static_cast<double>(kSurfaceBandMm),
+      "A region's surface as tofmatd bins it: (mean combined depth, the two features' sums, pixels) of the "
+      "valid pixels within band_mm of centre_mm on the centre's side of every wrap (NaN depth, 0 pixels: none).");
   m.attr("DECODE_SATURATED") = kDecodeSaturated;
   m.attr("DECODE_DARK") = kDecodeDark;
   m.attr("DECODE_UNWRAP") = kDecodeUnwrap;

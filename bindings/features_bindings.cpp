@@ -43,6 +43,18 @@ void register_features(pyb::module_& m) {
           },
           pyb::arg("depths_mm"), pyb::arg("values"), "Add many observations; returns how many fell in a bin.")
       .def(
+          "add_sums",
+          [](DepthBinAccumulator& acc, double depth_mm, const pyb::handle& sums, std::uint64_t count) {
+            auto v = pyb::array_t<double, pyb::array::c_style | pyb::array::forcecast>::ensure(sums);
+            if (!v || v.ndim() != 1 || v.shape(0) != static_cast<pyb::ssize_t>(acc.n_rows())) {
+              throw pyb::value_error("sums must be a 1-D float array with one sum per row");
+            }
+            return acc.add_sums(depth_mm, v.data(), count);
+          },
+          pyb::arg("depth_mm"), pyb::arg("sums"), pyb::arg("count"),
+          "Add `count` observations whose values sum to `sums` (a region's surface at its mean depth); returns "
+          "the bin, or -1 if out of range or count is 0.")
+      .def(
           "query",
           [](const DepthBinAccumulator& acc, std::uint64_t min_count) {
             const auto q = acc.query(min_count);

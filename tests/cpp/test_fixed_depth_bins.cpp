@@ -125,3 +125,142 @@ TEST(FixedDepthBins, VectorBinKernelIsBitExactWithScalar) {
 }
 
 }  // namespace
+
+// A still target in front of the camera: every pixel at the same true depth,
+// the samples with sensor noise. A pixel's combined depth and its features are
+// computed from the same samples, so their errors are correlated; binned by
+// its own depth, each bin holds the pixels whose noise put them there and the
+// bins' means lean with depth although the target has one depth and features
+// 0. The surface's mean at its mean depth is the target's own value in one
+// bin: what the tables are recorded as and what RegionMatcher adds.
+TEST(FixedDepthBins, AStillTargetsSurfaceIsOneBinAtItsValueWherePixelBinsLean) {
+  constexpr std::size_t n = 2304;  // the handheld ROI, 48 x 48
+  std::vector<std::int16_t> raw(9 * n);
+  std::vector<float> p0(3 * n);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 6.0);
+  const double depth[3] = {900.0, 900.0, 900.0};
+  const float zero[3] = {0.0f, 0.0f, 0.0f};
+  for (std::size_t i = 0; i < n; ++i) {
+    tofmat_test::put_synthetic_pixel(raw.data(), p0.data(), n, i, depth, zero, 1000.0, 0.0);
+    for (std::size_t k = 0; k < 9; ++k) {
+      raw[k * n + i] = tofmat_test::raw_sample(raw[k * n + i] + noise(rng));
+    }
+  }
+  const FixedDecodedFrame x = decode_frame_fixed(raw.data(), FixedDecodeTables(p0, n));
+  const DecodedFrame f = decode_frame(raw.data(), n, p0);
+
+  FixedDepthBinAccumulator per_pixel(kDatabaseBins, 2);
+  per_pixel.add_frame(x);
+  const auto qp = per_pixel.query();
+  double lowest = 0.0, highest = 0.0;  // row 0's mean in the nearest and the farthest bin holding 20 pixels
+  for (std::uint32_t j = 0; j < kDatabaseBins.count; ++j) {
+    if (per_pixel.count(0, j) < 20) continue;
+    if (lowest == 0.0) lowest = qp[j];
+    highest = qp[j];
+  }
+  std::cout << "[ measured ] still target, pixels binned by their own depth: " << per_pixel.bins_covered()
+            << " bins, row 0 from " << lowest << " to " << highest << " mm\n";
+  EXPECT_GE(per_pixel.bins_covered(), 3u);
+  EXPECT_GT(std::fabs(highest - lowest), 2.0);
+
+  const FixedSurfaceMean s = surface_mean(x, 900 * 256, 64 * 256);
+  FixedDepthBinAccumulator surface(kDatabaseBins, 2);
+  EXPECT_EQ(surface.add_surface(s), s.pixels);
+  EXPECT_GT(s.pixels, n * 9 / 10);
+  EXPECT_EQ(surface.bins_covered(), 1u);
+  const auto j = static_cast<std::size_t>(kDatabaseBins.index_of(s.depth_q8 / 256.0));
+  const auto q = surface.query();
+  EXPECT_NEAR(s.depth_q8 / 256.0, 900.0, 0.5);
+  EXPECT_NEAR(q[j], 0.0, 0.3);
+  EXPECT_NEAR(q[kDatabaseBins.count + j], 0.0, 0.3);
+
+  // The float reference takes the same pixels to within the fixed decode's error.
+  const SurfaceMean g = surface_mean(f, 900.0, 64.0);
+  EXPECT_LE(g.pixels > s.pixels ? g.pixels - s.pixels : s.pixels - g.pixels, 2u);
+  EXPECT_NEAR(g.depth_mm, s.depth_q8 / 256.0, 0.01);
+  EXPECT_NEAR(g.sum_mm[0] / static_cast<double>(g.pixels), q[j], 0.01);
+  DepthBinAccumulator fl(kDatabaseBins, 2);
+  EXPECT_EQ(fl.add_sums(g.depth_mm, g.sum_mm, g.pixels), static_cast<std::int32_t>(j));
+  EXPECT_NEAR(fl.query()[j], q[j], 0.01);
+}
+
+TEST(FixedDepthBins, TheSurfaceIsThePixelsWithinTheBandAndOneObservationOfThem) {
+  FixedDecodedFrame f;
+  f.pixels = 6;
+  // Two pixels of the target (901, 903 mm), a background at 1500, one dark, one invalid, one at the band's edge.
+  f.combined_q8 = {901 * 256, 903 * 256, 1500 * 256, 902 * 256, kFixedInvalid, 964 * 256};
+  f.flags = {0, 0, 0, kDecodeDark, 0, 0};
+  f.features_q16[0] = {2 * 65536, 4 * 65536, 100 * 65536, 100 * 65536, 0, 3 * 65536};
+  f.features_q16[1] = {-65536, -65536, 0, 0, 0, -65536};
+  const FixedSurfaceMean s = surface_mean(f, 900 * 256, 64 * 256);
+  EXPECT_EQ(s.pixels, 3u);
+  EXPECT_EQ(s.depth_q8, (901 + 903 + 964) * 256 / 3);
+  EXPECT_EQ(s.sum_q16[0], 9 * 65536);
+  EXPECT_EQ(s.sum_q16[1], -3 * 65536);
+  // The mean is floored, toward lower depths, for negative sums too.
+  FixedDecodedFrame neg = f;
+  neg.combined_q8 = {-1, -2, kFixedInvalid, kFixedInvalid, kFixedInvalid, kFixedInvalid};
+  EXPECT_EQ(surface_mean(neg, 0, 10).depth_q8, -2);
+  EXPECT_EQ(surface_mean(f, 0, 10).pixels, 0u);  // nothing within the band
+  EXPECT_EQ(surface_mean(f, 0, 10).depth_q8, kFixedInvalid);
+  EXPECT_THROW(surface_mean(f, 900 * 256, -1), std::invalid_argument);
+  FixedDecodedFrame bad = f;
+  bad.flags.pop_back();
+  EXPECT_THROW(surface_mean(bad, 900 * 256, 64 * 256), std::invalid_argument);
+
+  // One bin takes them all, counted as pixels; a full bin refuses the whole surface.
+  FixedDepthBinAccumulator acc(kDatabaseBins, 2, 5);
+  EXPECT_EQ(acc.add_surface(s), 3u);
+  EXPECT_EQ(acc.bins_covered(), 1u);
+  const auto j = static_cast<std::uint32_t>(kDatabaseBins.index_of(s.depth_q8 / 256.0));
+  EXPECT_EQ(acc.count(0, j), 3u);
+  EXPECT_FLOAT_EQ(acc.query()[j], 3.0f);
+  EXPECT_EQ(acc.add_surface(s), 0u);  // 3 + 3 > 5
+  EXPECT_EQ(acc.refused(), 3u);
+  EXPECT_EQ(acc.add_surface(FixedSurfaceMean{}), 0u);
+  FixedSurfaceMean far = s;
+  far.depth_q8 = 2000 * 256;
+  EXPECT_EQ(acc.add_surface(far), 0u);  // outside the bins
+
+  DepthBinAccumulator fl(kDatabaseBins, 2);
+  const double sums[2] = {9.0, -3.0}, inf[2] = {INFINITY, 0.0};
+  EXPECT_EQ(fl.add_sums(922.0, sums, 0), -1);
+  EXPECT_EQ(fl.add_sums(100.0, sums, 3), -1);
+  EXPECT_THROW(fl.add_sums(922.0, inf, 3), std::invalid_argument);
+  const std::int32_t k = fl.add_sums(922.0, sums, 3);
+  ASSERT_GE(k, 0);
+  EXPECT_EQ(fl.count(1, static_cast<std::uint32_t>(k)), 3u);
+  EXPECT_FLOAT_EQ(fl.query()[kDatabaseBins.count + static_cast<std::size_t>(k)], -1.0f);
+  EXPECT_THROW(surface_mean(DecodedFrame{}, 900.0, NAN), std::invalid_argument);
+}
+
+// A surface across the 120 MHz wrap (1250 mm): the features of the pixels
+// beyond it are 1250 mm apart (differences of wrapped depths); they would
+// drag the mean by hundreds of mm. Only the centre's side counts.
+TEST(FixedDepthBins, TheSurfaceKeepsToTheSideOfEveryWrapItsCentreIsOn) {
+  FixedDecodedFrame f;
+  f.pixels = 5;
+  f.combined_q8 = {1240 * 256, 1244 * 256, 1246 * 256, 1256 * 256, 1262 * 256};
+  f.flags.assign(5, 0);
+  f.features_q16[0] = {7 * 65536, 8 * 65536, 9 * 65536, 1258 * 65536, 1259 * 65536};
+  f.features_q16[1] = {-2 * 65536, -2 * 65536, -2 * 65536, 1248 * 65536, 1248 * 65536};
+  const FixedSurfaceMean s = surface_mean(f, 1245 * 256, 64 * 256);
+  EXPECT_EQ(s.pixels, 3u);
+  EXPECT_EQ(s.sum_q16[0], 24 * 65536);
+  EXPECT_EQ(s.depth_q8, 1243 * 256 + 85);  // (1240 + 1244 + 1246) / 3 = 1243.33 mm
+  const FixedSurfaceMean far = surface_mean(f, 1258 * 256, 64 * 256);
+  EXPECT_EQ(far.pixels, 2u);  // the other side, from a centre there
+  EXPECT_EQ(far.sum_q16[1], 2496 * 65536);
+
+  DecodedFrame g;
+  g.pixels = 5;
+  g.flags.assign(5, 0);
+  g.combined_mm = {1240.0f, 1244.0f, 1246.0f, 1256.0f, 1262.0f};
+  g.features[0] = {7.0f, 8.0f, 9.0f, 1258.0f, 1259.0f};
+  g.features[1] = {-2.0f, -2.0f, -2.0f, 1248.0f, 1248.0f};
+  const SurfaceMean t = surface_mean(g, 1245.0, 64.0);
+  EXPECT_EQ(t.pixels, 3u);
+  EXPECT_DOUBLE_EQ(t.sum_mm[0], 24.0);
+  EXPECT_NEAR(t.depth_mm, 1243.333, 0.001);
+}

@@ -61,6 +61,19 @@ def test_combining_passes_gives_their_mean_and_pooled_spread(real_table: tofmat.
     with pytest.raises(CaptureError, match="--replace"):
         with_material(real_table, "cork", cap)
     assert with_material(real_table, "cork", cap, replace=True).materials == real_table.materials
+    # A table with a depth distortion keeps it; a replaced material's old one goes with its old curve.
+    grid = tofmat.BinSpec(450.0, 4.0, 500)
+    dist = np.tile(np.linspace(-5.0, 5.0, grid.count), (len(real_table), 1))
+    with_d = real_table.with_distortion(grid, dist)
+    added = with_material(with_d, "cork2", cap)
+    assert added.distortion_mm is not None and added.distortion_mm.shape == (len(real_table) + 1, grid.count)
+    assert np.allclose(added.distortion_mm[:-1], dist) and np.isnan(added.distortion_mm[-1]).all()
+    replaced = with_material(with_d, "cork", cap, replace=True)
+    assert replaced.distortion_mm is not None
+    k = real_table.index_of("cork")
+    assert np.isnan(replaced.distortion_mm[k]).all() and np.allclose(
+        np.delete(replaced.distortion_mm, k, 0), np.delete(dist, k, 0)
+    )
 
 
 def test_a_new_material_captured_with_the_box_is_served_after_sighup(
@@ -82,6 +95,12 @@ def test_a_new_material_captured_with_the_box_is_served_after_sighup(
     assert np.array_equal(after.features[:-1], before.features, equal_nan=True)
     assert after.noise_mm is not None and np.all(after.noise_mm[-1] > 0)
     assert np.isfinite(after.features[-1]).all(axis=0).sum() >= 100  # the sweep's range
+    # Everything the table carried stays: its depth distortion too (none measured for wax).
+    assert before.distortion_mm is not None and after.distortion_mm is not None
+    assert after.distortion_grid is not None and before.distortion_grid is not None
+    assert after.distortion_grid.count == before.distortion_grid.count
+    assert np.array_equal(after.distortion_mm[:-1], before.distortion_mm, equal_nan=True)
+    assert np.isnan(after.distortion_mm[-1]).all()
     with d.client() as c:
         d.proc.send_signal(signal.SIGHUP)
         deadline = time.monotonic() + 20

@@ -3,6 +3,7 @@
 #include "tofmat/core/fixed_depth_bins.hpp"
 
 #include <cmath>
+#include <cstdlib>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -92,6 +93,71 @@ std::size_t FixedDepthBinAccumulator::add_frame(const FixedDecodedFrame& f, Fixe
     added += any;
   }
   return added;
+}
+
+FixedSurfaceMean surface_mean(const FixedDecodedFrame& f, std::int32_t centre_q8, std::int32_t band_q8) {
+  const std::size_t n = f.pixels;
+  if (f.combined_q8.size() != n || f.flags.size() != n || f.features_q16[0].size() != n ||
+      f.features_q16[1].size() != n) {
+    throw std::invalid_argument("decoded frame's arrays do not match its pixel count");
+  }
+  if (band_q8 < 0) throw std::invalid_argument("the surface's band must not be negative");
+  FixedSurfaceMean s;
+  const std::int64_t lo = static_cast<std::int64_t>(centre_q8) - band_q8;
+  const std::int64_t hi = static_cast<std::int64_t>(centre_q8) + band_q8;
+  const auto counts = [&](std::size_t i) {
+    const std::int32_t z = f.combined_q8[i];
+    return f.flags[i] == 0 && z != kFixedInvalid && z >= lo && z <= hi;
+  };
+  // The reference features: the counted pixel nearest the centre's depth.
+  std::size_t ref = n;
+  std::int64_t nearest = std::numeric_limits<std::int64_t>::max();
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::int64_t gap = std::llabs(static_cast<std::int64_t>(f.combined_q8[i]) - centre_q8);
+    if (counts(i) && gap < nearest) {
+      nearest = gap;
+      ref = i;
+    }
+  }
+  if (ref == n) return s;
+  constexpr std::int64_t kSameWrapQ16 = static_cast<std::int64_t>(kSurfaceSameWrapMm) * 65536;
+  const std::int64_t r0 = f.features_q16[0][ref], r1 = f.features_q16[1][ref];
+  std::int64_t depth_sum = 0;  // |depth| < 2^31 each, at most 2^32 pixels: below 2^63
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!counts(i) || std::llabs(f.features_q16[0][i] - r0) > kSameWrapQ16 ||
+        std::llabs(f.features_q16[1][i] - r1) > kSameWrapQ16)
+      continue;
+    depth_sum += f.combined_q8[i];
+    s.sum_q16[0] += f.features_q16[0][i];
+    s.sum_q16[1] += f.features_q16[1][i];
+    ++s.pixels;
+  }
+  // Floor division (the mean lies between the pixels' depths: it fits int32).
+  const auto count = static_cast<std::int64_t>(s.pixels);
+  std::int64_t q = depth_sum / count;
+  if (depth_sum % count != 0 && depth_sum < 0) --q;
+  s.depth_q8 = static_cast<std::int32_t>(q);
+  return s;
+}
+
+std::size_t FixedDepthBinAccumulator::add_surface(const FixedSurfaceMean& s) {
+  if (s.pixels == 0 || s.depth_q8 == kFixedInvalid) return 0;
+  const std::uint8_t valid = 0;
+  std::int32_t j = -1;
+  bin_indices_scalar(&s.depth_q8, &valid, 1, fixed_, &j);
+  if (j < 0) return 0;
+  for (std::uint32_t r = 0; r < n_rows_; ++r) {
+    if (count_[static_cast<std::size_t>(r) * bins_.count + static_cast<std::size_t>(j)] + s.pixels > max_count_) {
+      refused_ += s.pixels;
+      return 0;
+    }
+  }
+  for (std::uint32_t r = 0; r < n_rows_; ++r) {
+    const std::size_t k = static_cast<std::size_t>(r) * bins_.count + static_cast<std::size_t>(j);
+    sum_[k] += s.sum_q16[r];
+    count_[k] += s.pixels;
+  }
+  return static_cast<std::size_t>(s.pixels);
 }
 
 std::vector<float> FixedDepthBinAccumulator::query(std::uint64_t min_count) const {

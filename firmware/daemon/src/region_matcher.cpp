@@ -19,6 +19,8 @@ T median_of(std::vector<T>& v) {
   return *mid;
 }
 
+constexpr std::int32_t kSurfaceBandQ8 = kSurfaceBandMm * 256;
+
 }  // namespace
 
 RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
@@ -87,18 +89,16 @@ RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelR
 }
 
 void RegionMatcher::accumulate(const Decoded& d) {
+  // One observation a frame: the surface's mean features at its mean depth,
+  // as the tables are recorded (FixedSurfaceMean says why not pixel by pixel).
+  if (!std::isfinite(d.median_mm)) return;
   if (backend_ == Backend::kFixed) {
-    fixed_acc_.add_frame(std::get<FixedDecodedFrame>(d.frame));
+    const auto centre = static_cast<std::int32_t>(std::lround(d.median_mm * 256.0));
+    fixed_acc_.add_surface(surface_mean(std::get<FixedDecodedFrame>(d.frame), centre, kSurfaceBandQ8));
     return;
   }
-  const auto& f = std::get<DecodedFrame>(d.frame);
-  float row[2];
-  for (std::size_t i = 0; i < f.pixels; ++i) {
-    if (f.flags[i] != 0) continue;
-    row[0] = f.features[0][i];
-    row[1] = f.features[1][i];
-    float_acc_.add(f.combined_mm[i], row);
-  }
+  const SurfaceMean s = surface_mean(std::get<DecodedFrame>(d.frame), d.median_mm, kSurfaceBandQ8 / 256.0);
+  float_acc_.add_sums(s.depth_mm, s.sum_mm, s.pixels);
 }
 
 std::optional<Classification> RegionMatcher::classify() const {

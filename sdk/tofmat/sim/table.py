@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import BinSpec, ExemplarTable
 from .._progress import Progress
-from .._tofmat import DecodedFrame, decode_frame
+from .._tofmat import DecodedFrame, decode_frame, surface_mean
 from . import Frame, Renderer, Scene, library_path
 
 ROWS = [(16, 120), (80, 120)]
@@ -51,12 +51,14 @@ def _roi_frame(
 def roi_observation(
     renderer: Renderer, p0: np.ndarray, material: str, depth_mm: float, yaw_deg: float, seed: int
 ) -> tuple[float, np.ndarray] | None:
-    """(combined depth, the two rows) averaged over the ROI's valid pixels; None if none is valid."""
+    """(combined depth, the two rows) averaged over the ROI's surface as tofmatd takes it (the valid
+    pixels near their median depth, on its side of every frequency's wrap: ``surface_mean``); None
+    if no pixel is valid."""
     _, d, ok = _roi_frame(renderer, p0, material, depth_mm, yaw_deg, seed)
     if not ok.any():
         return None
-    features = np.asarray(d.features)[:, ok].astype(np.float64)
-    return float(np.mean(np.asarray(d.combined_mm)[ok])), features.mean(axis=1)
+    depth, sums, pixels = surface_mean(d, float(np.median(np.asarray(d.combined_mm)[ok])))
+    return depth, sums / pixels
 
 
 def library_fit_rms(library: str) -> dict[str, float]:

@@ -3,8 +3,10 @@
 
 The box's tofmatd runs its hand-held profile; the user sweeps the material through the depth range
 in front of the camera, several times. Each pass (from the target appearing to its ``no_target``
-label) is accumulated the way the profile accumulates a query: every valid pixel of the region's
-depth images gives its two Eq. (10) rows, binned by its combined depth (``DepthBinAccumulator``).
+label) is accumulated the way the profile accumulates a query: each frame's surface (the valid
+pixels of the region's depth images within 64 mm of their median) gives its mean combined depth and
+the sums of its pixels' two Eq. (10) rows, added to that depth's bin (``DepthBinAccumulator.add_sums``;
+binning each pixel by its own depth would sort the pixels by their noise, docs/numerics.md).
 The passes' mean is the material's curve; the spread of the passes about it, pooled over the
 elements two or more passes saw, is its bin noise (the session matcher's per-material noise,
 stored with the table in format 1.1). With one pass the curve's roughness stands in for it.
@@ -20,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import DepthBinAccumulator, ExemplarTable, curve_roughness, unambiguous_range_mm
+from .._tofmat import SURFACE_BAND_MM
 from ..client import Client, DepthImage, Label
 
 F32 = npt.NDArray[np.float32]
@@ -55,6 +58,15 @@ def frame_observations(images: Mapping[str, DepthImage], rows: list[tuple[int, i
     values = np.stack([unwrapped[f] - unwrapped[ref] for f, ref in rows], axis=1)
     ok = np.isfinite(comb) & np.all(np.isfinite(values), axis=1)
     return comb[ok], values[ok]
+
+
+def frame_surface(depth_mm: F64, values: F64) -> tuple[float, F64, int] | None:
+    """A frame's surface from its valid pixels (``frame_observations``): (mean combined depth, the
+    sums of the rows, pixels) of those within SURFACE_BAND_MM of the median depth; None if none."""
+    if depth_mm.size == 0:
+        return None
+    near = np.abs(depth_mm - np.median(depth_mm)) <= SURFACE_BAND_MM
+    return float(depth_mm[near].mean()), values[near].sum(axis=0), int(near.sum())
 
 
 def check_rows(table: ExemplarTable) -> list[tuple[int, int]]:
@@ -104,7 +116,9 @@ def capture_passes(
                 in_pass = True
                 images = pending.pop(event.frame, {})
                 if not skip and len(images) == len(_FREQS) + 1:  # (a frame whose images were dropped: none)
-                    acc.add_many(*frame_observations(images, rows))
+                    surface = frame_surface(*frame_observations(images, rows))
+                    if surface is not None:
+                        acc.add_sums(*surface)
             elif event.state == "no_target" and in_pass:
                 covered = acc.bins_covered()
                 if skip:
@@ -142,10 +156,15 @@ def combine_passes(passes: list[F32], table: ExemplarTable, name: str) -> Captur
 
 def with_material(table: ExemplarTable, name: str, capture: Capture, replace: bool = False) -> ExemplarTable:
     """``table`` with the captured material added (or, with ``replace``, in place of its old curve)
-    and its noise stored; the other materials keep theirs (NaN where the table had none)."""
+    and its noise stored; the other materials keep theirs (NaN where the table had none), and
+    everything else the table carries, its depth distortion included. A hand-held capture measures
+    no absolute distortion (it has no true depth), so the captured material has none: NaN, which
+    tofmatd's corrected depth leaves uncorrected (a replaced material loses its old one, which
+    belonged to the old curve)."""
     names = list(table.materials)
     features = table.features
     noise = table.noise_mm if table.noise_mm is not None else np.full((len(names), table.n_rows), np.nan)
+    grid, distortion = table.distortion_grid, table.distortion_mm
     if not np.isfinite(capture.curve).any():
         raise CaptureError("the capture observed no element of the table's bins")
     if name in names:
@@ -156,11 +175,18 @@ def with_material(table: ExemplarTable, name: str, capture: Capture, replace: bo
         features[i] = capture.curve
         noise = noise.copy()
         noise[i] = capture.noise_mm
-        return ExemplarTable(names, features, table.bins, table.rows, noise)
-    return ExemplarTable(
-        [*names, name],
-        np.concatenate([features, capture.curve[None]]),
-        table.bins,
-        table.rows,
-        np.concatenate([noise, capture.noise_mm[None]]),
-    )
+        out = ExemplarTable(names, features, table.bins, table.rows, noise)
+        if distortion is not None:
+            distortion = distortion.copy()
+            distortion[i] = np.nan
+    else:
+        out = ExemplarTable(
+            [*names, name],
+            np.concatenate([features, capture.curve[None]]),
+            table.bins,
+            table.rows,
+            np.concatenate([noise, capture.noise_mm[None]]),
+        )
+        if distortion is not None:
+            distortion = np.concatenate([distortion, np.full((1, distortion.shape[1]), np.nan)])
+    return out.with_distortion(grid, distortion) if distortion is not None else out

@@ -9,8 +9,19 @@
 #include <vector>
 
 #include "tofmat/core/bin_spec.hpp"
+#include "tofmat/core/frame_decode.hpp"
 
 namespace tofmat {
+
+// A region's surface in one frame on the float path: the valid pixels within
+// band_mm of centre_mm, their mean combined depth (NaN if none) and the sums of
+// their two features (see FixedSurfaceMean for why a region is binned so).
+struct SurfaceMean {
+  double depth_mm = 0.0;
+  double sum_mm[2] = {0.0, 0.0};
+  std::uint64_t pixels = 0;
+};
+SurfaceMean surface_mean(const DecodedFrame& frame, double centre_mm, double band_mm);
 
 class DepthBinAccumulator {
  public:
@@ -21,6 +32,12 @@ class DepthBinAccumulator {
   // std::invalid_argument. Returns the bin index, or -1 when the depth is
   // outside the bins (nothing is added).
   std::int32_t add(double depth_mm, const float* row_values);
+  // Adds `count` observations whose values sum to row_sums[0..n_rows) at the
+  // bin holding depth_mm (a region's surface at its mean depth, as
+  // FixedDepthBinAccumulator::add_surface). A non-finite sum throws
+  // std::invalid_argument; returns the bin index, or -1 (nothing added) when
+  // the depth is outside the bins or count is 0.
+  std::int32_t add_sums(double depth_mm, const double* row_sums, std::uint64_t count);
 
   // n_rows x n_bins means, NaN where a bin holds fewer than min_count observations.
   std::vector<float> query(std::uint64_t min_count = 1) const;

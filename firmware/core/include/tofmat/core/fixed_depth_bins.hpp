@@ -42,6 +42,39 @@ void bin_indices_avx2(const std::int32_t* depth_q8, const std::uint8_t* flags, s
 void bin_indices(FixedKernel kernel, const std::int32_t* depth_q8, const std::uint8_t* flags, std::size_t n,
                  const FixedBinning& b, std::int32_t* bin);
 
+// The surface a region shows in one frame: its valid pixels within band_q8 of
+// centre_q8 (the region's median depth; a background behind the target falls
+// outside), their mean combined depth and their features' sums.
+//
+// Why a region is binned by its mean depth and not pixel by pixel: a pixel's
+// combined depth and its Eq. (10) features come from the same nine phase
+// samples, so their noise is correlated (the 120 MHz phase's error moves the
+// combined depth one way and both rows the other). Binning each pixel by its
+// own noisy depth sorts pixels by their noise: a still target at 900 mm
+// spreads over about ten bins whose means lean from -12 to +8 mm off the
+// curve at the sparse edges, while the mean over the region is right. The
+// tables are recorded the same way (the region's mean features at its mean
+// depth, sdk/tofmat/sim/table.py), and so were the real database's curves.
+//
+// The features are differences of wrapped depths (Eq. (10) as the database
+// has them), so a surface that crosses a frequency's wrap (120 MHz every
+// 1250 mm: a tilted target's far corners at 1.2 m) holds pixels whose features
+// are 1250, 1875 or 9375 mm apart. Only the pixels within kSurfaceSameWrapMm
+// of the features of the pixel nearest the centre's depth count: those on its
+// side of every wrap (the smallest jump is 1250 mm; a material's features
+// vary by tens of mm across a surface).
+inline constexpr std::int32_t kSurfaceSameWrapMm = 625;
+// A region's surface: its valid pixels within this far of the region's median
+// depth. A target tilted 30 degrees across the handheld ROI at 1200 mm spans
+// about +-46 mm; a background behind it lies further away.
+inline constexpr std::int32_t kSurfaceBandMm = 64;
+struct FixedSurfaceMean {
+  std::int32_t depth_q8 = kFixedInvalid;  // floor of the mean; kFixedInvalid when no pixel counts
+  std::int64_t sum_q16[2] = {0, 0};       // features of the pixels counted
+  std::uint64_t pixels = 0;
+};
+FixedSurfaceMean surface_mean(const FixedDecodedFrame& frame, std::int32_t centre_q8, std::int32_t band_q8);
+
 class FixedDepthBinAccumulator {
  public:
   // Observations one row and bin holds at most: beyond it a bin takes no more
@@ -53,6 +86,11 @@ class FixedDepthBinAccumulator {
 
   // Adds every valid pixel of a decoded frame or region; returns how many.
   std::size_t add_frame(const FixedDecodedFrame& frame, FixedKernel kernel = FixedKernel::kBest);
+  // Adds a region's surface as one observation at its mean depth: its pixels'
+  // sums and count go to that bin, so the bin's mean is the pixel-weighted mean
+  // of the surfaces it holds. Returns the pixels added: 0 when the surface is
+  // empty, its depth outside the bins, or the bin would pass max_count.
+  std::size_t add_surface(const FixedSurfaceMean& surface);
   // n_rows x n_bins means in mm, NaN where a bin holds fewer than min_count
   // observations: the query for Classifier / FixedClassifier.
   std::vector<float> query(std::uint64_t min_count = 1) const;

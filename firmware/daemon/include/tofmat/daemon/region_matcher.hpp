@@ -40,6 +40,8 @@ class RegionMatcher {
     double median_mm = 0.0;  // combined depth of the valid pixels (NaN if none)
   };
   Decoded decode(const RawFrame& frame, const PixelRegion& region) const;
+  // Adds the region's surface (its valid pixels near the median depth) as one
+  // observation at its mean depth (FixedSurfaceMean says why not pixel by pixel).
   void accumulate(const Decoded& d);
   // The method's match of the query so far; nothing while no bin holds an observation.
   std::optional<Classification> classify() const;
