@@ -422,6 +422,37 @@ def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no
         click.echo(format_labels_markdown(labels) + "\n\n" + format_markdown(results))
 
 
+@main.command("bench-targets")
+@_sim_table_option
+@click.option("--depths", default="650,800,950,1100", show_default=True, type=NumberList(float, 100, 5000),
+              help="Still targets' depths, mm.")  # fmt: skip
+@click.option("--yaws", default="0,10,20,30", show_default=True, type=NumberList(float, -85, 85),
+              help="The targets' angles, degrees.")  # fmt: skip
+@click.option("--materials", help="Materials of the table to show, comma-separated (default: all).")
+@click.option("--no-sweeps", is_flag=True, help="Still targets only.")
+@click.option("--json", "as_json", is_flag=True, help="Print every target's result as JSON.")
+def bench_targets_cmd(table_path: Path | None, depths: list[float], yaws: list[float], materials: str | None,
+                      no_sweeps: bool, as_json: bool) -> None:  # fmt: skip
+    """Still targets and sweeps through tofmatd's hand-held path against the simulated camera's table:
+    labels right, right among the candidates a target can be told from, confidently wrong, and the
+    live query's Eq. (12) distance to the true material (docs/benchmarks.md)."""
+    from dataclasses import asdict
+
+    from .tools.target_bench import bench_targets, format_markdown, summary
+
+    table = table_path or _sim_table()
+    try:
+        with progress_bar("scenes") as progress:
+            results = bench_targets(table, depths, yaws, not no_sweeps, materials=csv_list(materials),
+                                    progress=progress)  # fmt: skip
+    except (RuntimeError, ValueError) as e:
+        raise click.ClickException(str(e)) from e
+    if as_json:
+        click.echo(json.dumps({"summary": summary(results), "targets": [asdict(r) for r in results]}, indent=2))
+    else:
+        click.echo(format_markdown(results))
+
+
 @main.command("thickness")
 @click.argument("query", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--material", default="acryl3mm", show_default=True,
