@@ -129,6 +129,28 @@ def exemplar_table(features: list[npt.NDArray[np.float32]], names: list[str]) ->
     return ExemplarTable(names, stacked, BinSpec(0.0, 1.0, n_bins), rows)
 
 
+def _nearest_exemplars(
+    feats: dict[tuple[str, float], npt.NDArray[np.float32]],
+    materials: list[str],
+    train: list[float],
+    queries: npt.NDArray[np.float32],
+    backend: str,
+) -> npt.NDArray[np.float64]:
+    """Each query's Eq. (12) distance to each material's nearest exemplar, (queries, materials).
+
+    A table holds at most 255 materials while the protocol's exemplars are materials x training
+    orientations (348 for the whole library), so each training orientation is a table of its own
+    and a material's distance is the least over them: the nearest neighbour over every exemplar."""
+    out = np.full((len(queries), len(materials)), np.inf)
+    for o in train:
+        table = exemplar_table([feats[(m, o)] for m in materials], materials)
+        for q, r in enumerate(Classifier(table, backend=backend, method="eq12").classify_batch(queries)):
+            for m in r.ranking:
+                k = materials.index(m.material)
+                out[q, k] = min(out[q, k], m.distance)
+    return out
+
+
 def leave_one_orientation_out(
     captures: dict[tuple[str, float], Capture],
     materials: list[str],
@@ -137,29 +159,26 @@ def leave_one_orientation_out(
     disagreements: list[tuple[str, float, str, str, float]] | None = None,
 ) -> npt.NDArray[np.int64]:
     """Confusion matrix (truth x predicted) over every material and held-out orientation, with
-    the float backend. With `disagreements`, the fixed-point backend classifies the same queries
-    and every query it labels differently is appended (see Evaluation.fixed_disagreements)."""
+    the float backend: each query's label is the material of its nearest exemplar among the other
+    orientations (Eq. (12)). With `disagreements`, the fixed-point backend classifies the same
+    queries and every query it labels differently is appended (see Evaluation.fixed_disagreements)."""
     feats = {k: feature(c) for k, c in captures.items()}
     conf = np.zeros((len(materials), len(materials)), dtype=np.int64)
     for held in orientations:
-        names = [f"{m}@{o:g}" for m in materials for o in orientations if o != held]
-        train = [feats[(m, o)] for m in materials for o in orientations if o != held]
-        table = exemplar_table(train, names)
+        train = [o for o in orientations if o != held]
         queries = np.stack([feats[(m, held)] for m in materials])
-        results = Classifier(table, method="eq12").classify_batch(queries)
-        for truth, r in enumerate(results):
-            conf[truth, materials.index(r.material.split("@")[0])] += 1
+        dist = _nearest_exemplars(feats, materials, train, queries, "float")
+        labels = dist.argmin(axis=1)
+        for truth, label in enumerate(labels):
+            conf[truth, label] += 1
         if disagreements is None:
             continue
-        # (Exemplars are "material@orientation": a different orientation of the same material is
-        # the same label.)
-        for truth, (a, b) in enumerate(
-            zip(results, Classifier(table, backend="fixed", method="eq12").classify_batch(queries), strict=True)
-        ):
-            la, lb = a.material.split("@")[0], b.material.split("@")[0]
-            if la != lb:
-                d = {m.material: m.distance for m in a.ranking}
-                disagreements.append((materials[truth], held, la, lb, d[b.material] - d[a.material]))
+        fixed = _nearest_exemplars(feats, materials, train, queries, "fixed").argmin(axis=1)
+        for truth, (a, b) in enumerate(zip(labels, fixed, strict=True)):
+            if a != b:
+                disagreements.append(
+                    (materials[truth], held, materials[a], materials[b], float(dist[truth, b] - dist[truth, a]))
+                )
     return conf
 
 
