@@ -71,7 +71,7 @@ class Classifier {
     }
     backend_ = backend;
     method_ = method;
-    calibration_ = calibration ? *calibration : Calibration::tuned(method);
+    calibration_ = calibration ? *calibration : Calibration::tuned(method, *table_);
     if (open_set && method != "session") {
       throw pyb::value_error("open_set needs method='session': Eq. (12) has no noise model to judge a fit");
     }
@@ -248,7 +248,7 @@ void register_classifier(pyb::module_& m) {
            "temperatures: (sweep length in bins, T) knots, lengths increasing; unknown_fits: (sweep length in "
            "bins, fit) knots of the open-set threshold (empty: never unknown). Both are interpolated linearly in "
            "log length and held beyond the ends.")
-      .def_static("tuned", &Calibration::tuned, pyb::arg("method"),
+      .def_static("tuned", pyb::overload_cast<const std::string&>(&Calibration::tuned), pyb::arg("method"),
                   "What docs/evaluation.md fitted for 'eq12' or 'session'.")
       .def_readonly("temperatures", &Calibration::temperatures)
       .def_readonly("unknown_fits", &Calibration::unknown_fits)

@@ -21,6 +21,71 @@ namespace {
 
 using Table = std::shared_ptr<ExemplarTable>;  // pybind11 holders cannot be const; nothing mutates a table
 
+using Knots = std::vector<std::pair<double, double>>;
+
+// (bins, value) knots as [[bins, value], ...]: what JSON gives back.
+pyb::list knot_list(const Knots& knots) {
+  pyb::list out;
+  for (const auto& [bins, v] : knots) {
+    pyb::list knot;
+    knot.append(bins);
+    knot.append(v);
+    out.append(knot);
+  }
+  return out;
+}
+
+// A table's calibration as Python sees it: a dict of plain numbers and lists.
+pyb::dict calibration_dict(const TableCalibration& c) {
+  pyb::dict methods;
+  for (const MethodCalibration& m : c.methods) {
+    pyb::dict d;
+    d["temperatures"] = knot_list(m.temperatures);
+    d["unknown_fits"] = knot_list(m.unknown_fits);
+    methods[pyb::str(m.method)] = d;
+  }
+  pyb::dict out;
+  out["offset_sd_mm"] = c.offset_sd_mm;
+  out["drift_sd_mm"] = std::vector<double>{c.drift1_sd_mm, c.drift2_sd_mm};
+  out["noise_scale"] = c.noise_scale;
+  out["floor_mm"] = c.floor_mm;
+  out["huber_k"] = c.huber_k;
+  out["iterations"] = c.iterations;
+  out["methods"] = methods;
+  return out;
+}
+
+TableCalibration calibration_of(const pyb::dict& d) {
+  static const char* const keys[] = {"offset_sd_mm", "drift_sd_mm", "noise_scale", "floor_mm",
+                                     "huber_k",      "iterations",  "methods"};
+  for (const auto& [k, v] : d) {
+    const auto key = pyb::cast<std::string>(k);
+    if (std::find_if(std::begin(keys), std::end(keys), [&](const char* x) { return key == x; }) == std::end(keys))
+      throw pyb::value_error("calibration: unknown key '" + key + "'");
+  }
+  for (const char* k : keys)
+    if (!d.contains(k)) throw pyb::value_error(std::string("calibration: '") + k + "' is missing");
+  TableCalibration c;
+  c.offset_sd_mm = pyb::cast<std::vector<double>>(d["offset_sd_mm"]);
+  const auto drift = pyb::cast<std::vector<double>>(d["drift_sd_mm"]);
+  if (drift.size() != 2) throw pyb::value_error("calibration: 'drift_sd_mm' holds the two drift terms' sds");
+  c.drift1_sd_mm = drift[0];
+  c.drift2_sd_mm = drift[1];
+  c.noise_scale = pyb::cast<double>(d["noise_scale"]);
+  c.floor_mm = pyb::cast<double>(d["floor_mm"]);
+  c.huber_k = pyb::cast<double>(d["huber_k"]);
+  c.iterations = pyb::cast<std::uint32_t>(d["iterations"]);
+  for (const auto& [name, m] : pyb::cast<pyb::dict>(d["methods"])) {
+    const auto md = pyb::cast<pyb::dict>(m);
+    MethodCalibration mc;
+    mc.method = pyb::cast<std::string>(name);
+    mc.temperatures = pyb::cast<Knots>(md["temperatures"]);
+    mc.unknown_fits = md.contains("unknown_fits") ? pyb::cast<Knots>(md["unknown_fits"]) : Knots{};
+    c.methods.push_back(std::move(mc));
+  }
+  return c;
+}
+
 pyb::array_t<double> bin_edges(const BinSpec& b) {
   pyb::array_t<double> out(b.count + 1);
   auto v = out.mutable_unchecked<1>();
@@ -176,6 +241,25 @@ void register_table(pyb::module_& m) {
           pyb::arg("grid"), pyb::arg("distortion_mm"),
           "A copy of this table carrying a depth distortion: distortion_mm (n_materials, grid.count), mm, sampled "
           "at grid's bin centres of the measured depth, NaN = unknown (None, None drops it).")
+      .def_property_readonly(
+          "calibration",
+          [](const ExemplarTable& t) -> std::optional<pyb::dict> {
+            if (!t.calibration()) return std::nullopt;
+            return calibration_dict(*t.calibration());
+          },
+          "The table's own calibration (format 1.3, tofmat table calibrate), or None: a dict of the session "
+          "prior ('offset_sd_mm' per row, 'drift_sd_mm' (2), 'noise_scale', 'floor_mm', 'huber_k', 'iterations') "
+          "and 'methods': {'eq12' | 'session': {'temperatures': [[bins, T], ...], 'unknown_fits': [[bins, fit], "
+          "...]}}.")
+      .def(
+          "with_calibration",
+          [](const ExemplarTable& t, const std::optional<pyb::dict>& c) {
+            if (!c) return std::make_shared<ExemplarTable>(t.with_calibration(std::nullopt));
+            return std::make_shared<ExemplarTable>(t.with_calibration(calibration_of(*c)));
+          },
+          pyb::arg("calibration"),
+          "A copy of this table carrying a calibration (a dict as `calibration` gives; None drops it). Raises "
+          "ValueError naming what is wrong.")
       .def(
           "distortion_at",
           [](const ExemplarTable& t, const std::string& material,

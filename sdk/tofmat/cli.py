@@ -125,6 +125,7 @@ def table_summary(path: Path, t: ExemplarTable) -> dict[str, Any]:
             m: [None if np.isnan(v) else float(v) for v in row] for m, row in zip(t.materials, t.noise_mm, strict=True)
         },
         "distortion": _distortion_summary(t),
+        "calibration": t.calibration,
     }
 
 
@@ -154,6 +155,10 @@ def table_info(path: Path, as_json: bool) -> None:
     g, dist = t.distortion_grid, t.distortion_mm
     click.echo("depth distortion: " + ("none (no corrected depth)" if g is None else
                f"{g.count} samples every {g.width_mm:g} mm of measured depth from {g.start_mm + g.width_mm / 2:g} mm"))  # fmt: skip
+    c = t.calibration
+    click.echo("calibration: " + ("built-in (tuned on the real database's curves)" if c is None else
+               "its own (tofmat table calibrate): session row offsets "
+               + ", ".join(f"{v:.2f}" for v in c["offset_sd_mm"]) + " mm; " + ", ".join(sorted(c["methods"]))))  # fmt: skip
     for i, (name, n) in enumerate(zip(t.materials, t.valid_counts, strict=True)):
         sd = "" if noise is None else "  noise " + " ".join("-" if np.isnan(v) else f"{v:.3f}" for v in noise[i])
         if dist is not None:
@@ -619,6 +624,50 @@ def table_distortion(path: Path, output: Path | None, device: str, library: str,
         fit = f"fit rms {fits[name]:.2f} mm" if name in fits else "fit rms unknown"
         span = f"{row.min():+.1f}..{row.max():+.1f} mm over {row.size} samples" if row.size else "none measured"
         click.echo(f"  {name:<14s} {span}  ({fit})")
+
+
+@table.command("calibrate")
+@click.argument("path", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path),
+              help="Table file to write (default: PATH itself, replaced atomically).")  # fmt: skip
+@click.option("--source", type=click.Choice(["curves", "sim"]), default="curves", show_default=True,
+              help="curves: a table of the real database's curves, its sessions drawn from them; sim: a table the "
+              "simulated camera recorded, its sessions rendered.")  # fmt: skip
+@click.option("--sessions", type=click.IntRange(1, 1000), default=10, show_default=True,
+              help="New sessions per material and split (as tofmat evaluate's).")  # fmt: skip
+@click.option("--json", "as_json", is_flag=True, help="Print the calibration written as JSON.")
+def table_calibrate(path: Path, output: Path | None, source: str, sessions: int, as_json: bool) -> None:
+    """Calibrate a table for itself and store the calibration in it (format 1.3).
+
+    The held-out evaluation (docs/evaluation.md) on this table's materials: its tuning split tunes the
+    session matcher's prior and fits each method's confidence temperatures and the open-set
+    thresholds, which the table then carries; tofmatd and tofmat.Classifier use them instead of the
+    built-in ones. Everything else the table holds (noise, depth distortion) is kept. Prints the
+    test split's accuracy with them."""
+    from .evaluation.run import format_markdown
+    from .evaluation.table_calibration import calibrate_table
+
+    t = open_table(path)
+    if len(t) < 2:
+        raise click.BadParameter("a table of one material has nothing to calibrate a choice on", param_hint="PATH")
+    try:
+        with progress_bar("calibrating") as progress:
+            calibrated, result = calibrate_table(t, source, sessions, progress)
+    except (ValueError, RuntimeError) as e:
+        raise click.ClickException(str(e)) from e
+    target = output or path
+    calibrated.save(str(target))
+    if as_json:
+        click.echo(json.dumps(calibrated.calibration, indent=2))
+        return
+    c = calibrated.calibration or {}
+    click.echo(f"{target}: calibrated for {len(t)} materials ({source}, {sessions} sessions a material and split)")
+    click.echo("  session prior: row offsets " + ", ".join(f"{v:.2f}" for v in c["offset_sd_mm"]) + " mm, drift "
+               + ", ".join(f"{v:.2f}" for v in c["drift_sd_mm"]) + " mm")  # fmt: skip
+    for name, m in c["methods"].items():
+        temps = ", ".join(f"{n:g}: {v:.3g}" for n, v in m["temperatures"])
+        click.echo(f"  {name}: temperatures by sweep length {temps}")
+    click.echo(format_markdown([result]))
 
 
 @table.command("add")

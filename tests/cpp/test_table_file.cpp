@@ -7,13 +7,17 @@
 #include <sys/resource.h>
 
 #include <cmath>
+#include <cstring>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <limits>
 
 #include "test_util.hpp"
+#include "tofmat/core/confidence.hpp"
 #include "tofmat/core/error.hpp"
 #include "tofmat/core/exemplar_table.hpp"
+#include "tofmat/core/session_classifier.hpp"
 #include "tofmat/core/table_file.hpp"
 
 namespace {
@@ -276,6 +280,105 @@ TEST(TableFile, DistortionRoundTripsInVersion12WithOrWithoutNoise) {
   }
 }
 
+tofmat::TableCalibration synthetic_calibration() {
+  tofmat::TableCalibration c;
+  c.offset_sd_mm = {1.5, 0.5};
+  c.drift1_sd_mm = 4.0;
+  c.drift2_sd_mm = 2.0;
+  c.noise_scale = 1.25;
+  c.floor_mm = 0.4;
+  c.huber_k = 3.0;
+  c.iterations = 3;
+  c.methods = {{"eq12", {{1, 6.0}, {10, 8.0}}, {}}, {"session", {{1, 0.5}, {100, 12.0}}, {{1, 1.1}, {100, 27.0}}}};
+  return c;
+}
+
+// Format 1.3: the table's own calibration, with or without a distortion and
+// noise; older content kept, a table without one written as before.
+TEST(TableFile, CalibrationRoundTripsInVersion13) {
+  for (const bool with_distortion : {false, true}) {
+    for (const auto& base : {synthetic(), synthetic_with_noise()}) {
+      SCOPED_TRACE(std::string(with_distortion ? "distortion, " : "") + (base.has_noise() ? "noise" : "no noise"));
+      const auto d = with_distortion ? base.with_distortion(synthetic_distortion()) : base;
+      const auto t = d.with_calibration(synthetic_calibration());
+      const auto b = tofmat::encode_table(t);
+      EXPECT_EQ(b[10], 3);
+      const auto back = decode(b);
+      expect_round_trip(t, back);
+      EXPECT_EQ(back.distortion().has_value(), with_distortion);
+      ASSERT_TRUE(back.calibration());
+      const auto& c = *back.calibration();
+      EXPECT_EQ(c.offset_sd_mm, (std::vector<double>{1.5, 0.5}));
+      EXPECT_EQ(c.drift1_sd_mm, 4.0);
+      EXPECT_EQ(c.floor_mm, 0.4);
+      EXPECT_EQ(c.iterations, 3u);
+      ASSERT_EQ(c.methods.size(), 2u);
+      ASSERT_NE(c.method("session"), nullptr);
+      EXPECT_EQ(c.method("session")->unknown_fits, (std::vector<std::pair<double, double>>{{1, 1.1}, {100, 27.0}}));
+      EXPECT_EQ(c.method("onnx"), nullptr);
+      // Editing the table keeps it.
+      EXPECT_TRUE(back.with_noise({}).calibration());
+      EXPECT_TRUE(back.with_distortion(std::nullopt).calibration());
+      EXPECT_FALSE(back.with_calibration(std::nullopt).calibration());
+      EXPECT_LT(tofmat::encode_table(d)[10], 3);
+      // Every truncation of it is a format error, never a crash.
+      for (std::size_t n = 0; n < b.size(); ++n) EXPECT_THROW(tofmat::decode_table(b.data(), n), tofmat::FormatError);
+    }
+  }
+}
+
+TEST(TableFile, TheTablesCalibrationIsWhatTheMatchersUse) {
+  const auto t = synthetic().with_calibration(synthetic_calibration());
+  const auto eq12 = tofmat::Calibration::tuned("eq12", t);
+  EXPECT_EQ(eq12.temperatures, (std::vector<std::pair<double, double>>{{1, 6.0}, {10, 8.0}}));
+  EXPECT_EQ(tofmat::SessionPrior::tuned(t).offset_sd_mm, (std::vector<double>{1.5, 0.5}));
+  EXPECT_EQ(tofmat::SessionPrior::tuned(t).noise_scale, 1.25);
+  // Without one (or without the method), the built-in tuned settings.
+  EXPECT_EQ(tofmat::Calibration::tuned("eq12", synthetic()).temperatures,
+            tofmat::Calibration::tuned("eq12").temperatures);
+  auto only_session = synthetic_calibration();
+  only_session.methods.erase(only_session.methods.begin());
+  EXPECT_EQ(tofmat::Calibration::tuned("eq12", synthetic().with_calibration(only_session)).temperatures,
+            tofmat::Calibration::tuned("eq12").temperatures);
+}
+
+TEST(TableFile, RejectsBadCalibrations) {
+  const auto bad = [](const std::function<void(tofmat::TableCalibration&)>& edit) {
+    auto c = synthetic_calibration();
+    edit(c);
+    return c;
+  };
+  const tofmat::TableCalibration cases[] = {
+      bad([](auto& c) { c.offset_sd_mm = {1.0}; }),
+      bad([](auto& c) { c.offset_sd_mm[0] = -1.0; }),
+      bad([](auto& c) { c.drift1_sd_mm = NAN; }),
+      bad([](auto& c) { c.noise_scale = 0.0, c.floor_mm = 0.0; }),
+      bad([](auto& c) { c.huber_k = 0.0; }),
+      bad([](auto& c) { c.iterations = 0; }),
+      bad([](auto& c) { c.methods[0].method = "onnx"; }),
+      bad([](auto& c) { c.methods[1].method = "eq12"; }),
+      bad([](auto& c) { c.methods[0].temperatures = {}; }),
+      bad([](auto& c) {
+        c.methods[0].temperatures = {{10, 1.0}, {1, 1.0}};
+      }),
+      bad([](auto& c) {
+        c.methods[0].temperatures = {{1, -1.0}};
+      }),
+      bad([](auto& c) {
+        c.methods[0].temperatures.assign(65, {1, 1.0});
+      }),
+  };
+  for (const auto& c : cases) EXPECT_THROW(synthetic().with_calibration(c), std::invalid_argument);
+  // Behind a valid checksum, the same is a format error naming the content.
+  auto good = tofmat::encode_table(synthetic().with_calibration(synthetic_calibration()));
+  // The last method's last knot's value (before the CRC): a NaN threshold is refused.
+  const double nan = NAN;
+  std::memcpy(good.data() + good.size() - 4 - 8, &nan, 8);
+  const std::uint32_t crc = crc32_ieee(good.data(), good.size() - 4);
+  std::memcpy(good.data() + good.size() - 4, &crc, 4);
+  EXPECT_CONTAINS(decode_error(good), "inconsistent content");
+}
+
 TEST(ExemplarTable, DistortionIsInterpolatedBetweenItsSamples) {
   const auto t = synthetic().with_distortion(synthetic_distortion());
   EXPECT_DOUBLE_EQ(t.distortion_mm(0, 505.0), 10.0);  // a sample
@@ -448,7 +551,8 @@ TEST(TableFile, EveryTruncationIsAFormatError) {
 // message must point at the first field that gave the damage away.
 TEST(TableFile, EveryByteFlipIsAFormatError) {
   for (const auto& full : {tofmat::encode_table(synthetic()), tofmat::encode_table(synthetic_with_noise()),
-                           tofmat::encode_table(synthetic_with_noise().with_distortion(synthetic_distortion()))}) {
+                           tofmat::encode_table(synthetic_with_noise().with_distortion(synthetic_distortion())),
+                           tofmat::encode_table(synthetic().with_calibration(synthetic_calibration()))}) {
     for (std::size_t i = 0; i < full.size(); ++i) {
       for (int mask : {0x01, 0x80, 0xff}) {
         Bytes b = full;
@@ -461,13 +565,21 @@ TEST(TableFile, EveryByteFlipIsAFormatError) {
           // 1.0 <-> 1.1, both known: the noise block is then missing or left over.
           const bool sized = msg.find("truncated") != std::string::npos || msg.find("trailing") != std::string::npos;
           EXPECT_TRUE(sized) << "a changed minor version not caught by the file's size";
+        } else if (i == 10 && mask == 0x01) {
+          // 1.2 <-> 1.3, both known: a calibration read from the distortion's checksum, or left over, or
+          // 1.3's empty distortion grid read as 1.2's.
+          const bool sized = msg.find("calibration") != std::string::npos ||
+                             msg.find("trailing") != std::string::npos || msg.find("truncated") != std::string::npos ||
+                             msg.find("grid count 0") != std::string::npos;
+          EXPECT_TRUE(sized) << "a changed minor version not caught by the file's size";
         } else if (i < 12) {
-          EXPECT_CONTAINS(msg, "version");  // major and minor: only 1.0 to 1.2 are read (docs/table-format.md)
+          EXPECT_CONTAINS(msg, "version");  // major and minor: only 1.0 to 1.3 are read (docs/table-format.md)
         } else {
           const bool named = msg.find("checksum") != std::string::npos || msg.find("count") != std::string::npos ||
                              msg.find("truncated") != std::string::npos || msg.find("trailing") != std::string::npos ||
                              msg.find("name length") != std::string::npos || msg.find("limit") != std::string::npos ||
-                             msg.find("quantisation step") != std::string::npos;
+                             msg.find("quantisation step") != std::string::npos ||
+                             msg.find("calibration") != std::string::npos;
           EXPECT_TRUE(named) << "payload damage reported without naming checksum or a dimension";
         }
       }
@@ -476,8 +588,8 @@ TEST(TableFile, EveryByteFlipIsAFormatError) {
 }
 
 TEST(TableFile, RejectsOtherVersions) {
-  // A reader reads only the versions it knows: 1.0 to 1.2 (docs/table-format.md).
-  const std::pair<int, int> versions[] = {{0, 0}, {2, 0}, {0xffff, 0}, {1, 3}, {1, 7}, {1, 0xffff}};
+  // A reader reads only the versions it knows: 1.0 to 1.3 (docs/table-format.md).
+  const std::pair<int, int> versions[] = {{0, 0}, {2, 0}, {0xffff, 0}, {1, 4}, {1, 7}, {1, 0xffff}};
   for (const auto& [major, minor] : versions) {
     SCOPED_TRACE(std::to_string(major) + "." + std::to_string(minor));
     RawTable raw;

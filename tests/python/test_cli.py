@@ -290,3 +290,36 @@ def test_usb_error_is_an_oserror_with_a_kind() -> None:
         _tofmat.kinect.open_device()
     assert isinstance(e.value, OSError)
     assert e.value.kind == "no device"
+
+
+def test_table_calibrate_stores_the_tables_own_calibration(real_table, tmp_path: Path) -> None:
+    # Four materials of the real curves, two sessions a material and split: a short calibration.
+    from tofmat.evaluation.open_set import subset
+
+    names = ["cork", "pvc", "acryl", "wood"]
+    small = subset(real_table, [real_table.index_of(m) for m in names])
+    grid = tofmat.BinSpec(450.0, 4.0, 500)
+    src = tmp_path / "four.tmx"
+    small.with_distortion(grid, np.ones((4, grid.count))).save(src)
+    out = tmp_path / "calibrated.tmx"
+    p = run("table", "calibrate", src, "-o", out, "--sessions", "2", "--json")
+    written = json.loads(p.stdout)
+    t = tofmat.ExemplarTable.load(out)
+    assert t.calibration == written
+    assert set(written["methods"]) == {"eq12", "session"}
+    assert len(written["offset_sd_mm"]) == 2 and all(v > 0 for v in written["offset_sd_mm"])
+    assert [k[0] for k in written["methods"]["session"]["temperatures"]] == [1.0, 3.0, 10.0, 30.0, 100.0]
+    assert written["methods"]["session"]["unknown_fits"]
+    # Everything else the table had stays; the matchers take the table's temperatures.
+    assert t.materials == names and t.distortion_mm is not None and np.allclose(t.distortion_mm, 1.0)
+    q = t.features[0].copy()
+    q[:, 50:] = np.nan
+    own = tofmat.Classifier(t, method="eq12").classify(q).confidence
+    builtin = tofmat.Classifier(t.with_calibration(None), method="eq12").classify(q).confidence
+    assert own != builtin
+    # A table of one material cannot be calibrated; nothing is written.
+    one = tmp_path / "one.tmx"
+    subset(real_table, [0]).save(one)
+    before = one.read_bytes()
+    assert_clean_error(run("table", "calibrate", one, ok=False), "one material")
+    assert one.read_bytes() == before

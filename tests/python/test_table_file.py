@@ -223,9 +223,9 @@ def test_wrong_major_version(real_tmx, tmp_path, major) -> None:
 
 
 def test_unknown_minor_version(real_tmx, tmp_path) -> None:
-    # docs/table-format.md: minor version 0 or 1, else "unsupported version".
+    # docs/table-format.md: minor version 0 to 3, else "unsupported version".
     data = real_tmx.read_bytes()
-    for minor in (2, 0xFFFF):
+    for minor in (4, 0xFFFF):
         with pytest.raises(tofmat.FormatError, match="version"):
             load_bytes(tmp_path, patch(data, 10, "<H", minor))
     # A 1.0 file relabelled 1.1 lacks the noise block.
@@ -458,3 +458,58 @@ def test_devices_are_typed_records(monkeypatch: pytest.MonkeyPatch) -> None:
     (d,) = tofmat.devices()
     assert d == tofmat.Device(bus=2, port="2-1", product_id=0x02D8, serial="0123", accessible=False, problem="busy")
     assert d.as_dict() == listing[0]
+
+
+CALIBRATION = {
+    "offset_sd_mm": [1.0, 0.4],
+    "drift_sd_mm": [4.0, 2.0],
+    "noise_scale": 1.2,
+    "floor_mm": 0.3,
+    "huber_k": 3.0,
+    "iterations": 3,
+    "methods": {
+        "eq12": {"temperatures": [[1.0, 50.0], [100.0, 50.0]], "unknown_fits": []},
+        "session": {"temperatures": [[1.0, 0.5], [100.0, 10.0]], "unknown_fits": [[1.0, 1.0], [100.0, 30.0]]},
+    },
+}
+
+
+def test_a_tables_calibration_round_trips_in_a_version_1_3_file(real_table, tmp_path) -> None:
+    grid = tofmat.BinSpec(450.0, 4.0, 500)
+    t = real_table.with_distortion(grid, np.zeros((len(real_table), grid.count))).with_calibration(CALIBRATION)
+    path = tmp_path / "calibrated.tmx"
+    t.save(path)
+    assert path.read_bytes()[10] == 3
+    back = tofmat.ExemplarTable.load(path)
+    assert back.calibration == CALIBRATION
+    assert back.distortion_mm is not None and back.noise_mm is None
+    # Everything else a table carries keeps it; None drops it.
+    assert back.with_noise(None).calibration == CALIBRATION
+    assert back.with_calibration(None).calibration is None
+    real_table.save(tmp_path / "plain.tmx")
+    assert (tmp_path / "plain.tmx").read_bytes()[10] == 0
+
+
+def test_the_classifier_takes_the_tables_calibration(real_table) -> None:
+    q = real_table.features[real_table.index_of("cork")].copy()
+    q[:, 60:] = np.nan
+    plain = tofmat.Classifier(real_table, backend="float", method="eq12").classify(q)
+    hot = tofmat.Classifier(real_table.with_calibration(CALIBRATION), backend="float", method="eq12").classify(q)
+    assert plain.material == hot.material == "cork"
+    assert hot.confidence < plain.confidence  # a temperature of 50 spreads the probabilities
+
+
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [
+        ({"offset_sd_mm": [1.0]}, "row offsets"),
+        ({"huber_k": 0.0}, "huber_k"),
+        ({"methods": {"onnx": {"temperatures": [[1.0, 1.0]]}}}, "unknown method"),
+        ({"methods": {"eq12": {"temperatures": []}}}, "temperature"),
+        ({"drift_sd_mm": [1.0]}, "drift"),
+        ({"colour": "red"}, "unknown key"),
+    ],
+)
+def test_a_bad_calibration_is_a_clear_error(real_table, edit, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        real_table.with_calibration({**CALIBRATION, **edit})

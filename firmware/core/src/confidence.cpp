@@ -54,6 +54,46 @@ Calibration Calibration::tuned(const std::string& method) {
   return c;
 }
 
+Calibration Calibration::tuned(const std::string& method, const ExemplarTable& table) {
+  if (table.calibration()) {
+    if (const MethodCalibration* m = table.calibration()->method(method))
+      return Calibration{m->temperatures, m->unknown_fits};
+  }
+  return tuned(method);
+}
+
+// (Beside Calibration::validate: a table's calibration holds its knots.)
+void TableCalibration::validate(std::uint32_t n_rows) const {
+  const auto bad = [](double v) { return !(v >= 0.0) || std::isinf(v); };
+  if (offset_sd_mm.size() != n_rows) {
+    throw std::invalid_argument("table calibration: " + std::to_string(offset_sd_mm.size()) +
+                                " row offsets for a table of " + std::to_string(n_rows) + " rows");
+  }
+  for (double v : offset_sd_mm)
+    if (bad(v)) throw std::invalid_argument("table calibration: a row offset's sd must be finite and >= 0");
+  if (bad(drift1_sd_mm) || bad(drift2_sd_mm) || bad(noise_scale) || bad(floor_mm)) {
+    throw std::invalid_argument("table calibration: drift sds, noise_scale and floor_mm must be finite and >= 0");
+  }
+  if (noise_scale == 0.0 && floor_mm == 0.0) {
+    throw std::invalid_argument("table calibration: noise_scale and floor_mm are both 0 (no noise at all)");
+  }
+  if (!(huber_k > 0.0)) throw std::invalid_argument("table calibration: huber_k must be > 0");
+  if (iterations < 1 || iterations > 100) throw std::invalid_argument("table calibration: iterations must be 1..100");
+  for (std::size_t i = 0; i < methods.size(); ++i) {
+    const MethodCalibration& m = methods[i];
+    if (m.method != "eq12" && m.method != "session") {
+      throw std::invalid_argument("table calibration: unknown method '" + m.method + "': 'eq12' or 'session'");
+    }
+    for (std::size_t j = 0; j < i; ++j)
+      if (methods[j].method == m.method) throw std::invalid_argument("table calibration: '" + m.method + "' twice");
+    if (m.temperatures.size() > kMaxCalibrationKnots || m.unknown_fits.size() > kMaxCalibrationKnots) {
+      throw std::invalid_argument("table calibration: at most " + std::to_string(kMaxCalibrationKnots) +
+                                  " knots a method");
+    }
+    Calibration{m.temperatures, m.unknown_fits}.validate();
+  }
+}
+
 void Calibration::validate() const {
   if (temperatures.empty()) throw std::invalid_argument("calibration: give at least one (bins, temperature) knot");
   validate_lengths(temperatures, "temperatures");

@@ -77,7 +77,21 @@ ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<Row
 ExemplarTable ExemplarTable::with_noise(std::vector<float> noise_mm) const {
   ExemplarTable t(materials_, rows_, bins_, values_, quant_step_mm_, std::move(noise_mm));
   t.distortion_ = distortion_;
+  t.calibration_ = calibration_;
   return t;
+}
+
+ExemplarTable ExemplarTable::with_calibration(std::optional<TableCalibration> c) const {
+  if (c) c->validate(n_rows());
+  ExemplarTable t = *this;
+  t.calibration_ = std::move(c);
+  return t;
+}
+
+const MethodCalibration* TableCalibration::method(const std::string& name) const {
+  for (const auto& m : methods)
+    if (m.method == name) return &m;
+  return nullptr;
 }
 
 ExemplarTable ExemplarTable::with_distortion(std::optional<DepthDistortion> d) const {

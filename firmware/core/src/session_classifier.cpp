@@ -31,6 +31,16 @@ double median(std::vector<double> v) {
 SessionPrior SessionPrior::tuned(const ExemplarTable& table) {
   if (table.n_rows() == 0) throw std::invalid_argument("session prior: the table has no rows");
   SessionPrior p;
+  if (const auto& c = table.calibration()) {  // the table's own (format 1.3)
+    p.offset_sd_mm = c->offset_sd_mm;
+    p.drift1_sd_mm = c->drift1_sd_mm;
+    p.drift2_sd_mm = c->drift2_sd_mm;
+    p.noise_scale = c->noise_scale;
+    p.floor_mm = c->floor_mm;
+    p.huber_k = c->huber_k;
+    p.iterations = static_cast<int>(c->iterations);
+    return p;
+  }
   const bool kinect = table.n_rows() == 2 && table.rows()[0] == RowSpec{16, 120} && table.rows()[1] == RowSpec{80, 120};
   p.offset_sd_mm = kinect ? std::vector<double>{2.27, 0.73} : std::vector<double>(table.n_rows(), 1.0);
   return p;

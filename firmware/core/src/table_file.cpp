@@ -32,6 +32,63 @@ std::uint32_t crc32_of(const std::uint8_t* p, std::size_t n) {
   return static_cast<std::uint32_t>(c);
 }
 
+// 1.3's calibration block (docs/table-format.md).
+void write_calibration(ByteWriter& w, const TableCalibration& c) {
+  w.u16(static_cast<std::uint16_t>(c.offset_sd_mm.size()));
+  for (double v : c.offset_sd_mm) w.f64(v);
+  for (double v : {c.drift1_sd_mm, c.drift2_sd_mm, c.noise_scale, c.floor_mm, c.huber_k}) w.f64(v);
+  w.u32(c.iterations);
+  w.u8(static_cast<std::uint8_t>(c.methods.size()));
+  for (const MethodCalibration& m : c.methods) {
+    w.u8(static_cast<std::uint8_t>(m.method.size()));
+    w.bytes(m.method);
+    for (const auto* knots : {&m.temperatures, &m.unknown_fits}) {
+      w.u16(static_cast<std::uint16_t>(knots->size()));
+      for (const auto& [bins, v] : *knots) {
+        w.f64(bins);
+        w.f64(v);
+      }
+    }
+  }
+}
+
+constexpr std::size_t kMaxMethodNameBytes = 16;
+constexpr std::size_t kMaxCalibrationMethods = 8;
+
+TableCalibration read_calibration(ByteReader& in, std::uint32_t n_rows) {
+  TableCalibration c;
+  const std::uint16_t n_offsets = in.u16("calibration offset count");
+  if (n_offsets != n_rows)
+    fail("calibration holds " + std::to_string(n_offsets) + " row offsets for " + std::to_string(n_rows) + " rows");
+  c.offset_sd_mm.resize(n_offsets);
+  for (double& v : c.offset_sd_mm) v = in.f64("calibration offset sd");
+  c.drift1_sd_mm = in.f64("calibration drift");
+  c.drift2_sd_mm = in.f64("calibration drift");
+  c.noise_scale = in.f64("calibration noise scale");
+  c.floor_mm = in.f64("calibration noise floor");
+  c.huber_k = in.f64("calibration huber k");
+  c.iterations = in.u32("calibration iterations");
+  const std::uint8_t n_methods = in.u8("calibration method count");
+  if (n_methods > kMaxCalibrationMethods) fail("calibration method count " + std::to_string(n_methods) + " is over 8");
+  c.methods.resize(n_methods);
+  for (MethodCalibration& m : c.methods) {
+    const std::uint8_t len = in.u8("calibration method name length");
+    if (len == 0 || len > kMaxMethodNameBytes)
+      fail("calibration method name length " + std::to_string(len) + " is outside 1..16");
+    m.method.assign(reinterpret_cast<const char*>(in.take(len, "calibration method name")), len);
+    for (auto* knots : {&m.temperatures, &m.unknown_fits}) {
+      const std::uint16_t n = in.u16("calibration knot count");
+      if (n > kMaxCalibrationKnots) fail("calibration knot count " + std::to_string(n) + " is over 64");
+      knots->resize(n);
+      for (auto& [bins, v] : *knots) {
+        bins = in.f64("calibration knot");
+        v = in.f64("calibration knot");
+      }
+    }
+  }
+  return c;
+}
+
 }  // namespace
 
 double choose_quant_step_mm(const ExemplarTable& table) {
@@ -55,7 +112,12 @@ std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
   w.bytes(std::string_view(kTableMagic, sizeof kTableMagic));
   w.u16(kTableVersionMajor);
   const auto& distortion = table.distortion();
-  w.u16(distortion ? std::uint16_t{2} : table.has_noise() ? std::uint16_t{1} : std::uint16_t{0});
+  const auto& calibration = table.calibration();
+  // The oldest minor that holds what the table carries (older readers still read it).
+  w.u16(calibration         ? std::uint16_t{3}
+        : distortion        ? std::uint16_t{2}
+        : table.has_noise() ? std::uint16_t{1}
+                            : std::uint16_t{0});
   w.u32(static_cast<std::uint32_t>(table.n_materials()));
   w.u32(table.n_rows());
   w.u32(table.n_bins());
@@ -75,17 +137,20 @@ std::vector<std::uint8_t> encode_table(const ExemplarTable& table) {
         std::isnan(v) ? kTableMissing : static_cast<std::int16_t>(std::nearbyint(static_cast<double>(v) / step));
     w.u16(static_cast<std::uint16_t>(q));
   }
-  if (distortion) {
-    // 1.2: the noise block always (NaN: none), then the distortion's grid and values.
+  if (distortion || calibration) {
+    // 1.2 and 1.3: the noise block always (NaN: none), then the distortion's
+    // grid and values (1.3: a grid of count 0 when there is none).
     if (table.has_noise()) {
       for (float s : table.noise_mm()) w.f32(s);
     } else {
       for (std::size_t i = 0; i < table.n_materials() * table.n_rows(); ++i) w.f32(NAN);
     }
-    w.f64(distortion->grid.start_mm);
-    w.f64(distortion->grid.width_mm);
-    w.u32(distortion->grid.count);
-    for (float v : distortion->mm) w.f32(v);
+    w.f64(distortion ? distortion->grid.start_mm : 0.0);
+    w.f64(distortion ? distortion->grid.width_mm : 0.0);
+    w.u32(distortion ? distortion->grid.count : 0);
+    if (distortion)
+      for (float v : distortion->mm) w.f32(v);
+    if (calibration) write_calibration(w, *calibration);
   } else {
     for (float s : table.noise_mm()) w.f32(s);  // 1.1's noise block
   }
@@ -157,7 +222,9 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
     d.grid.start_mm = in.f64("distortion grid start");
     d.grid.width_mm = in.f64("distortion grid width");
     d.grid.count = in.u32("distortion grid count");
-    if (d.grid.count < 1 || d.grid.count > kMaxBins)
+    // (1.3 writes a grid of count 0 for a table without a distortion.)
+    const bool none = minor >= 3 && d.grid.count == 0;
+    if (!none && (d.grid.count < 1 || d.grid.count > kMaxBins))
       fail("distortion grid count " + std::to_string(d.grid.count) + " is outside 1..65535");
     const std::size_t n_distortion = std::size_t{n_materials} * d.grid.count;
     const std::size_t rest = n_distortion * 4 + 4;
@@ -165,10 +232,16 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
       fail("truncated: " + std::to_string(in.remaining()) + " bytes left for the distortion and checksum, need " +
            std::to_string(rest));
     }
-    if (in.remaining() > rest) fail(std::to_string(in.remaining() - rest) + " unexpected trailing bytes");
+    if (minor < 3 && in.remaining() > rest) fail(std::to_string(in.remaining() - rest) + " unexpected trailing bytes");
     d.mm.resize(n_distortion);
     for (float& x : d.mm) x = in.f32("distortion");
-    distortion = std::move(d);
+    if (!none) distortion = std::move(d);
+  }
+  std::optional<TableCalibration> calibration;
+  if (minor >= 3) {
+    calibration = read_calibration(in, n_rows);
+    if (in.remaining() < 4) fail("truncated: no checksum after the calibration");
+    if (in.remaining() > 4) fail(std::to_string(in.remaining() - 4) + " unexpected trailing bytes");
   }
   const std::size_t crc_offset = in.offset();
   const std::uint32_t stored_crc = in.u32("checksum");
@@ -189,7 +262,8 @@ ExemplarTable decode_table(const std::uint8_t* bytes, std::size_t size) {
   }
   try {
     return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values), step, std::move(noise))
-        .with_distortion(std::move(distortion));
+        .with_distortion(std::move(distortion))
+        .with_calibration(std::move(calibration));
   } catch (const std::invalid_argument& e) {
     fail(std::string("inconsistent content: ") + e.what());
   }

@@ -31,7 +31,7 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
       // temperatures its metadata holds (1 without them: the model's own);
       // it has no noise model, so nothing is unknown.
       calibration_(method == Method::kOnnx ? tofmat::Calibration{{{1.0, 1.0}}, {}}
-                                           : tofmat::Calibration::tuned(method_name(method))),
+                                           : tofmat::Calibration::tuned(method_name(method), *table_)),
       fixed_acc_(table_->bins(), table_->n_rows()),
       float_acc_(table_->bins(), table_->n_rows()) {
   if (!open_set) calibration_.unknown_fits.clear();  // never unknown

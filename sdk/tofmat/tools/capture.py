@@ -157,7 +157,7 @@ def combine_passes(passes: list[F32], table: ExemplarTable, name: str) -> Captur
 def with_material(table: ExemplarTable, name: str, capture: Capture, replace: bool = False) -> ExemplarTable:
     """``table`` with the captured material added (or, with ``replace``, in place of its old curve)
     and its noise stored; the other materials keep theirs (NaN where the table had none), and
-    everything else the table carries, its depth distortion included. A hand-held capture measures
+    everything else the table carries, its depth distortion and its calibration included. A hand-held capture measures
     no absolute distortion (it has no true depth), so the captured material has none: NaN, which
     tofmatd's corrected depth leaves uncorrected (a replaced material loses its old one, which
     belonged to the old curve)."""
@@ -189,4 +189,5 @@ def with_material(table: ExemplarTable, name: str, capture: Capture, replace: bo
         )
         if distortion is not None:
             distortion = np.concatenate([distortion, np.full((1, distortion.shape[1]), np.nan)])
-    return out.with_distortion(grid, distortion) if distortion is not None else out
+    out = out.with_distortion(grid, distortion) if distortion is not None else out
+    return out.with_calibration(table.calibration)  # (its prior and temperatures were fitted without the new one)

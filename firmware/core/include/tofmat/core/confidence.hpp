@@ -39,6 +39,9 @@ struct Calibration {
   // for the session matcher the open-set thresholds (Eq. (12) has no noise
   // model: never unknown). Throws std::invalid_argument for another name.
   static Calibration tuned(const std::string& method);
+  // The table's own calibration of the method when it carries one (format
+  // 1.3, tofmat table calibrate), else tuned(method).
+  static Calibration tuned(const std::string& method, const ExemplarTable& table);
   // Throws std::invalid_argument naming the bad setting: no temperature, a
   // length not increasing or not > 0, a temperature not finite and > 0, a
   // threshold NaN.

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tofmat/core/bin_spec.hpp"
@@ -48,6 +49,32 @@ struct DepthDistortion {
   std::vector<float> mm;  // n_materials x grid.count, material-major; NaN = unknown
 };
 inline constexpr double kMaxDistortionMm = 10000.0;
+
+// What a table was calibrated for, and with (format 1.3; `tofmat table
+// calibrate`): the session matcher's prior (the spreads of the sessions its
+// queries were drawn in and the tuned noise model) and each method's
+// confidence calibration (temperatures and open-set thresholds by sweep
+// length, confidence.hpp's Calibration). tofmatd and the SDK use these in
+// place of the built-in tuned ones.
+struct MethodCalibration {
+  std::string method;                                                 // "eq12" or "session"
+  std::vector<std::pair<double, double>> temperatures, unknown_fits;  // (bins, value) knots
+};
+struct TableCalibration {
+  std::vector<double> offset_sd_mm;  // per row
+  double drift1_sd_mm = 0.0, drift2_sd_mm = 0.0;
+  double noise_scale = 0.0, floor_mm = 0.0, huber_k = 0.0;
+  std::uint32_t iterations = 0;
+  std::vector<MethodCalibration> methods;
+  // Its method's calibration, or nullptr.
+  const MethodCalibration* method(const std::string& name) const;
+  // Throws std::invalid_argument naming what is wrong: offsets not one per
+  // row, a spread or noise setting negative or not finite, huber_k <= 0,
+  // iterations not 1..100, an unknown or repeated method, knots not as
+  // Calibration::validate wants them (at most kMaxCalibrationKnots each).
+  void validate(std::uint32_t n_rows) const;
+};
+inline constexpr std::size_t kMaxCalibrationKnots = 64;
 
 class ExemplarTable {
  public:
@@ -96,6 +123,10 @@ class ExemplarTable {
   // Material m's distortion at a measured depth, linear between the grid's
   // samples; NaN outside them, next to an unknown sample, or without a distortion.
   double distortion_mm(std::size_t m, double measured_mm) const;
+  // The table's own calibration, if it carries one.
+  const std::optional<TableCalibration>& calibration() const { return calibration_; }
+  // This table with `c` (nothing drops it); throws as TableCalibration::validate.
+  ExemplarTable with_calibration(std::optional<TableCalibration> c) const;
   const float* material_values(std::size_t m) const { return values_.data() + m * elements_per_material(); }
   std::size_t valid_count(std::size_t m) const;
 
@@ -110,6 +141,7 @@ class ExemplarTable {
   double quant_step_mm_;
   std::vector<float> noise_mm_;
   std::optional<DepthDistortion> distortion_;
+  std::optional<TableCalibration> calibration_;
 };
 
 // The Kinect v2 database's rows: 16 vs 120 MHz, then 80 vs 120 MHz.

@@ -57,7 +57,9 @@ struct SessionPrior {
   // The settings docs/evaluation.md tuned on its tuning split, for a table
   // of the Kinect v2 database rows (16-120 and 80-120 MHz): the offset
   // priors are the calibration's spread (2.27 and 0.73 mm). Other rows get
-  // 1 mm each. Throws std::invalid_argument for n_rows 0.
+  // 1 mm each. A table that carries its own calibration (format 1.3, tofmat
+  // table calibrate) gives its prior instead. Throws std::invalid_argument
+  // for n_rows 0.
   static SessionPrior tuned(const ExemplarTable& table);
   // Throws std::invalid_argument naming the bad setting (negative or NaN
   // sd, noise_scale, floor; huber_k <= 0; iterations < 1; the offsets'
