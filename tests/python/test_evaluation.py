@@ -233,6 +233,29 @@ def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--sessions" in r.output
 
 
+def test_the_session_spread_as_a_variable(real_tmx: Path) -> None:
+    # The shipped matchers at 0 and 2 times the calibration's session spreads: with no session change
+    # Eq. (12) is near perfect at long sweeps, and every matcher loses as sessions move more.
+    r = CliRunner().invoke(
+        main,
+        ["-q", "evaluate", "--source", "curves", "--table", str(real_tmx), "--sessions", "3",
+         "--session-scales", "0,2", "--json"],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    rows = {(row["scale"], row["method"]): row for row in json.loads(r.output)}
+    assert set(rows) == {(0.0, "eq12"), (0.0, "session"), (2.0, "eq12"), (2.0, "session")}
+    for method in ("eq12", "session"):
+        still, moved = rows[(0.0, method)]["accuracy"], rows[(2.0, method)]["accuracy"]
+        assert still.keys() == moved.keys() == {"1", "3", "10", "30", "100"}
+        assert all(still[n] > moved[n] for n in ("10", "30", "100")), (method, still, moved)
+        assert all(0.0 <= v <= 100.0 for v in rows[(2.0, method)]["confidently_wrong"].values())
+    assert rows[(0.0, "eq12")]["accuracy"]["100"] >= 95.0
+    bad = CliRunner().invoke(main, ["evaluate", "--source", "all", "--session-scales", "1"])
+    assert bad.exit_code != 0 and "--source curves" in bad.output
+    bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--session-scales", "-1"])
+    assert bad.exit_code != 0 and "scales" in bad.output
+
+
 def test_thickness_among_the_acrylics_with_confusions(real_tmx: Path) -> None:
     # --materials evaluates a few of the table's curves among themselves (candidates and targets).
     acrylics = ["acryl", "acryl1mm", "acryl2mm", "acryl3mm"]

@@ -61,6 +61,11 @@ from ..report.cli import resolve_table, table_option
     help="Also a learned model (tofmat train; repeat for one per source): its row 'onnx' is reported for the "
     "source whose table it was trained for (the real curves', or with --sim-table the simulator's).",
 )
+@click.option(
+    "--session-scales",
+    help="Instead: the matchers as they ship (not tuned again) on the real curves' test split with the session "
+    "spreads times each of these scales, e.g. 0,0.25,0.5,1,2 (needs --source curves).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
     "--plot",
@@ -78,6 +83,7 @@ def evaluate(
     sim_table: Path | None,
     out: Path | None,
     models: tuple[Path, ...],
+    session_scales: str | None,
     as_json: bool,
     plot: Path | None,
 ) -> None:
@@ -87,6 +93,8 @@ def evaluate(
     from ..tools.tables import open_table
     from .run import evaluate_curves, evaluate_sim, format_markdown
 
+    if session_scales is not None:
+        return _evaluate_scales(source, table_path, session_scales, sessions, as_json, out)
     if materials and source == "sim":
         raise UserError("--materials chooses among the real curves' materials (the simulator's: --sim-materials)")
     if sim_table is not None and sim_materials:
@@ -151,6 +159,32 @@ def evaluate(
         from .plots import reliability_diagram
 
         reliability_diagram(results, plot)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n")
+    click.echo(text)
+
+
+def _evaluate_scales(
+    source: str, table_path: Path | None, scales: str, sessions: int, as_json: bool, out: Path | None
+) -> None:
+    from ..tools.tables import open_table
+    from .scales import evaluate_scales, format_markdown
+
+    if source != "curves":
+        raise UserError("--session-scales runs on the real curves: give --source curves")
+    try:
+        values = tuple(float(v) for v in scales.split(",") if v.strip())
+    except ValueError as e:
+        raise UserError(f"--session-scales: {e}") from e
+    if not values:
+        raise UserError("--session-scales needs at least one scale")
+    with progress_bar("session scales") as progress:
+        try:
+            rows = evaluate_scales(open_table(resolve_table(table_path)), values, sessions, progress=progress)
+        except ValueError as e:
+            raise UserError(str(e)) from e
+    text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2) if as_json else format_markdown(rows)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text + "\n")

@@ -1,0 +1,92 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""How the shipped matchers hold when sessions move less, or more, than the calibration says.
+
+docs/evaluation.md draws new sessions with the spreads the calibration measured (its per-capture
+residuals, which also hold the simulator's misfit of each material). How far a real box's sessions
+move is not known, so the matchers as they ship (the built-in session prior and temperatures, not
+tuned again) are measured on the real curves' test split with the session spreads scaled by 0 to 2:
+accuracy by sweep length, and the share of labels wrong with a confidence of 0.9 or more.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .. import Classifier, ExemplarTable
+from .._progress import Progress
+from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
+from .sessions import CurveSessions, Queries, calibrated_model, draw_queries
+
+SCALES = (0.0, 0.25, 0.5, 1.0, 2.0)
+CONFIDENT = 0.9
+
+
+@dataclass(frozen=True)
+class ScaleRow:
+    scale: float  # of the calibration's session spreads (row offsets and waveform state)
+    method: str  # "eq12" or "session", as tofmat.Classifier ships them
+    accuracy: dict[int, float]  # % right by sweep length
+    confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
+    queries: dict[int, int]
+
+
+def _rows(table: ExemplarTable, scale: float, q: Queries) -> list[ScaleRow]:
+    out = []
+    for method in ("eq12", "session"):
+        results = Classifier(table, method=method).classify_batch(q.queries)
+        right = np.array([r.index == t for r, t in zip(results, q.truth, strict=True)])
+        sure = np.array([r.confidence >= CONFIDENT for r in results])
+        acc, wrong, count = {}, {}, {}
+        for n in sorted(set(q.lengths.tolist())):
+            sel = q.lengths == n
+            acc[int(n)] = 100.0 * float(right[sel].mean())
+            wrong[int(n)] = 100.0 * float((sure & ~right)[sel].mean())
+            count[int(n)] = int(sel.sum())
+        out.append(ScaleRow(scale, method, acc, wrong, count))
+    return out
+
+
+def evaluate_scales(
+    table: ExemplarTable,
+    scales: tuple[float, ...] = SCALES,
+    sessions_per_material: int = 10,
+    lengths: tuple[int, ...] = LENGTHS,
+    progress: Progress | None = None,
+) -> list[ScaleRow]:
+    """The shipped matchers on the real curves' test split, sessions drawn with the calibration's
+    spreads times each scale (the same seeds at every scale: only the spread changes)."""
+    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
+        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
+    library, device = calibrated_json()
+    base = calibrated_model(library, table)
+    out: list[ScaleRow] = []
+    for i, s in enumerate(scales):
+        if progress:
+            progress(i, len(scales), f"sessions at {s:g} x the calibration's spread")
+        model = replace(
+            base,
+            offsets_sd_mm=tuple(s * v for v in base.offsets_sd_mm),
+            state_sd=(s * base.state_sd[0], s * base.state_sd[1], s * base.state_sd[2]),
+        )
+        q = draw_queries(CurveSessions(table, model, device, library), list(lengths), sessions_per_material,
+                         SPLIT_SEEDS["test"])  # fmt: skip
+        out.extend(_rows(table, s, q))
+    return out
+
+
+def format_markdown(rows: list[ScaleRow]) -> str:
+    lengths = sorted({n for r in rows for n in r.accuracy})
+    head = " | ".join(f"{n} bins" for n in lengths)
+    lines = [
+        f"| scale | matcher | {head} | confident and wrong (worst length) |",
+        "|---|---|" + "---|" * len(lengths) + "---|",
+    ]
+    for r in rows:
+        cells = " | ".join(f"{r.accuracy[n]:.1f} %" for n in lengths)
+        worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
+        lines.append(
+            f"| {r.scale:g} | {r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) |"
+        )
+    return "\n".join(lines)
