@@ -86,7 +86,5 @@ def format_markdown(rows: list[ScaleRow]) -> str:
     for r in rows:
         cells = " | ".join(f"{r.accuracy[n]:.1f} %" for n in lengths)
         worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
-        lines.append(
-            f"| {r.scale:g} | {r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) |"
-        )
+        lines.append(f"| {r.scale:g} | {r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) |")
     return "\n".join(lines)
