@@ -33,7 +33,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -134,7 +134,7 @@ def _nearest_exemplars(
     materials: list[str],
     train: list[float],
     queries: npt.NDArray[np.float32],
-    backend: str,
+    backend: Literal["float", "fixed"],
 ) -> npt.NDArray[np.float64]:
     """Each query's Eq. (12) distance to each material's nearest exemplar, (queries, materials).
 
