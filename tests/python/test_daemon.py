@@ -48,7 +48,8 @@ def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]
         labels = final_labels(c, 4)
         for label in labels:
             assert label.truth is not None and label.material == label.truth.material, label
-            assert label.profile == "handheld" and label.bins_covered > 100
+            # One bin a frame (the region's surface at its mean depth): a 30-frame sweep of 600 mm.
+            assert label.profile == "handheld" and label.bins_covered >= 25
             distances = [r.distance for r in label.ranking]
             assert distances == sorted(distances) and len(label.ranking) == 5
             assert label.ranking[0].material == label.material and label.distance == distances[0]
@@ -668,9 +669,10 @@ def test_a_replay_gives_the_same_labels_bit_for_bit_on_every_build(tmp_path: Pat
     # must give the same labels from the same recorded frames. Natively both are the x86 daemon, and the
     # test asserts that a lossless replay is deterministic.
     rec = tmp_path / "two.tmrec"
-    scene = "sim:sweep,materials=cork+pvc,frames=12,gap=3,realtime=0" if profile == "handheld" else \
+    # (16 frames a sweep: 15 bins, what tells cork from wood, 0.2-0.7 mm apart, one bin a frame.)
+    scene = "sim:sweep,materials=cork+pvc,frames=16,gap=3,realtime=0" if profile == "handheld" else \
         "sim:regions,materials=acryl+cork+paper,realtime=0"  # fmt: skip
-    frames = 30 if profile == "handheld" else 3
+    frames = 38 if profile == "handheld" else 3
     p = subprocess.run(["python3", "-m", "tofmat", "record", "--source", scene, "-o", str(rec), "--frames",
                         str(frames)], capture_output=True, text=True, timeout=120)  # fmt: skip
     assert p.returncode == 0, p.stderr
@@ -679,7 +681,7 @@ def test_a_replay_gives_the_same_labels_bit_for_bit_on_every_build(tmp_path: Pat
     theirs = _one_replay_loop(reference, rec, sim_table, tmp_path, profile)
     assert ours == theirs
     if profile == "handheld":
-        assert len(ours) == 24 + 2  # every target frame labelled, and one no_target per gap
+        assert len(ours) == 32 + 2  # every target frame labelled, and one no_target per gap
         # The last label of each sweep (before its no_target) is the material swept; earlier ones converge.
         finals = [ours[i - 1][2] for i, e in enumerate(ours) if e[1] == "no_target" and i > 0]
         assert sorted(finals) == ["cork", "pvc"] and all(e[-1] for e in ours)

@@ -94,7 +94,8 @@ def test_a_new_material_captured_with_the_box_is_served_after_sighup(
     assert after.materials == [*before.materials, "wax"]
     assert np.array_equal(after.features[:-1], before.features, equal_nan=True)
     assert after.noise_mm is not None and np.all(after.noise_mm[-1] > 0)
-    assert np.isfinite(after.features[-1]).all(axis=0).sum() >= 100  # the sweep's range
+    # One bin a frame of each pass (the region's surface at its mean depth): 30 frames over 600 mm.
+    assert np.isfinite(after.features[-1]).all(axis=0).sum() >= 25
     # Everything the table carried stays: its depth distortion too (none measured for wax).
     assert before.distortion_mm is not None and after.distortion_mm is not None
     assert after.distortion_grid is not None and before.distortion_grid is not None
