@@ -47,8 +47,15 @@ ATTACKS = ["flood", "load_table", "big_folder", "second_daemon", "idle_slots", "
 
 def test_the_quiet_run_is_the_cameras_rate(bench: dict[str, dict[str, Any]]) -> None:
     quiet = bench["(quiet)"]["stats"]
-    # The scene: 30 frames/s, a label for each frame with a target (30 of every 36 frames) = 25/s.
-    assert 22.0 <= quiet["rate"] <= 27.0, quiet
+    # The scene: a label for each frame with a target (30 of every 36 frames), at the rate the
+    # simulated camera delivers: 30 frames/s (25 labels/s) when its renderer keeps up, less on a
+    # slower machine (it renders on the same two cores: 16-27 frames/s measured here on 2026-11-28,
+    # the daemon of before and after that day's change alike). So the labels are held to the
+    # camera's own rate over the window (a 4 s window holds 2 to 4 of the scene's gaps: +-10 %).
+    fps = quiet["camera_fps"]
+    assert 10.0 <= fps <= 31.0, quiet
+    assert 0.85 * fps * 30 / 36 <= quiet["rate"] <= 1.1 * fps * 30 / 36 + 1.0, quiet
+    assert quiet["missed_frames"] == 0, quiet
     assert quiet["gap_ms"] < 150.0, quiet
 
 

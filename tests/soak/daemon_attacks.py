@@ -1077,6 +1077,7 @@ class LabelStats:
     gap_ms: float = float("nan")  # longest wait for a label that the scene does not explain (below)
     raw_gap_ms: float = float("nan")  # longest wait for any label, the scene's empty frames included
     missed_frames: int = 0  # frames with a target in view that gave no label
+    camera_fps: float = float("nan")  # the camera's frames a second over the window (by its frame numbers and clock)
     source_gap_ms: float = float("nan")  # longest frame interval while tracking, by the daemon's frame clock
     gap_end: float = float(
         "nan"
@@ -1094,6 +1095,10 @@ def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: La
     up to its end in the same way (after `no_target`, less the scene's gap)."""
     s = LabelStats(labels=len(records), seconds=t1 - t0)
     s.rate = len(records) / s.seconds if s.seconds > 0 else 0.0
+    if len(records) >= 2 and records[-1].timestamp_ns > records[0].timestamp_ns:
+        s.camera_fps = (records[-1].frame - records[0].frame) / (
+            (records[-1].timestamp_ns - records[0].timestamp_ns) * 1e-9
+        )
     if records:
         lat = np.array([r.latency_ms for r in records])
         s.p50_ms, s.p99_ms, s.max_ms = (float(np.percentile(lat, 50)), float(np.percentile(lat, 99)),
