@@ -2,7 +2,7 @@
 """A table's own calibration (format 1.3, ``tofmat table calibrate``).
 
 The evaluation of docs/evaluation.md run on one table: its tuning split (sessions drawn with the
-calibration's spreads, or a multiple of them) tunes the session matcher's prior, fits each method's
+calibration's spreads) tunes the session matcher's prior, fits each method's
 confidence temperature per sweep length, and chooses the open-set thresholds. Those are what the
 table then carries; tofmatd and :class:`tofmat.Classifier` use them in place of the built-in ones
 (which were tuned on the real database's curves). The test split's figures come back beside them,

@@ -145,9 +145,8 @@ def _nearest_exemplars(
     for o in train:
         table = exemplar_table([feats[(m, o)] for m in materials], materials)
         for q, r in enumerate(Classifier(table, backend=backend, method="eq12").classify_batch(queries)):
-            for m in r.ranking:
-                k = materials.index(m.material)
-                out[q, k] = min(out[q, k], m.distance)
+            for m in r.ranking:  # (m.index: the table's order, which is materials')
+                out[q, m.index] = min(out[q, m.index], m.distance)
     return out
 
 

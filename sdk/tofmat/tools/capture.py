@@ -62,7 +62,9 @@ def frame_observations(images: Mapping[str, DepthImage], rows: list[tuple[int, i
 
 def frame_surface(depth_mm: F64, values: F64) -> tuple[float, F64, int] | None:
     """A frame's surface from its valid pixels (``frame_observations``): (mean combined depth, the
-    sums of the rows, pixels) of those within SURFACE_BAND_MM of the median depth; None if none."""
+    sums of the rows, pixels) of those within SURFACE_BAND_MM of the median depth; None if none.
+    (The core's ``surface_mean`` also keeps to one side of every wrap: its features are differences
+    of wrapped depths, these of depths unwrapped near the combined one, which have no such jump.)"""
     if depth_mm.size == 0:
         return None
     near = np.abs(depth_mm - np.median(depth_mm)) <= SURFACE_BAND_MM

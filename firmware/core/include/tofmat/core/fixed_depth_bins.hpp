@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-// Depth-bin accumulation in fixed point (docs/numerics.md): the valid pixels
-// of a fixed-point decoded frame (or region) add their Eq. (10) features, Q16
-// mm, to the bin of their combined depth, Q8 mm, in integer sums. The bin
+// Depth-bin accumulation in fixed point (docs/numerics.md): a region's
+// surface adds its pixels' Eq. (10) features, Q16 mm, to the bin of its mean
+// combined depth, Q8 mm (add_surface: what the profiles use), or each pixel
+// to the bin of its own depth (add_frame), in integer sums. The bin
 // index of every pixel comes from a kernel with a scalar, a NEON and an AVX2
 // version (bit for bit the same); the sums are shared scalar code. The result is the
 // partial query the classifier matches as a hand-held sweep grows.
@@ -50,9 +51,10 @@ void bin_indices(FixedKernel kernel, const std::int32_t* depth_q8, const std::ui
 // combined depth and its Eq. (10) features come from the same nine phase
 // samples, so their noise is correlated (the 120 MHz phase's error moves the
 // combined depth one way and both rows the other). Binning each pixel by its
-// own noisy depth sorts pixels by their noise: a still target at 900 mm
-// spreads over about ten bins whose means lean from -12 to +8 mm off the
-// curve at the sparse edges, while the mean over the region is right. The
+// own noisy depth sorts pixels by their noise: the bins a still target
+// covers lean with depth (-6.7 to +7.3 mm across three bins in
+// FixedDepthBins.AStillTargetsSurfaceIsOneBinAtItsValueWherePixelBinsLean),
+// while the mean over the region is right. The
 // tables are recorded the same way (the region's mean features at its mean
 // depth, sdk/tofmat/sim/table.py), and so were the real database's curves.
 //
@@ -84,7 +86,8 @@ class FixedDepthBinAccumulator {
   // n_rows: 1 or 2 (the decode's two features, d16 - d120 and d80 - d120).
   FixedDepthBinAccumulator(BinSpec bins, std::uint32_t n_rows = 2, std::uint64_t max_count = kMaxCount);
 
-  // Adds every valid pixel of a decoded frame or region; returns how many.
+  // Adds every valid pixel of a decoded frame or region to the bin of its own
+  // depth; returns how many. (Biased for a still target: see FixedSurfaceMean.)
   std::size_t add_frame(const FixedDecodedFrame& frame, FixedKernel kernel = FixedKernel::kBest);
   // Adds a region's surface as one observation at its mean depth: its pixels'
   // sums and count go to that bin, so the bin's mean is the pixel-weighted mean
