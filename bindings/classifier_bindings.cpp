@@ -15,6 +15,7 @@
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/fixed_session_classifier.hpp"
 #include "tofmat/core/session_classifier.hpp"
+#include "tofmat/core/session_learner.hpp"
 
 namespace tofmat::py {
 
@@ -58,7 +59,7 @@ class Classifier {
   Classifier(std::shared_ptr<ExemplarTable> table, const std::string& backend,
              const std::optional<std::vector<std::string>>& materials, const std::string& method,
              const std::optional<SessionPrior>& prior, const pyb::handle& noise_mm,
-             const std::optional<Calibration>& calibration, bool open_set)
+             const std::optional<Calibration>& calibration, bool open_set, bool learning)
       : table_(std::move(table)) {
     if (backend != "float" && backend != "fixed") {
       throw pyb::value_error("unknown backend '" + backend + "': available backends are 'fixed' and 'float'");
@@ -72,6 +73,9 @@ class Classifier {
     backend_ = backend;
     method_ = method;
     calibration_ = calibration ? *calibration : Calibration::tuned(method, *table_);
+    if (learning && method != "session") {
+      throw pyb::value_error("learning needs method='session': it learns the session prior's scale");
+    }
     if (open_set && method != "session") {
       throw pyb::value_error("open_set needs method='session': Eq. (12) has no noise model to judge a fit");
     }
@@ -94,6 +98,7 @@ class Classifier {
         noise.assign(a.data(), a.data() + a.size());
       }
       const SessionPrior chosen = prior ? *prior : SessionPrior::tuned(*table_);
+      if (learning) learner_ = SessionLearner::make(table_, chosen, backend == "fixed", noise, candidates);
       if (backend == "fixed") {
         fixed_session_ =
             std::make_unique<FixedSessionClassifier>(table_, chosen, std::move(noise), std::move(candidates));
@@ -115,6 +120,25 @@ class Classifier {
       c = core_classify(q.data(), static_cast<std::size_t>(q.size()));
     }
     return to_result(*table_, c, calibration_);
+  }
+
+  // A finished sweep's whole query moves the learned session (learning=True only).
+  void learn(const pyb::handle& query) {
+    SessionLearner& learner = require_learning();
+    auto q = as_float32(query, shape(), "query");
+    pyb::gil_scoped_release nogil;
+    learner.learn(learner.classify(q.data(), static_cast<std::size_t>(q.size()), true));
+  }
+  void reset_session() { require_learning().reset(); }
+  std::optional<pyb::dict> session() const {
+    if (!learner_) return std::nullopt;
+    const auto s = learner_->state();
+    pyb::dict d;
+    d["scales"] = s.scales;
+    d["weights"] = s.weights;
+    d["scale"] = s.scale;
+    d["sweeps"] = s.sweeps;
+    return d;
   }
 
   std::vector<Result> classify_batch(const pyb::handle& queries) const {
@@ -174,7 +198,13 @@ class Classifier {
     return {static_cast<pyb::ssize_t>(table_->n_rows()), static_cast<pyb::ssize_t>(table_->n_bins())};
   }
 
+  SessionLearner& require_learning() const {
+    if (!learner_) throw pyb::value_error("this classifier does not learn its session: make it with learning=True");
+    return *learner_;
+  }
+
   Classification core_classify(const float* q, std::size_t n) const {
+    if (learner_) return learner_->classify(q, n).mixture;
     if (session_) return session_->classify(q, n);
     if (fixed_session_) return fixed_session_->classify(q, n);
     return fixed_ ? fixed_->classify(q, n) : float_->classify(q, n);
@@ -187,6 +217,7 @@ class Classifier {
   std::unique_ptr<FixedClassifier> fixed_;
   std::unique_ptr<SessionClassifier> session_;
   std::unique_ptr<FixedSessionClassifier> fixed_session_;
+  std::shared_ptr<SessionLearner> learner_;  // learning=True: the mixture of scaled priors (session_learner.hpp)
 };
 
 }  // namespace
@@ -320,14 +351,22 @@ void register_classifier(pyb::module_& m) {
                           "(method='eq12').")
       .def(pyb::init<std::shared_ptr<ExemplarTable>, const std::string&, const std::optional<std::vector<std::string>>&,
                      const std::string&, const std::optional<SessionPrior>&, const pyb::handle&,
-                     const std::optional<Calibration>&, bool>(),
+                     const std::optional<Calibration>&, bool, bool>(),
            pyb::arg("table"), pyb::arg("backend") = "float", pyb::arg("materials") = pyb::none(),
            pyb::arg("method") = "session", pyb::arg("prior") = pyb::none(), pyb::arg("noise_mm") = pyb::none(),
-           pyb::arg("calibration") = pyb::none(), pyb::arg("open_set") = false)
+           pyb::arg("calibration") = pyb::none(), pyb::arg("open_set") = false, pyb::arg("learning") = false)
       .def("classify", &Classifier::classify, pyb::arg("query"),
            "query: float array (n_rows, n_bins), NaN = missing. Raises ValueError if no element is valid.")
       .def("classify_batch", &Classifier::classify_batch, pyb::arg("queries"),
            "queries: float array (n, n_rows, n_bins). Returns a list of results.")
+      .def("learn", &Classifier::learn, pyb::arg("query"),
+           "learning=True: a finished sweep's whole query (n_rows, n_bins) teaches the classifier how far this "
+           "session moved (docs/evaluation.md). Raises ValueError without learning or if no element is valid.")
+      .def("reset_session", &Classifier::reset_session,
+           "learning=True: a new session (the learned weights start again equal).")
+      .def_property_readonly("session", &Classifier::session,
+                             "learning=True: the learned session {'scales', 'weights', 'scale' (the weights' "
+                             "mean), 'sweeps'}; None otherwise.")
       .def_property_readonly("materials", &Classifier::materials, "Candidate materials searched.")
       .def_property_readonly("backend", &Classifier::backend)
       .def_property_readonly("method", &Classifier::method, "'eq12' or 'session'.")

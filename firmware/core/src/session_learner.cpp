@@ -1,0 +1,192 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// SessionLearner: the mixture of session priors of session_learner.hpp and
+// the weights it learns from finished sweeps.
+#include "tofmat/core/session_learner.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "tofmat/core/fixed_session_classifier.hpp"
+
+namespace tofmat {
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// log sum exp(v), -inf for no finite term.
+double log_sum_exp(const std::vector<double>& v) {
+  double top = -kInf;
+  for (double x : v) top = std::max(top, x);
+  if (!std::isfinite(top)) return top;
+  double s = 0.0;
+  for (double x : v) s += std::exp(x - top);
+  return top + std::log(s);
+}
+
+}  // namespace
+
+void SessionLearning::validate() const {
+  if (scales.empty()) throw std::invalid_argument("session learning: give at least one scale");
+  for (std::size_t k = 0; k < scales.size(); ++k) {
+    if (!(scales[k] >= 0.0) || std::isinf(scales[k]))
+      throw std::invalid_argument("session learning: a scale must be finite and >= 0");
+    if (k > 0 && !(scales[k] > scales[k - 1]))
+      throw std::invalid_argument("session learning: the scales must be increasing");
+  }
+  if (!(forget > 0.0 && forget <= 1.0)) throw std::invalid_argument("session learning: forget must be in (0, 1]");
+  if (!(evidence_cap > 0.0) || std::isinf(evidence_cap))
+    throw std::invalid_argument("session learning: evidence_cap must be finite and > 0");
+}
+
+SessionPrior scaled(const SessionPrior& prior, double scale) {
+  if (!(scale >= 0.0) || std::isinf(scale))
+    throw std::invalid_argument("session prior: a scale must be finite and >= 0");
+  SessionPrior p = prior;
+  for (double& s : p.offset_sd_mm) s *= scale;
+  p.drift1_sd_mm *= scale;
+  p.drift2_sd_mm *= scale;
+  return p;
+}
+
+SessionLearner::SessionLearner(SessionLearning settings, std::vector<Scorer> scorers)
+    : settings_(std::move(settings)), scorers_(std::move(scorers)) {
+  settings_.validate();
+  if (scorers_.size() != settings_.scales.size()) {
+    throw std::invalid_argument("session learning: " + std::to_string(scorers_.size()) + " scorers for " +
+                                std::to_string(settings_.scales.size()) + " scales");
+  }
+  log_weight_.assign(settings_.scales.size(), 0.0);
+}
+
+std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const ExemplarTable>& table,
+                                                     const SessionPrior& prior, bool fixed_point,
+                                                     const std::vector<double>& noise_mm,
+                                                     const std::vector<std::uint32_t>& candidates,
+                                                     SessionLearning settings) {
+  settings.validate();
+  std::vector<Scorer> scorers;
+  for (double s : settings.scales) {
+    if (fixed_point) {
+      auto c = std::make_shared<const FixedSessionClassifier>(table, scaled(prior, s), noise_mm, candidates);
+      scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
+    } else {
+      auto c = std::make_shared<const SessionClassifier>(table, scaled(prior, s), noise_mm, candidates);
+      scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
+    }
+  }
+  return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers));
+}
+
+SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t n, bool every_scale) const {
+  const std::size_t k_count = scorers_.size();
+  std::vector<double> log_w;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    log_w = log_weight_;
+  }
+  const double norm = log_sum_exp(log_w);
+  for (double& w : log_w) w -= norm;
+  double heaviest = -kInf;
+  for (double w : log_w) heaviest = std::max(heaviest, w);
+  std::vector<bool> scored(k_count);
+  for (std::size_t k = 0; k < k_count; ++k) scored[k] = every_scale || log_w[k] >= heaviest - kNegligibleNats;
+
+  std::vector<Classification> by_scale(k_count);
+  std::size_t first = k_count;  // the first scored scale: its ranking gives the candidates' order
+  for (std::size_t k = 0; k < k_count; ++k) {
+    if (!scored[k]) continue;
+    by_scale[k] = scorers_[k](query, n);
+    if (first == k_count) first = k;
+  }
+
+  // Per candidate (as the first scale ranks them), its score under every scale.
+  const std::size_t m_count = by_scale[first].ranking.size();
+  Scored out;
+  out.evidence.assign(k_count, -kInf);
+  std::vector<std::vector<double>> neg_score(k_count);  // -D_k(m), in the first scale's order
+  std::vector<std::uint32_t> order;
+  order.reserve(m_count);
+  for (const Match& m : by_scale[first].ranking) order.push_back(m.index);
+  for (std::size_t k = 0; k < k_count; ++k) {
+    neg_score[k].assign(m_count, -kInf);
+    if (!scored[k]) continue;
+    if (by_scale[k].ranking.size() != m_count)
+      throw std::logic_error("session learning: the scales' scorers rank different candidates");
+    for (const Match& m : by_scale[k].ranking) {
+      const auto at = std::find(order.begin(), order.end(), m.index);
+      if (at == order.end()) throw std::logic_error("session learning: the scales' scorers rank different candidates");
+      neg_score[k][static_cast<std::size_t>(at - order.begin())] = -m.distance;
+    }
+    out.evidence[k] = log_sum_exp(neg_score[k]);
+  }
+  out.mixture.ranking.reserve(m_count);
+  std::vector<double> terms(k_count);
+  for (std::size_t i = 0; i < m_count; ++i) {
+    std::size_t likeliest = first;
+    for (std::size_t k = 0; k < k_count; ++k) {
+      terms[k] = scored[k] ? log_w[k] + neg_score[k][i] : -kInf;
+      if (terms[k] > terms[likeliest]) likeliest = k;
+    }
+    Match m = *std::find_if(by_scale[likeliest].ranking.begin(), by_scale[likeliest].ranking.end(),
+                            [&](const Match& x) { return x.index == order[i]; });
+    m.distance = -log_sum_exp(terms);
+    out.mixture.ranking.push_back(m);
+  }
+  std::sort(out.mixture.ranking.begin(), out.mixture.ranking.end(), [](const Match& a, const Match& b) {
+    return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
+  });
+  return out;
+}
+
+void SessionLearner::learn(const Scored& sweep) {
+  if (sweep.evidence.size() != log_weight_.size())
+    throw std::invalid_argument("session learning: a sweep's evidence has " + std::to_string(sweep.evidence.size()) +
+                                " scales, the learner " + std::to_string(log_weight_.size()));
+  double best = -kInf;
+  for (double e : sweep.evidence) {
+    if (std::isnan(e) || e == -kInf) {
+      throw std::invalid_argument("session learning: a sweep to learn from must be scored at every scale");
+    }
+    best = std::max(best, e);
+  }
+  if (!std::isfinite(best)) return;  // nothing to learn from
+  std::lock_guard<std::mutex> lock(mutex_);
+  double top = -kInf;
+  for (std::size_t k = 0; k < log_weight_.size(); ++k) {
+    const double e = sweep.evidence[k];
+    const double moved = std::isfinite(e) ? std::max(e - best, -settings_.evidence_cap) : -settings_.evidence_cap;
+    log_weight_[k] = settings_.forget * log_weight_[k] + moved;
+    top = std::max(top, log_weight_[k]);
+  }
+  for (double& w : log_weight_) w -= top;  // (kept near 0: the weights are relative)
+  ++sweeps_;
+}
+
+void SessionLearner::reset() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  std::fill(log_weight_.begin(), log_weight_.end(), 0.0);
+  sweeps_ = 0;
+}
+
+SessionLearner::State SessionLearner::state() const {
+  State s;
+  s.scales = settings_.scales;
+  std::vector<double> log_w;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    log_w = log_weight_;
+    s.sweeps = sweeps_;
+  }
+  const double norm = log_sum_exp(log_w);
+  for (std::size_t k = 0; k < log_w.size(); ++k) {
+    s.weights.push_back(std::exp(log_w[k] - norm));
+    s.scale += s.weights.back() * s.scales[k];
+  }
+  return s;
+}
+
+}  // namespace tofmat

@@ -1,0 +1,204 @@
+// SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+// The session-learning matcher (session_learner.hpp): the mixture's score in
+// closed form over scorers with known scores, the weights' update (evidence,
+// cap, forgetting, reset), the scales it skips, and on a small table of real
+// session classifiers: an unmoved session settles on scale 0, a moved one on a
+// wide scale, and each then labels a sweep the other way of matching gets wrong.
+#include "tofmat/core/session_learner.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+namespace {
+
+using namespace tofmat;
+
+// A scorer that ranks candidates 0..n-1 with the given scores (lower first), counting its calls.
+SessionLearner::Scorer fixed_scores(const std::vector<double>& scores, int* calls = nullptr) {
+  return [scores, calls](const float*, std::size_t) {
+    if (calls) ++*calls;
+    Classification c;
+    for (std::uint32_t i = 0; i < scores.size(); ++i) c.ranking.push_back({i, scores[i], 4, 0.1 * i});
+    std::sort(c.ranking.begin(), c.ranking.end(),
+              [](const Match& a, const Match& b) { return a.distance < b.distance; });
+    return c;
+  };
+}
+
+SessionLearning two_scales(double forget = 1.0, double cap = 10.0) {
+  SessionLearning s;
+  s.scales = {0.0, 1.0};
+  s.forget = forget;
+  s.evidence_cap = cap;
+  return s;
+}
+
+const float kQuery[1] = {0.0f};
+
+TEST(SessionLearner, TheMixturesScoreIsMinusTheLogOfTheWeightedLikelihoods) {
+  // Scale 0 prefers candidate 0 strongly, scale 1 candidate 1 mildly.
+  SessionLearner l(two_scales(), {fixed_scores({1.0, 5.0}), fixed_scores({3.0, 2.0})});
+  const auto s = l.classify(kQuery, 1);
+  ASSERT_EQ(s.mixture.ranking.size(), 2u);
+  const double d0 = -std::log(0.5 * std::exp(-1.0) + 0.5 * std::exp(-3.0));
+  const double d1 = -std::log(0.5 * std::exp(-5.0) + 0.5 * std::exp(-2.0));
+  EXPECT_EQ(s.mixture.best().index, 0u);
+  EXPECT_NEAR(s.mixture.ranking[0].distance, d0, 1e-12);
+  EXPECT_NEAR(s.mixture.ranking[1].distance, d1, 1e-12);
+  // A candidate's fit is that of its likeliest scale (candidate 1: scale 1's).
+  EXPECT_DOUBLE_EQ(s.mixture.ranking[1].fit, 0.1);
+  EXPECT_NEAR(s.evidence[0], std::log(std::exp(-1.0) + std::exp(-5.0)), 1e-12);
+  EXPECT_NEAR(s.evidence[1], std::log(std::exp(-3.0) + std::exp(-2.0)), 1e-12);
+}
+
+TEST(SessionLearner, EvidenceMovesTheWeightsCappedForgottenAndResetBySession) {
+  // Scale 1 explains every sweep e^2 better than scale 0 does.
+  SessionLearner l(two_scales(0.5, 10.0), {fixed_scores({4.0, 9.0}), fixed_scores({2.0, 7.0})});
+  EXPECT_DOUBLE_EQ(l.state().weights[0], 0.5);
+  const auto sweep = l.classify(kQuery, 1, true);
+  const double e = sweep.evidence[1] - sweep.evidence[0];  // 2 nats
+  EXPECT_NEAR(e, 2.0, 1e-12);
+  l.learn(sweep);
+  auto st = l.state();
+  EXPECT_EQ(st.sweeps, 1u);
+  EXPECT_NEAR(st.weights[1] / st.weights[0], std::exp(2.0), 1e-9);
+  EXPECT_NEAR(st.scale, st.weights[1], 1e-12);
+  // Forgetting 0.5: the log ratio after n sweeps is 2 (1 + 0.5 + ... ), at most 4.
+  for (int i = 0; i < 30; ++i) l.learn(sweep);
+  st = l.state();
+  EXPECT_NEAR(std::log(st.weights[1] / st.weights[0]), 4.0, 1e-6);
+  l.reset();
+  st = l.state();
+  EXPECT_EQ(st.sweeps, 0u);
+  EXPECT_DOUBLE_EQ(st.weights[0], 0.5);
+
+  // One sweep moves a weight by at most the cap.
+  SessionLearner capped(two_scales(1.0, 3.0), {fixed_scores({50.0, 90.0}), fixed_scores({2.0, 7.0})});
+  capped.learn(capped.classify(kQuery, 1, true));
+  st = capped.state();
+  EXPECT_NEAR(std::log(st.weights[1] / st.weights[0]), 3.0, 1e-9);
+}
+
+TEST(SessionLearner, ANegligibleScaleIsNotScoredUnlessEveryScaleIsAskedFor) {
+  int calls0 = 0, calls1 = 0;
+  SessionLearner l(two_scales(1.0, 40.0), {fixed_scores({60.0, 70.0}, &calls0), fixed_scores({2.0, 7.0}, &calls1)});
+  l.learn(l.classify(kQuery, 1, true));  // scale 0 now ~58 nats down (under the 30 of kNegligibleNats)
+  calls0 = calls1 = 0;
+  const auto s = l.classify(kQuery, 1);
+  EXPECT_EQ(calls0, 0);
+  EXPECT_EQ(calls1, 1);
+  EXPECT_TRUE(std::isinf(s.evidence[0]) && s.evidence[0] < 0);
+  EXPECT_NEAR(s.mixture.best().distance, 2.0, 1e-9);
+  // Such a classification cannot be learned from: it lacks a scale's evidence.
+  EXPECT_THROW(l.learn(s), std::invalid_argument);
+  l.classify(kQuery, 1, true);
+  EXPECT_EQ(calls0, 1);
+}
+
+TEST(SessionLearner, BadSettingsAreRefusedByName) {
+  SessionLearning s;
+  s.scales = {};
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.scales = {0.0, 0.0};
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.scales = {-1.0, 1.0};
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.scales = {0.0, 1.0};
+  s.forget = 0.0;
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.forget = 0.9;
+  s.evidence_cap = std::nan("");
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.evidence_cap = 10.0;
+  EXPECT_NO_THROW(s.validate());
+  EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0})}), std::invalid_argument);  // 1 scorer, 2 scales
+  SessionLearner l(s, {fixed_scores({1.0}), fixed_scores({1.0})});
+  SessionLearner::Scored wrong;
+  wrong.evidence = {0.0, 0.0, 0.0};
+  EXPECT_THROW(l.learn(wrong), std::invalid_argument);
+  EXPECT_THROW(scaled(SessionPrior{}, -1.0), std::invalid_argument);
+}
+
+// Two materials 1.2 mm apart on row 0 (equal on row 1), 40 bins, noise 0.2 mm.
+struct Twins {
+  std::shared_ptr<const ExemplarTable> table;
+  Twins() {
+    const std::uint32_t bins = 40;
+    std::vector<float> v(2 * 2 * bins);
+    for (std::uint32_t j = 0; j < bins; ++j) {
+      const float trend = 0.05f * static_cast<float>(j);
+      v[0 * 2 * bins + j] = 10.0f + trend;  // material a, row 0
+      v[0 * 2 * bins + bins + j] = 3.0f;    // row 1
+      v[1 * 2 * bins + j] = 11.2f + trend;  // material b, row 0
+      v[1 * 2 * bins + bins + j] = 3.0f;
+    }
+    table = std::make_shared<const ExemplarTable>(std::vector<std::string>{"a", "b"},
+                                                  std::vector<RowSpec>{{16, 120}, {80, 120}},
+                                                  BinSpec{600.0, 10.0, bins}, std::move(v));
+  }
+  // Material m's 10-bin sweep from bin 15, moved by `offset` on row 0, with noise.
+  std::vector<float> sweep(int m, double offset, std::mt19937& rng) const {
+    std::normal_distribution<double> noise(0.0, 0.2);
+    const std::uint32_t bins = table->n_bins();
+    std::vector<float> q(2 * bins, std::nanf(""));
+    for (std::uint32_t j = 15; j < 25; ++j) {
+      q[j] = static_cast<float>(table->material_values(static_cast<std::size_t>(m))[j] + offset + noise(rng));
+      q[bins + j] = static_cast<float>(3.0 + noise(rng));
+    }
+    return q;
+  }
+};
+
+SessionPrior twins_prior() {
+  SessionPrior p;
+  p.offset_sd_mm = {2.0, 0.5};
+  p.drift1_sd_mm = p.drift2_sd_mm = 0.0;
+  p.noise_scale = 0.0;
+  p.floor_mm = 0.2;
+  return p;
+}
+
+TEST(SessionLearner, AnUnmovedSessionSettlesOnScaleZeroAndTellsTwinsApart) {
+  Twins t;
+  for (bool fixed : {false, true}) {
+    auto l = SessionLearner::make(t.table, twins_prior(), fixed);
+    std::mt19937 rng(7);
+    for (int i = 0; i < 6; ++i) {
+      const auto q = t.sweep(i % 2, 0.0, rng);
+      l->learn(l->classify(q.data(), q.size(), true));
+    }
+    const auto st = l->state();
+    EXPECT_GT(st.weights[0], 0.9) << (fixed ? "fixed" : "float");
+    EXPECT_LT(st.scale, 0.1);
+    // The session did not move: a sweep of b is b, not a moved by 1.2 mm.
+    int right = 0;
+    for (int i = 0; i < 20; ++i) {
+      const auto q = t.sweep(1, 0.0, rng);
+      right += l->classify(q.data(), q.size()).mixture.best().index == 1;
+    }
+    EXPECT_EQ(right, 20) << (fixed ? "fixed" : "float");
+  }
+}
+
+TEST(SessionLearner, AMovedSessionSettlesOnAWideScale) {
+  Twins t;
+  auto l = SessionLearner::make(t.table, twins_prior(), false);
+  std::mt19937 rng(11);
+  // The session moved row 0 by 4 mm: no material explains a sweep without an offset.
+  for (int i = 0; i < 6; ++i) {
+    const auto q = t.sweep(i % 2, 4.0, rng);
+    l->learn(l->classify(q.data(), q.size(), true));
+  }
+  const auto st = l->state();
+  EXPECT_GT(st.scale, 1.0);
+  EXPECT_LT(st.weights[0], 1e-6);
+  EXPECT_EQ(st.sweeps, 6u);
+}
+
+}  // namespace
