@@ -66,6 +66,13 @@ from ..report.cli import resolve_table, table_option
     help="Instead: the matchers as they ship (not tuned again) on the real curves' test split with the session "
     "spreads times each of these scales, e.g. 0,0.25,0.5,1,2 (needs --source curves).",
 )
+@click.option(
+    "--sweeps-per-session",
+    type=click.IntRange(1, 1000),
+    help="With --session-scales: sessions of this many sweeps (materials and lengths at random), labelled in "
+    "turn by Eq. (12), the session matcher and the matcher that learns its session (tofmatd's default); "
+    "--sessions x the table's materials sessions per scale.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
     "--plot",
@@ -84,6 +91,7 @@ def evaluate(
     out: Path | None,
     models: tuple[Path, ...],
     session_scales: str | None,
+    sweeps_per_session: int | None,
     as_json: bool,
     plot: Path | None,
 ) -> None:
@@ -93,8 +101,10 @@ def evaluate(
     from ..tools.tables import open_table
     from .run import evaluate_curves, evaluate_sim, format_markdown
 
+    if sweeps_per_session is not None and session_scales is None:
+        raise UserError("--sweeps-per-session goes with --session-scales (e.g. --session-scales 0,0.25,0.5,1,2)")
     if session_scales is not None:
-        return _evaluate_scales(source, table_path, session_scales, sessions, as_json, out)
+        return _evaluate_scales(source, table_path, session_scales, sessions, sweeps_per_session, as_json, out)
     if materials and source == "sim":
         raise UserError("--materials chooses among the real curves' materials (the simulator's: --sim-materials)")
     if sim_table is not None and sim_materials:
@@ -166,10 +176,17 @@ def evaluate(
 
 
 def _evaluate_scales(
-    source: str, table_path: Path | None, scales: str, sessions: int, as_json: bool, out: Path | None
+    source: str,
+    table_path: Path | None,
+    scales: str,
+    sessions: int,
+    sweeps_per_session: int | None,
+    as_json: bool,
+    out: Path | None,
 ) -> None:
     from ..tools.tables import open_table
-    from .scales import evaluate_scales, format_markdown
+    from . import scales as single
+    from . import sequences
 
     if source != "curves":
         raise UserError("--session-scales runs on the real curves: give --source curves")
@@ -179,12 +196,23 @@ def _evaluate_scales(
         raise UserError(f"--session-scales: {e}") from e
     if not values:
         raise UserError("--session-scales needs at least one scale")
+    table = open_table(resolve_table(table_path))
     with progress_bar("session scales") as progress:
         try:
-            rows = evaluate_scales(open_table(resolve_table(table_path)), values, sessions, progress=progress)
+            if sweeps_per_session is None:
+                scale_rows = single.evaluate_scales(table, values, sessions, progress=progress)
+                rows: list[Any] = scale_rows
+                text = single.format_markdown(scale_rows)
+            else:
+                sequence_rows = sequences.evaluate_sequences(
+                    table, values, sessions * len(table.materials), sweeps_per_session, progress=progress
+                )
+                rows = sequence_rows
+                text = sequences.format_markdown(sequence_rows)
         except ValueError as e:
             raise UserError(str(e)) from e
-    text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2) if as_json else format_markdown(rows)
+    if as_json:
+        text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text + "\n")

@@ -122,6 +122,15 @@ def calibrated_model(library: Mapping[str, Any], table: ExemplarTable, drop_p: f
     )
 
 
+@dataclass(frozen=True)
+class Session:
+    """What one capture session does to every curve: row offsets (R,), mm, and the move of the
+    waveform's state per group (None: no drift)."""
+
+    offsets_mm: F64
+    state_delta: tuple[float, float, float] | None
+
+
 class CurveSessions:
     """The table's curves in new sessions: :meth:`curve` draws one material's curve in a new session."""
 
@@ -183,18 +192,28 @@ class CurveSessions:
         d = moved - self._base[name]
         return np.asarray(np.where(np.isfinite(d), d, 0.0), dtype=np.float64)
 
-    def curve(self, m: int, rng: np.random.Generator) -> F64:
-        """Material m's curve (R, B) in a new session: offsets and drift, before bin noise."""
+    def session(self, rng: np.random.Generator) -> Session:
+        """A new session's departure: its row offsets and, with a waveform drift, its state's move."""
         off = np.array([rng.normal(0.0, s) for s in self.model.offsets_sd_mm])
-        out: F64 = self.curves[m] + off[:, None]
+        delta = None
         if self._drift:
             delta = (
                 float(rng.normal(0.0, self.model.state_sd[0])),
                 float(rng.normal(0.0, self.model.state_sd[1])),
                 float(rng.normal(0.0, self.model.state_sd[2])),
             )
-            out = out + self.drift(m, delta)
+        return Session(off, delta)
+
+    def session_curve(self, m: int, session: Session) -> F64:
+        """Material m's curve (R, B) in that session: offsets and drift, before bin noise."""
+        out: F64 = self.curves[m] + session.offsets_mm[:, None]
+        if session.state_delta is not None:
+            out = out + self.drift(m, session.state_delta)
         return out
+
+    def curve(self, m: int, rng: np.random.Generator) -> F64:
+        """Material m's curve (R, B) in a new session of its own."""
+        return self.session_curve(m, self.session(rng))
 
     def measure(self, m: int, session_curve: F64, start: int, length: int, rng: np.random.Generator) -> F32:
         """A sweep over bins [start, start + length) of a session's curve: the material's bin noise,

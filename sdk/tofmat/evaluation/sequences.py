@@ -1,0 +1,195 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""Sessions of many sweeps: how the matcher that learns its session (``Classifier(...,
+learning=True)``, what tofmatd runs by default) does from a session's first sweep on.
+
+A box labels many sweeps in one capture session, and what the session does to the curves (row
+offsets, the waveform's state) is common to all of them. Each session here is drawn once with the
+calibration's spreads times a scale (:mod:`.scales`), and then sweeps of materials and lengths at
+random follow in it; the learning matcher starts each session afresh and learns from every sweep
+after labelling it, while Eq. (12) and the session matcher label each sweep on its own. The real
+curves' test split; the matchers as they ship (the built-in prior and temperatures).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .. import Classifier, ExemplarTable
+from .._progress import Progress
+from ..tools.sweeps import window_starts
+from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
+from .scales import CONFIDENT, SCALES
+from .sessions import CurveSessions, calibrated_model
+
+MATCHERS = ("eq12", "session", "learning")
+# A sweep's place in its session, as reported: the first, the second to fourth, the fifth on.
+STAGES = ((0, 1, "1st"), (1, 4, "2nd-4th"), (4, None, "5th on"))
+
+
+@dataclass(frozen=True)
+class SequenceRow:
+    scale: float  # of the calibration's session spreads
+    matcher: str  # one of MATCHERS
+    stage: str  # one of STAGES' names: which sweeps of their session
+    accuracy: dict[int, float]  # % right by sweep length
+    confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
+    sweeps: dict[int, int]
+
+
+@dataclass(frozen=True)
+class _Sweep:
+    session: int
+    position: int  # in its session, from 0
+    truth: int
+    length: int
+    query: np.ndarray
+
+
+def draw_sequences(
+    sessions: CurveSessions, n_sessions: int, sweeps_per_session: int, lengths: tuple[int, ...], seed: int
+) -> list[_Sweep]:
+    """``n_sessions`` sessions of ``sweeps_per_session`` sweeps each: a material and a length (of
+    ``lengths``) at random per sweep, a window at random where the material's curve has elements."""
+    if n_sessions < 1 or sweeps_per_session < 1:
+        raise ValueError("give at least one session and one sweep per session")
+    table = sessions.table
+    for n in lengths:
+        if not 1 <= n <= table.n_bins:
+            raise ValueError(f"a sweep length must be 1..{table.n_bins}, got {n}")
+    rng = np.random.default_rng(seed)
+    out: list[_Sweep] = []
+    for s in range(n_sessions):
+        session = sessions.session(rng)
+        for k in range(sweeps_per_session):
+            while True:
+                m = int(rng.integers(0, len(table.materials)))
+                n = int(lengths[rng.integers(0, len(lengths))])
+                starts = window_starts(table, m, n)
+                if starts.size:
+                    break
+            curve = sessions.session_curve(m, session)
+            while True:
+                q = sessions.measure(m, curve, int(starts[rng.integers(0, starts.size)]), n, rng)
+                if (np.isfinite(q) & np.isfinite(table.features[m])).any():
+                    break
+            out.append(_Sweep(s, k, m, n, q))
+    return out
+
+
+def _label(sweeps: list[_Sweep], table: ExemplarTable) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each matcher's (right, confident) per sweep; the learning one session by session, learning
+    from each sweep after it labels it."""
+    eq12 = Classifier(table, method="eq12")
+    session = Classifier(table, method="session")
+    learning = Classifier(table, method="session", learning=True)
+    out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name, c in (("eq12", eq12), ("session", session)):
+        results = c.classify_batch(np.stack([s.query for s in sweeps]))
+        out[name] = (
+            np.array([r.index == s.truth for r, s in zip(results, sweeps, strict=True)]),
+            np.array([r.confidence >= CONFIDENT for r in results]),
+        )
+    right, sure = [], []
+    current = -1
+    for s in sweeps:
+        if s.session != current:
+            learning.reset_session()
+            current = s.session
+        r = learning.classify(s.query)
+        right.append(r.index == s.truth)
+        sure.append(r.confidence >= CONFIDENT)
+        learning.learn(s.query)
+    out["learning"] = (np.array(right), np.array(sure))
+    return out
+
+
+def evaluate_sequences(
+    table: ExemplarTable,
+    scales: tuple[float, ...] = SCALES,
+    n_sessions: int = 290,
+    sweeps_per_session: int = 10,
+    lengths: tuple[int, ...] = LENGTHS,
+    progress: Progress | None = None,
+) -> list[SequenceRow]:
+    """Eq. (12), the session matcher and the learning matcher on sessions of many sweeps of the real
+    curves' test split, at each scale of the calibration's session spreads (the same draws at every
+    scale: only the spread changes)."""
+    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
+        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
+    library, device = calibrated_json()
+    base = calibrated_model(library, table)
+    rows: list[SequenceRow] = []
+    for i, scale in enumerate(scales):
+        if progress:
+            progress(i, len(scales), f"sessions of {sweeps_per_session} sweeps at {scale:g} x the spread")
+        model = replace(
+            base,
+            offsets_sd_mm=tuple(scale * v for v in base.offsets_sd_mm),
+            state_sd=(scale * base.state_sd[0], scale * base.state_sd[1], scale * base.state_sd[2]),
+        )
+        sweeps = draw_sequences(
+            CurveSessions(table, model, device, library), n_sessions, sweeps_per_session, lengths, SPLIT_SEEDS["test"]
+        )
+        labelled = _label(sweeps, table)
+        position = np.array([s.position for s in sweeps])
+        length = np.array([s.length for s in sweeps])
+        for name in MATCHERS:
+            right, sure = labelled[name]
+            for lo, hi, stage in STAGES:
+                in_stage = (position >= lo) & (position < (hi if hi is not None else sweeps_per_session))
+                if not in_stage.any():
+                    continue
+                acc, wrong, count = {}, {}, {}
+                for n in sorted(set(lengths)):
+                    sel = in_stage & (length == n)
+                    if not sel.any():
+                        continue
+                    acc[n] = 100.0 * float(right[sel].mean())
+                    wrong[n] = 100.0 * float((sure & ~right)[sel].mean())
+                    count[n] = int(sel.sum())
+                rows.append(SequenceRow(scale, name, stage, acc, wrong, count))
+    return rows
+
+
+def margins(rows: list[SequenceRow]) -> dict[tuple[float, str], dict[int, float]]:
+    """The learning matcher's accuracy less the better of Eq. (12) and the session matcher on the
+    same sweeps, per (scale, stage) and sweep length, points."""
+    out: dict[tuple[float, str], dict[int, float]] = {}
+    by = {(r.scale, r.matcher, r.stage): r for r in rows}
+    for r in rows:
+        if r.matcher != "learning":
+            continue
+        cells = {}
+        for n, a in r.accuracy.items():
+            better = max(by[(r.scale, m, r.stage)].accuracy[n] for m in ("eq12", "session"))
+            cells[n] = a - better
+        out[(r.scale, r.stage)] = cells
+    return out
+
+
+def format_markdown(rows: list[SequenceRow]) -> str:
+    lengths = sorted({n for r in rows for n in r.accuracy})
+    head = " | ".join(f"{n} bins" for n in lengths)
+    lines = [
+        f"| scale | matcher | sweeps | {head} | confident and wrong (worst length) |",
+        "|---|---|---|" + "---|" * len(lengths) + "---|",
+    ]
+    gap = margins(rows)
+    for r in rows:
+        cells = []
+        for n in lengths:
+            if n not in r.accuracy:
+                cells.append("")
+                continue
+            cell = f"{r.accuracy[n]:.1f} %"
+            if r.matcher == "learning":
+                cell += f" ({gap[(r.scale, r.stage)][n]:+.1f})"
+            cells.append(cell)
+        worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
+        lines.append(
+            f"| {r.scale:g} | {r.matcher} | {r.stage} | {' | '.join(cells)} | "
+            f"{r.confidently_wrong[worst]:.1f} % ({worst} bins) |"
+        )
+    return "\n".join(lines)

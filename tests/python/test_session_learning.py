@@ -1,0 +1,141 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""The matcher that learns its session (``Classifier(..., learning=True)``, tofmatd's default;
+firmware/core/include/tofmat/core/session_learner.hpp): its score is the mixture of the session
+matcher under scaled priors, its weights follow the sweeps it learns from, and on sessions of many
+sweeps of the real curves it does what docs/evaluation.md says."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import tofmat
+from tofmat.cli import main
+from tofmat.evaluation.sequences import MATCHERS, evaluate_sequences, margins
+
+SCALES = [0.0, 0.25, 0.5, 1.0, 2.0, 4.0]
+
+
+def scaled(prior: tofmat.SessionPrior, s: float) -> tofmat.SessionPrior:
+    return tofmat.SessionPrior(
+        [s * v for v in prior.offset_sd_mm],
+        drift1_sd_mm=s * prior.drift1_sd_mm,
+        drift2_sd_mm=s * prior.drift2_sd_mm,
+        noise_scale=prior.noise_scale,
+        floor_mm=prior.floor_mm,
+        huber_k=prior.huber_k,
+        iterations=prior.iterations,
+    )
+
+
+def sweep(table: tofmat.ExemplarTable, material: str, lo: int, n: int, rng: np.random.Generator,
+          offset: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:  # fmt: skip
+    q = np.full((table.n_rows, table.n_bins), np.nan, np.float32)
+    part = table.features[table.index_of(material), :, lo : lo + n].astype(np.float64)
+    q[:, lo : lo + n] = part + np.array(offset)[:, None] + rng.normal(0.0, 0.1, part.shape)
+    return q
+
+
+def test_the_score_is_the_mixture_of_the_scaled_session_matchers(real_table: tofmat.ExemplarTable) -> None:
+    rng = np.random.default_rng(3)
+    learning = tofmat.Classifier(real_table, learning=True)
+    prior = tofmat.SessionPrior.tuned(real_table)
+    by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
+    # Before any sweep the weights are equal; after three they are what the sweeps' evidence made them.
+    for k in range(4):
+        q = sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 12, rng)
+        got = {r.material: r.distance for r in learning.classify(q).ranking}
+        w = np.array(learning.session["weights"])
+        per = [{r.material: r.distance for r in c.classify(q).ranking} for c in by_scale]
+        for name, d in got.items():
+            terms = [math.log(wk) - p[name] for wk, p in zip(w, per, strict=True) if wk > 0]
+            want = -float(np.logaddexp.reduce(terms))
+            assert d == pytest.approx(want, abs=1e-6 * max(1.0, abs(want))), (k, name)
+        learning.learn(q)
+    s = learning.session
+    assert s["sweeps"] == 4 and s["scales"] == SCALES and sum(s["weights"]) == pytest.approx(1.0)
+    # Sweeps read straight off the table: a session that did not move.
+    assert s["weights"][0] > 0.9 and s["scale"] < 0.1
+    learning.reset_session()
+    assert learning.session["sweeps"] == 0 and learning.session["weights"] == pytest.approx([1 / 6] * 6)
+
+
+def test_a_moved_session_is_learned_on_either_backend(real_table: tofmat.ExemplarTable) -> None:
+    rng = np.random.default_rng(5)
+    sweeps = [sweep(real_table, m, 30, 30, rng, offset=(4.0, 1.5)) for m in ("cork", "wood", "pvc", "paper", "mdf")]
+    for backend in ("float", "fixed"):
+        c = tofmat.Classifier(real_table, backend=backend, learning=True)
+        for q in sweeps:
+            c.learn(q)
+        assert c.session["scale"] > 0.5 and c.session["weights"][0] < 1e-6, (backend, c.session)
+    # The fixed-point learner labels as the float one does.
+    f = tofmat.Classifier(real_table, learning=True)
+    x = tofmat.Classifier(real_table, backend="fixed", learning=True)
+    for q in sweeps:
+        assert f.classify(q).material == x.classify(q).material
+        f.learn(q)
+        x.learn(q)
+
+
+def test_learning_is_refused_where_it_has_no_meaning(real_table: tofmat.ExemplarTable) -> None:
+    with pytest.raises(ValueError, match="learning needs method='session'"):
+        tofmat.Classifier(real_table, method="eq12", learning=True)
+    plain = tofmat.Classifier(real_table)
+    assert plain.session is None
+    q = np.full((real_table.n_rows, real_table.n_bins), np.nan, np.float32)
+    with pytest.raises(ValueError, match="learning=True"):
+        plain.learn(q)
+    with pytest.raises(ValueError, match="learning=True"):
+        plain.reset_session()
+    learning = tofmat.Classifier(real_table, learning=True)
+    with pytest.raises(ValueError):
+        learning.learn(q)  # no element
+    assert learning.session["sweeps"] == 0
+
+
+def test_on_sessions_of_many_sweeps_the_learner_keeps_up_with_the_better_matcher(
+    real_table: tofmat.ExemplarTable,
+) -> None:
+    # A short run (docs/evaluation.md has the full one): an unmoved session and one that moved by
+    # the calibration's spread, sweeps of 10 and 30 bins.
+    rows = evaluate_sequences(real_table, scales=(0.0, 1.0), n_sessions=40, sweeps_per_session=6, lengths=(10, 30))
+    assert {r.matcher for r in rows} == set(MATCHERS)
+    assert {r.stage for r in rows} == {"1st", "2nd-4th", "5th on"}
+    gap = margins(rows)
+    by = {(r.scale, r.matcher, r.stage): r for r in rows}
+    # Unmoved: Eq. (12) beats the session matcher at 10 bins; from the fifth sweep on the learner
+    # is within a few points of it (40 sessions: 80 sweeps a cell), and far above the session matcher.
+    assert by[(0.0, "eq12", "5th on")].accuracy[10] > by[(0.0, "session", "5th on")].accuracy[10]
+    assert gap[(0.0, "5th on")][10] > -5.0
+    # Moved by the calibration's spread: Eq. (12) fails, the learner is with the session matcher.
+    assert by[(1.0, "eq12", "5th on")].accuracy[30] < 60.0
+    assert gap[(1.0, "5th on")][30] > -5.0
+    for r in rows:
+        assert sum(r.sweeps.values()) > 0 and all(0.0 <= a <= 100.0 for a in r.accuracy.values())
+
+
+def test_the_command_runs_sessions_of_sweeps(db_dir: Path) -> None:
+    r = CliRunner().invoke(
+        main,
+        [
+            "evaluate",
+            "--source",
+            "curves",
+            "--table",
+            str(db_dir),
+            "--session-scales",
+            "0.5",
+            "--sweeps-per-session",
+            "3",
+            "--sessions",
+            "1",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert "| 0.5 | learning | 1st |" in r.output and "| 0.5 | eq12 | 2nd-4th |" in r.output
+    bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--sweeps-per-session", "3"])
+    assert bad.exit_code == 2 and "--session-scales" in bad.output
