@@ -410,9 +410,11 @@ class Client:
         """Source, device state, profile, table, frame rate, drops, errors, clients."""
         return cast(Status, self._call("status"))
 
-    def reset(self) -> None:
-        """Forget the accumulated observations (handheld) or the armed burst (sorting)."""
-        self._call("reset")
+    def reset(self, session: bool = False) -> None:
+        """Forget the accumulated observations (handheld) or the armed burst (sorting). ``session``:
+        also start a new session, in which the session matcher learns again how far the session
+        moved (protocol minor 10; an older daemon refuses it)."""
+        self._call("reset", {"session": True} if session else None)
 
     def set_profile(self, name: Profile) -> None:
         self._call("set_profile", {"name": name})

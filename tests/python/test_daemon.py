@@ -43,7 +43,9 @@ def sweep(materials: list[str], frames: int = 30, gap: int = 6, extra: str = "")
 
 @pytest.mark.board
 def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]) -> None:
-    d = start(sweep(["cork", "paper", "acryl", "pvc"]))
+    # (Not paper: plaster is its twin in the simulated camera's table, 0.18 mm rms apart, under
+    # the live query's noise; tofmat bench-targets counts such labels as right among separable.)
+    d = start(sweep(["cork", "polystyrene", "acryl", "pvc"]))
     with d.client() as c:
         labels = final_labels(c, 4)
         for label in labels:
@@ -58,7 +60,7 @@ def test_handheld_labels_match_the_simulators_truth(start: Callable[..., Daemon]
             # Protocol 1.7: a calibrated confidence, and the session matcher's fit (known: no unknown).
             assert label.confidence is not None and 0.0 < label.confidence <= 1.0
             assert label.fit is not None and math.isfinite(label.fit)
-        assert sorted(label.material for label in labels) == ["acryl", "cork", "paper", "pvc"]
+        assert sorted(label.material for label in labels) == ["acryl", "cork", "polystyrene", "pvc"]
         s = c.status()
         assert s["profile"] == "handheld" and s["backend"] == "fixed" and s["device"]["state"] == "streaming"
         assert s["classifier"] == "session"  # the default, as the SDK's Classifier
@@ -104,6 +106,37 @@ def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Call
     with closed.client() as c:
         assert c.status()["open_set"] is False
         assert all(label.state != "unknown" for label in itertools.islice(c.labels(timeout=60), 60))
+
+
+def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Callable[..., Daemon]) -> None:
+    # The simulated camera against its own table: a session that did not move. Each finished
+    # sweep (the target leaving) teaches the learner; status reports it (protocol 1.10), and a
+    # reset with session=True starts the session again, a plain reset does not.
+    d = start(sweep(["cork", "polystyrene", "pvc"]))
+    with d.client() as c:
+        assert c.hello["minor"] >= 10
+        start_state = c.status()["session"]
+        assert start_state["scales"][0] == 0.0 and len(set(start_state["weights"])) == 1
+        labels = final_labels(c, 4)
+        assert all(label.material == label.truth.material for label in labels if label.truth), labels
+        learned = c.status()["session"]
+        assert learned["sweeps"] >= 4
+        assert learned["weights"][0] > 0.9 and learned["scale"] < 0.1, learned  # no session change
+        assert abs(sum(learned["weights"]) - 1.0) < 1e-9
+        c.reset()
+        assert c.status()["session"]["sweeps"] >= learned["sweeps"]
+        c.reset(session=True)
+        again = c.status()["session"]
+        assert again["sweeps"] < learned["sweeps"] and again["weights"][0] < 0.5
+        with pytest.raises(tofmat.CommandError) as e:
+            c._call("reset", {"session": "yes"})
+        assert e.value.code == "invalid_argument" and "session" in str(e.value)
+    plain = start(sweep(["cork"]), "--no-session-learning", name="plain")
+    with plain.client() as c:
+        assert "session" not in c.status()
+    eq12 = start(sweep(["cork"]), "--classifier", "eq12", name="eq12")
+    with eq12.client() as c:
+        assert "session" not in c.status()
 
 
 def test_depth_images_of_the_roi(start: Callable[..., Daemon]) -> None:

@@ -260,7 +260,10 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
     if (req.cmd == "status") {
       r.result = status();
     } else if (req.cmd == "reset") {
+      // session (minor 10): also a new session for the session matcher's learning
+      const bool session = a.contains("session") && protocol::get_bool(a, "session");
       pipeline_->reset();
+      if (session) pipeline_->reset_session();
       publish_reset("command", protocol::monotonic_ns());
     } else if (req.cmd == "set_profile") {
       pipeline_->set_profile(protocol::get_string(a, "name", protocol::kMaxNameBytes));

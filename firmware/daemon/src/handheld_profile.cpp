@@ -15,7 +15,8 @@ class HandheldProfile : public Profile {
   HandheldProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
       : config_(c),
         table_(std::move(table)),
-        matcher_(table_, candidate_indices(*table_, c.candidates), c.backend, c.method, c.open_set, c.model) {}
+        matcher_(table_, candidate_indices(*table_, c.candidates), c.backend, c.method, c.open_set, c.model,
+                 c.learner) {}
 
   std::optional<PixelRegion> input_region() const override { return config_.roi; }
 
@@ -43,6 +44,7 @@ class HandheldProfile : public Profile {
                          d.median_mm >= bins.start_mm - 50.0 && d.median_mm <= bins.end_mm() + 50.0;
     if (!present) {
       if (tracking_) {
+        matcher_.learn_sweep();  // the target left: its sweep is finished
         matcher_.reset();
         tracking_ = false;
         protocol::LabelEvent e;
@@ -51,7 +53,10 @@ class HandheldProfile : public Profile {
       }
       return -1;
     }
-    if (tracking_ && std::abs(d.median_mm - last_mm_) > config_.jump_mm) matcher_.reset();
+    if (tracking_ && std::abs(d.median_mm - last_mm_) > config_.jump_mm) {
+      matcher_.learn_sweep();  // another target: the last one's sweep is finished
+      matcher_.reset();
+    }
     tracking_ = true;
     last_mm_ = d.median_mm;
     matcher_.accumulate(d);

@@ -211,6 +211,10 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       ->capture_default_str();
   app.add_flag("--open-set", o.profile.open_set,
                "label a sweep no material explains 'unknown' (--classifier session; docs/evaluation.md)");
+  bool no_learning = false;
+  app.add_flag("--no-session-learning", no_learning,
+               "the session matcher labels each sweep on its own, without learning how far this session moved "
+               "from the sweeps before it (docs/evaluation.md)");
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
   app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
@@ -318,6 +322,7 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     app.parse(argc, argv);
     o.profile.name = profile;
     o.profile.backend = parse_backend(backend);
+    o.profile.session_learning = !no_learning;
     o.profile.method = parse_method(classifier);
     if (o.profile.method == Method::kOnnx) {
       o.profile.model.path = classifier.substr(5);

@@ -17,10 +17,22 @@ Pipeline::Pipeline(std::shared_ptr<const ExemplarTable> table, const std::string
   apply(config, std::move(table), table_path);
 }
 
-void Pipeline::apply(const ProfileConfig& config, std::shared_ptr<const ExemplarTable> table, const std::string& path) {
+void Pipeline::apply(const ProfileConfig& requested, std::shared_ptr<const ExemplarTable> table,
+                     const std::string& path) {
+  ProfileConfig config = requested;
+  config.learner = nullptr;
+  if (config.method == Method::kSession && config.session_learning) {
+    validate(config, *table);  // (before the learner: its candidates must exist)
+    const bool same =
+        learner_ && table == table_ && config.candidates == config_.candidates && config.backend == config_.backend;
+    config.learner = same ? learner_
+                          : SessionLearner::make(table, SessionPrior::tuned(*table), config.backend == Backend::kFixed,
+                                                 {}, candidate_indices(*table, config.candidates));
+  }
   auto profile = make_profile(config, table);  // validates; throws before anything changes
   std::lock_guard<std::mutex> lock(mutex_);
   profile_ = std::move(profile);
+  learner_ = config.learner;
   config_ = config;
   table_ = std::move(table);
   table_path_ = path;
@@ -104,6 +116,11 @@ void Pipeline::reset() {
   publish_wanted_region();
 }
 
+void Pipeline::reset_session() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (learner_) learner_->reset();
+}
+
 void Pipeline::set_profile(const std::string& name) {
   std::lock_guard<std::mutex> command(commands_mutex_);  // read, change, apply: one command at a time
   auto c = config();
@@ -181,6 +198,10 @@ nlohmann::json Pipeline::status() const {
                       {"fps", static_cast<double>(recent_ns_.size())},
                       {"process_ms", process_ms_ewma_}};
   if (config_.method == Method::kOnnx) s["model"] = config_.model.path;  // (minor 8)
+  if (learner_) {                                                        // (minor 10)
+    const auto l = learner_->state();
+    s["session"] = {{"sweeps", l.sweeps}, {"scale", l.scale}, {"scales", l.scales}, {"weights", l.weights}};
+  }
   return s;
 }
 

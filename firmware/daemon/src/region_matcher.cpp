@@ -24,7 +24,8 @@ constexpr std::int32_t kSurfaceBandQ8 = kSurfaceBandMm * 256;
 }  // namespace
 
 RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates,
-                             Backend backend, Method method, bool open_set, const LearnedModel& model)
+                             Backend backend, Method method, bool open_set, const LearnedModel& model,
+                             std::shared_ptr<SessionLearner> learner)
     : table_(std::move(table)),
       backend_(backend),
       // A learned model's confidence is its probabilities under the
@@ -38,7 +39,9 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
   if (method == Method::kOnnx) {
     onnx_ = std::make_shared<const learn::OnnxClassifier>(table_, model.path, std::move(candidates), model.library);
     if (!onnx_->contract().temperatures.empty()) calibration_.temperatures = onnx_->contract().temperatures;
-  } else if (method == Method::kSession && backend_ == Backend::kFixed)
+  } else if (method == Method::kSession && learner)
+    learner_ = std::move(learner);  // (its scorers are the session classifiers, at each scale)
+  else if (method == Method::kSession && backend_ == Backend::kFixed)
     fixed_session_ = std::make_shared<const FixedSessionClassifier>(table_, SessionPrior::tuned(*table_),
                                                                     std::vector<double>{}, std::move(candidates));
   else if (method == Method::kSession)
@@ -105,6 +108,7 @@ std::optional<Classification> RegionMatcher::classify() const {
   const std::vector<float> q = backend_ == Backend::kFixed ? fixed_acc_.query() : float_acc_.query();
   if (std::none_of(q.begin(), q.end(), [](float v) { return std::isfinite(v); })) return std::nullopt;
   try {
+    if (learner_) return learner_->classify(q.data(), q.size()).mixture;
     if (session_) return session_->classify(q.data(), q.size());
     if (fixed_session_) return fixed_session_->classify(q.data(), q.size());
     if (onnx_) return onnx_->classify(q.data(), q.size());
@@ -116,6 +120,17 @@ std::optional<Classification> RegionMatcher::classify() const {
 
 std::uint32_t RegionMatcher::bins_covered() const {
   return backend_ == Backend::kFixed ? fixed_acc_.bins_covered() : float_acc_.bins_covered();
+}
+
+void RegionMatcher::learn_sweep() {
+  if (!learner_) return;
+  const std::vector<float> q = backend_ == Backend::kFixed ? fixed_acc_.query() : float_acc_.query();
+  if (std::none_of(q.begin(), q.end(), [](float v) { return std::isfinite(v); })) return;
+  try {
+    learner_->learn(learner_->classify(q.data(), q.size(), true));
+  } catch (const std::invalid_argument&) {
+    // no candidate shares an observed element: nothing to learn from
+  }
 }
 
 void RegionMatcher::reset() {

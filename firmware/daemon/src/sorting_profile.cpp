@@ -25,7 +25,7 @@ class SortingProfile : public Profile {
   SortingProfile(const ProfileConfig& c, const std::shared_ptr<const ExemplarTable>& table)
       : config_(c),
         table_(table),
-        matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model),
+        matcher_(table, candidate_indices(*table, c.candidates), c.backend, c.method, c.open_set, c.model, c.learner),
         frame_matcher_(matcher_.twin()) {}  // (one classifier for both: a learned model is loaded once)
 
   std::uint64_t trigger(int burst) override {
@@ -89,6 +89,7 @@ class SortingProfile : public Profile {
       if (const auto c = matcher_.classify()) {
         e = matcher_.label_event(*c, config_.top_k);
         e.state = matcher_.unknown(*c) ? "unknown" : strict && c->best().index == majority ? "final" : "mixed";
+        matcher_.learn_sweep();  // (after its label: a sweep teaches the ones after it)
       }
     }
     e.frame = last.sequence;

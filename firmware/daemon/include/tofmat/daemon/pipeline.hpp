@@ -44,6 +44,9 @@ class Pipeline {
   // Commands (any thread). Each throws std::invalid_argument (or
   // std::logic_error for a trigger outside sorting) and changes nothing then.
   void reset();
+  // A new session: the session matcher's learned weights start again
+  // (also on a new table, candidate list or backend).
+  void reset_session();
   void set_profile(const std::string& name);
   void set_roi(const PixelRegion& roi);
   void set_candidates(const std::vector<std::string>& names);
@@ -70,6 +73,9 @@ class Pipeline {
   std::string table_path_;
   ProfileConfig config_;
   std::unique_ptr<Profile> profile_;
+  // The session's learner (session_learner.hpp), kept while the table,
+  // candidates and backend stay (a profile or ROI change is the same session).
+  std::shared_ptr<SessionLearner> learner_;
   // Statistics (under mutex_).
   std::uint64_t processed_ = 0, errors_ = 0;
   std::deque<std::uint64_t> recent_ns_;  // arrival times of the last second's frames

@@ -18,6 +18,7 @@
 
 #include "tofmat/core/exemplar_table.hpp"
 #include "tofmat/core/frame_decode.hpp"
+#include "tofmat/core/session_learner.hpp"
 #include "tofmat/daemon/frame.hpp"
 #include "tofmat/learn/onnx_classifier.hpp"
 #include "tofmat/protocol/messages.hpp"
@@ -57,6 +58,13 @@ struct ProfileConfig {
   // session model, which has no target angle: a table recorded at another
   // angle than the sweeps is called unknown.
   bool open_set = false;
+  // The session matcher learns how far this session moved from the sweeps
+  // it labels (session_learner.hpp, docs/evaluation.md): on unless
+  // --no-session-learning.
+  bool session_learning = true;
+  // Not a setting: the session's learner the Pipeline keeps across profile
+  // changes (null: the session matcher alone). Method::kSession only.
+  std::shared_ptr<SessionLearner> learner;
   LearnedModel model;                   // Method::kOnnx only
   PixelRegion roi{232, 188, 280, 236};  // 48 x 48 at the centre
   std::vector<std::string> candidates;  // empty: every material of the table

@@ -17,6 +17,7 @@
 #include "tofmat/core/fixed_depth_bins.hpp"
 #include "tofmat/core/fixed_session_classifier.hpp"
 #include "tofmat/core/session_classifier.hpp"
+#include "tofmat/core/session_learner.hpp"
 #include "tofmat/daemon/profile.hpp"
 
 namespace tofmat::daemon {
@@ -26,8 +27,11 @@ class RegionMatcher {
   // open_set: label a query no candidate explains "unknown" (the session matcher only).
   // model: Method::kOnnx's (loaded and checked against the table here: throws
   // std::runtime_error or std::invalid_argument saying why it cannot run).
+  // learner: Method::kSession's learner of the session (null: the session
+  // matcher alone); its scorers must be this table's, candidates and backend.
   RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::vector<std::uint32_t> candidates, Backend backend,
-                Method method = Method::kEq12, bool open_set = false, const LearnedModel& model = {});
+                Method method = Method::kEq12, bool open_set = false, const LearnedModel& model = {},
+                std::shared_ptr<SessionLearner> learner = nullptr);
 
   // A matcher of the same table, candidates and method with an accumulation
   // of its own, sharing this one's classifier (a learned model is loaded once).
@@ -47,6 +51,9 @@ class RegionMatcher {
   std::optional<Classification> classify() const;
   std::uint32_t bins_covered() const;
   void reset();
+  // The sweep so far is finished: the session's learner (if any) learns from
+  // its whole query. Call before reset() when a target leaves or a burst ends.
+  void learn_sweep();
   // The label event of a classification (ranking cut to top_k), with its
   // calibrated confidence and fit (confidence.hpp); when no candidate explains
   // the query (unknown) its material is "" and index -1, the ranking kept.
@@ -73,6 +80,7 @@ class RegionMatcher {
   std::shared_ptr<const SessionClassifier> session_;             // Method::kSession, the float backend
   std::shared_ptr<const FixedSessionClassifier> fixed_session_;  // Method::kSession, the fixed-point backend
   std::shared_ptr<const learn::OnnxClassifier> onnx_;            // Method::kOnnx, either backend's query
+  std::shared_ptr<SessionLearner> learner_;  // Method::kSession learning its session: shared by the session's matchers
   FixedDepthBinAccumulator fixed_acc_;
   DepthBinAccumulator float_acc_;
 };
