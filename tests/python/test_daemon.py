@@ -109,10 +109,10 @@ def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Call
 
 
 def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Callable[..., Daemon]) -> None:
-    # The simulated camera against its own table: a session that did not move. Each finished
+    # --session-learning, the simulated camera against its own table: a session that did not move. Each finished
     # sweep (the target leaving) teaches the learner; status reports it (protocol 1.10), and a
     # reset with session=True starts the session again, a plain reset does not.
-    d = start(sweep(["cork", "polystyrene", "pvc"]))
+    d = start(sweep(["cork", "polystyrene", "pvc"]), "--session-learning")
     with d.client() as c:
         assert c.hello["minor"] >= 10
         start_state = c.status()["session"]
@@ -131,7 +131,7 @@ def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Call
         with pytest.raises(tofmat.CommandError) as e:
             c._call("reset", {"session": "yes"})
         assert e.value.code == "invalid_argument" and "session" in str(e.value)
-    plain = start(sweep(["cork"]), "--no-session-learning", name="plain")
+    plain = start(sweep(["cork"]), name="plain")  # (off by default)
     with plain.client() as c:
         assert "session" not in c.status()
     eq12 = start(sweep(["cork"]), "--classifier", "eq12", name="eq12")
@@ -421,7 +421,8 @@ def test_bad_flags_are_refused(tmp_path: Path, sim_table: Path) -> None:
     for args, word in ((["--profile", "nope"], "profile"), (["--source", "usb"], "source"),
                        (["--roi", "1,2,3"], "roi"), (["--candidates", "unobtainium"], "unobtainium"),
                        (["--source", "sim:sweep,materials=unobtainium"], "unobtainium"),
-                       (["--log-level", "usb=debug"], "log category"), (["--log-level", "loud"], "log level")):  # fmt: skip
+                       (["--log-level", "usb=debug"], "log category"), (["--log-level", "loud"], "log level"),
+                       (["--classifier", "eq12", "--session-learning"], "--classifier session")):  # fmt: skip
         p = subprocess.run(base + args, capture_output=True, text=True, timeout=30)
         assert p.returncode != 0 and word in (p.stderr + p.stdout).lower(), (args, p.stderr)
     p = subprocess.run([str(daemon_binary()), "--table", str(tmp_path / "missing.tmx"), "--socket",

@@ -211,10 +211,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       ->capture_default_str();
   app.add_flag("--open-set", o.profile.open_set,
                "label a sweep no material explains 'unknown' (--classifier session; docs/evaluation.md)");
-  bool no_learning = false;
-  app.add_flag("--no-session-learning", no_learning,
-               "the session matcher labels each sweep on its own, without learning how far this session moved "
-               "from the sweeps before it (docs/evaluation.md)");
+  app.add_flag("--session-learning", o.profile.session_learning,
+               "the session matcher learns how far this capture session moved from the sweeps it has labelled "
+               "(docs/evaluation.md; --classifier session)");
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
   app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
   app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
@@ -322,7 +321,6 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
     app.parse(argc, argv);
     o.profile.name = profile;
     o.profile.backend = parse_backend(backend);
-    o.profile.session_learning = !no_learning;
     o.profile.method = parse_method(classifier);
     if (o.profile.method == Method::kOnnx) {
       o.profile.model.path = classifier.substr(5);
@@ -334,6 +332,9 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                                  "it bounds an Eq. (12) distance (mm^2), so it needs --classifier eq12 (the "
                                  "default classifier is session, whose scores are no distance; so are a learned "
                                  "model's)");
+    if (o.profile.session_learning && o.profile.method != Method::kSession)
+      throw CLI::ValidationError("--session-learning",
+                                 "learns the session matcher's session: it needs --classifier session");
     if (o.profile.open_set && o.profile.method != Method::kSession)
       throw CLI::ValidationError("--open-set",
                                  "needs --classifier session: Eq. (12) has no noise model to judge a fit");

@@ -142,7 +142,10 @@ def bench_targets(
     sweep_frames: int = 90,
     materials: list[str] | None = None,
     progress: Progress | None = None,
+    labeller_args: list[str] | None = None,
 ) -> list[TargetResult]:
+    """``labeller_args``: more tofmatd flags for the daemon whose labels are counted (the other one
+    runs --classifier eq12 for the distances)."""
     t = ExemplarTable.load(table_path)
     mats = materials or list(t.materials)
     out: list[TargetResult] = []
@@ -157,7 +160,7 @@ def bench_targets(
         # The two daemons side by side (one core each) see the same frames: the simulator is seeded.
         with ThreadPoolExecutor(2) as pool:
             jobs = [pool.submit(_run, table_path, source, extra, len(mats), timeout)
-                    for extra in ([], ["--classifier", "eq12"])]  # fmt: skip
+                    for extra in (list(labeller_args or []), ["--classifier", "eq12"])]  # fmt: skip
             runs = [j.result() for j in jobs]  # (a daemon's failure is raised here)
         if len(runs[0]) != len(mats) or len(runs[1]) != len(mats):
             raise RuntimeError(f"tofmatd did not label every target of {source}")

@@ -59,9 +59,11 @@ struct ProfileConfig {
   // angle than the sweeps is called unknown.
   bool open_set = false;
   // The session matcher learns how far this session moved from the sweeps
-  // it labels (session_learner.hpp, docs/evaluation.md): on unless
-  // --no-session-learning.
-  bool session_learning = true;
+  // it labels (session_learner.hpp, docs/evaluation.md): --session-learning.
+  // Off by default: learned on a session that did not move, it labels a
+  // target at another angle than the table's with more confidence than it
+  // has (docs/benchmarks.md, still targets).
+  bool session_learning = false;
   // Not a setting: the session's learner the Pipeline keeps across profile
   // changes (null: the session matcher alone). Method::kSession only.
   std::shared_ptr<SessionLearner> learner;
