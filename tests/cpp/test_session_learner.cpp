@@ -155,6 +155,14 @@ struct Twins {
   }
 };
 
+// Six finished sweeps, a and b in turn, of a session that moved row 0 by `offset` mm.
+void learn_six_sweeps(SessionLearner& l, const Twins& t, double offset, std::mt19937& rng) {
+  for (int i = 0; i < 6; ++i) {
+    const auto q = t.sweep(i % 2, offset, rng);
+    l.learn(l.classify(q.data(), q.size(), true));
+  }
+}
+
 SessionPrior twins_prior() {
   SessionPrior p;
   p.offset_sd_mm = {2.0, 0.5};
@@ -169,10 +177,7 @@ TEST(SessionLearner, AnUnmovedSessionSettlesOnScaleZeroAndTellsTwinsApart) {
   for (bool fixed : {false, true}) {
     auto l = SessionLearner::make(t.table, twins_prior(), fixed);
     std::mt19937 rng(7);
-    for (int i = 0; i < 6; ++i) {
-      const auto q = t.sweep(i % 2, 0.0, rng);
-      l->learn(l->classify(q.data(), q.size(), true));
-    }
+    learn_six_sweeps(*l, t, 0.0, rng);
     const auto st = l->state();
     EXPECT_GT(st.weights[0], 0.9) << (fixed ? "fixed" : "float");
     EXPECT_LT(st.scale, 0.1);
@@ -191,10 +196,7 @@ TEST(SessionLearner, AMovedSessionSettlesOnAWideScale) {
   auto l = SessionLearner::make(t.table, twins_prior(), false);
   std::mt19937 rng(11);
   // The session moved row 0 by 4 mm: no material explains a sweep without an offset.
-  for (int i = 0; i < 6; ++i) {
-    const auto q = t.sweep(i % 2, 4.0, rng);
-    l->learn(l->classify(q.data(), q.size(), true));
-  }
+  learn_six_sweeps(*l, t, 4.0, rng);
   const auto st = l->state();
   EXPECT_GT(st.scale, 1.0);
   EXPECT_LT(st.weights[0], 1e-6);

@@ -10,6 +10,7 @@ accuracy by sweep length, and the share of labels wrong with a confidence of 0.9
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -32,19 +33,45 @@ class ScaleRow:
     queries: dict[int, int]
 
 
+def by_length(
+    right: np.ndarray, sure: np.ndarray, lengths: np.ndarray, among: np.ndarray | None = None
+) -> tuple[dict[int, float], dict[int, float], dict[int, int]]:
+    """Per sweep length (of the labels ``among`` selects, default all): % right, % wrong with
+    confidence >= CONFIDENT, and the count; a length with no label is left out."""
+    acc, wrong, count = {}, {}, {}
+    for n in sorted(set(lengths.tolist())):
+        sel = lengths == n if among is None else among & (lengths == n)
+        if not sel.any():
+            continue
+        acc[int(n)] = 100.0 * float(right[sel].mean())
+        wrong[int(n)] = 100.0 * float((sure & ~right)[sel].mean())
+        count[int(n)] = int(sel.sum())
+    return acc, wrong, count
+
+
+def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator[tuple[float, CurveSessions]]:
+    """The real curves' sessions with the calibration's spreads (row offsets and waveform state)
+    times each scale. Raises ValueError for a scale that is negative or not finite."""
+    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
+        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
+    library, device = calibrated_json()
+    base = calibrated_model(library, table)
+    for s in scales:
+        model = replace(
+            base,
+            offsets_sd_mm=tuple(s * v for v in base.offsets_sd_mm),
+            state_sd=(s * base.state_sd[0], s * base.state_sd[1], s * base.state_sd[2]),
+        )
+        yield s, CurveSessions(table, model, device, library)
+
+
 def _rows(table: ExemplarTable, scale: float, q: Queries) -> list[ScaleRow]:
     out = []
     for method in ("eq12", "session"):
         results = Classifier(table, method=method).classify_batch(q.queries)
         right = np.array([r.index == t for r, t in zip(results, q.truth, strict=True)])
         sure = np.array([r.confidence >= CONFIDENT for r in results])
-        acc, wrong, count = {}, {}, {}
-        for n in sorted(set(q.lengths.tolist())):
-            sel = q.lengths == n
-            acc[int(n)] = 100.0 * float(right[sel].mean())
-            wrong[int(n)] = 100.0 * float((sure & ~right)[sel].mean())
-            count[int(n)] = int(sel.sum())
-        out.append(ScaleRow(scale, method, acc, wrong, count))
+        out.append(ScaleRow(scale, method, *by_length(right, sure, q.lengths)))
     return out
 
 
@@ -57,21 +84,11 @@ def evaluate_scales(
 ) -> list[ScaleRow]:
     """The shipped matchers on the real curves' test split, sessions drawn with the calibration's
     spreads times each scale (the same seeds at every scale: only the spread changes)."""
-    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
-        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
-    library, device = calibrated_json()
-    base = calibrated_model(library, table)
     out: list[ScaleRow] = []
-    for i, s in enumerate(scales):
+    for i, (s, sessions) in enumerate(scaled_sessions(table, scales)):
         if progress:
             progress(i, len(scales), f"sessions at {s:g} x the calibration's spread")
-        model = replace(
-            base,
-            offsets_sd_mm=tuple(s * v for v in base.offsets_sd_mm),
-            state_sd=(s * base.state_sd[0], s * base.state_sd[1], s * base.state_sd[2]),
-        )
-        q = draw_queries(CurveSessions(table, model, device, library), list(lengths), sessions_per_material,
-                         SPLIT_SEEDS["test"])  # fmt: skip
+        q = draw_queries(sessions, list(lengths), sessions_per_material, SPLIT_SEEDS["test"])
         out.extend(_rows(table, s, q))
     return out
 

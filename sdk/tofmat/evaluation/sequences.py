@@ -12,16 +12,16 @@ curves' test split; the matchers as they ship (the built-in prior and temperatur
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import Classifier, ExemplarTable
 from .._progress import Progress
 from ..tools.sweeps import window_starts
-from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
-from .scales import CONFIDENT, SCALES
-from .sessions import CurveSessions, calibrated_model
+from .run import LENGTHS, SPLIT_SEEDS
+from .scales import CONFIDENT, SCALES, by_length, scaled_sessions
+from .sessions import CurveSessions
 
 MATCHERS = ("eq12", "session", "learning")
 # A sweep's place in its session, as reported: the first, the second to fourth, the fifth on.
@@ -116,22 +116,11 @@ def evaluate_sequences(
     """Eq. (12), the session matcher and the learning matcher on sessions of many sweeps of the real
     curves' test split, at each scale of the calibration's session spreads (the same draws at every
     scale: only the spread changes)."""
-    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
-        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
-    library, device = calibrated_json()
-    base = calibrated_model(library, table)
     rows: list[SequenceRow] = []
-    for i, scale in enumerate(scales):
+    for i, (scale, sessions) in enumerate(scaled_sessions(table, scales)):
         if progress:
             progress(i, len(scales), f"sessions of {sweeps_per_session} sweeps at {scale:g} x the spread")
-        model = replace(
-            base,
-            offsets_sd_mm=tuple(scale * v for v in base.offsets_sd_mm),
-            state_sd=(scale * base.state_sd[0], scale * base.state_sd[1], scale * base.state_sd[2]),
-        )
-        sweeps = draw_sequences(
-            CurveSessions(table, model, device, library), n_sessions, sweeps_per_session, lengths, SPLIT_SEEDS["test"]
-        )
+        sweeps = draw_sequences(sessions, n_sessions, sweeps_per_session, lengths, SPLIT_SEEDS["test"])
         labelled = _label(sweeps, table)
         position = np.array([s.position for s in sweeps])
         length = np.array([s.length for s in sweeps])
@@ -139,17 +128,8 @@ def evaluate_sequences(
             right, sure = labelled[name]
             for lo, hi, stage in STAGES:
                 in_stage = (position >= lo) & (position < (hi if hi is not None else sweeps_per_session))
-                if not in_stage.any():
-                    continue
-                acc, wrong, count = {}, {}, {}
-                for n in sorted(set(lengths)):
-                    sel = in_stage & (length == n)
-                    if not sel.any():
-                        continue
-                    acc[n] = 100.0 * float(right[sel].mean())
-                    wrong[n] = 100.0 * float((sure & ~right)[sel].mean())
-                    count[n] = int(sel.sum())
-                rows.append(SequenceRow(scale, name, stage, acc, wrong, count))
+                if in_stage.any():
+                    rows.append(SequenceRow(scale, name, stage, *by_length(right, sure, length, in_stage)))
     return rows
 
 
