@@ -16,7 +16,16 @@ SUDO     := $(shell [ "$$(id -u)" -eq 0 ] || echo sudo)
 # tofmatd: spdlog (logging), CLI11 (flags and config file); OpenCV imgproc for
 # the tests (the float reference of the segmentation's integer smoothing).
 APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g-dev nlohmann-json3-dev clang libclang-rt-14-dev libusb-1.0-0-dev \
-                libspdlog-dev libcli11-dev libopencv-imgproc-dev libgpiod-dev clang-format clang-tidy
+                libspdlog-dev libcli11-dev libopencv-imgproc-dev libgpiod-dev clang-format clang-tidy ccache
+
+# The SDK's extension build (scikit-build-core, build/sdk-*) compiles the core, the simulator and the
+# driver again with the flags build-cpp uses (Release, make's $(CXX)): ccache hands it build-cpp's objects. CMake
+# takes its compiler and launcher from these variables when it configures a build tree the first
+# time; ccache keeps its cache in build/ccache (make clean removes it).
+export CXX CC
+export CMAKE_CXX_COMPILER_LAUNCHER := ccache
+export CMAKE_C_COMPILER_LAUNCHER := ccache
+export CCACHE_DIR := $(CURDIR)/build/ccache
 
 CROSS    := build/aarch64
 # The aarch64 cross build of everything that runs on the box: Debian's cross
@@ -52,7 +61,7 @@ setup-cross:
 build: setup build-cpp build-python
 
 build-cpp:
-	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_DB_DIR=$(DB) >/dev/null
 	cmake --build $(BUILD) -j$(JOBS)
 
 # The SDK builds the extension from this CMake project (scikit-build-core);
@@ -102,8 +111,10 @@ test-sanitize:
 test-sanitize-all: test-sanitize
 	ctest --test-dir $(ASAN) --output-on-failure -j$(JOBS) -R '$(ASAN_SLOW_SUITES)'
 
+# JOBS pytest workers (pytest-xdist): most tests wait on a daemon or a subprocess, so two workers
+# on two cores take about 60 % of one worker's time.
 test-python:
-	TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python -q
+	TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python -q -n $(JOBS)
 
 # libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus.
 fuzz: setup

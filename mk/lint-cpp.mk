@@ -40,7 +40,7 @@ lint-cpp-format:
 # One clang-tidy per file, JOBS at once; each prints its findings in one piece when it ends. (clang's own
 # "N warnings generated." lines count warnings in system headers that clang-tidy never shows: dropped.)
 lint-cpp-tidy:
-	cmake -S . -B $(TIDY_BUILD) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Debug \
+	cmake -S . -B $(TIDY_BUILD) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_CXX_COMPILER_LAUNCHER= -DCMAKE_BUILD_TYPE=Debug \
 	  -DCMAKE_EXPORT_COMPILE_COMMANDS=ON -DTOFMAT_DB_DIR=$(DB) >/dev/null
 	@git ls-files -z -- $(LINT_CPP_TIDY_FILES) | xargs -0 -n1 -P$(JOBS) bash -c \
 	  'out=$$($(CLANG_TIDY) -p $(TIDY_BUILD) --quiet "$$1" 2>&1); rc=$$?; \
