@@ -51,6 +51,24 @@ TEST(Calibration, ProbabilitiesAreASoftmaxAtTheLengthsTemperature) {
   EXPECT_EQ(far.probability[1], 0.0);
 }
 
+TEST(Calibration, ABestMatchThatFitsWorseThanItsNoiseFlattensTheProbabilities) {
+  Calibration c;
+  c.temperatures = {{1.0, 2.0}};
+  // n = 9: a = 2/81. The deviate of Q/n = 8 is (2 - 1 + a) / sqrt(a): the temperature is 8 x 2.
+  const double a = 2.0 / 81.0;
+  const double z8 = (2.0 - 1.0 + a) / std::sqrt(a);
+  EXPECT_NEAR(fit_tempering(Match{0, 0.0, 9, z8}), 8.0, 1e-9);
+  const auto v = judge(ranking({{0, 0.0, 9, z8}, {1, 16.0 * std::log(2.0), 9, 40.0}}), 1, c);
+  EXPECT_NEAR(v.probability[0], 2.0 / 3.0, 1e-9);  // weights 1 and 1/2 at T = 16
+  // A fit as good as the noise allows, or better, leaves the temperature alone.
+  EXPECT_DOUBLE_EQ(fit_tempering(Match{0, 0.0, 9, 0.0}), 1.0);
+  EXPECT_DOUBLE_EQ(fit_tempering(Match{0, 0.0, 9, -3.0}), 1.0);
+  // Eq. (12) (no fit) and a match of no elements are not tempered; an infinite fit flattens all.
+  EXPECT_DOUBLE_EQ(fit_tempering(Match{0, 0.0, 9}), 1.0);
+  EXPECT_DOUBLE_EQ(fit_tempering(Match{0, 0.0, 0, 2.0}), 1.0);
+  EXPECT_DOUBLE_EQ(fit_tempering(Match{0, 0.0, 9, std::numeric_limits<double>::infinity()}), 1e6);
+}
+
 TEST(Calibration, TheSweepsLengthChoosesTheThreshold) {
   Calibration c;
   c.temperatures = {{1.0, 1.0}};

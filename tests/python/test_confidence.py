@@ -1,7 +1,9 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Confidence and the open set in the SDK: the tuned calibration is what the evaluation fits on its
-tuning split (fitted again here), every result carries probabilities and a fit, a query unlike any
-material is ``unknown`` and a material's own sweep is not, and Eq. (12) is never unknown."""
+tuning split (fitted again here, made safe at every session size tried), every result carries
+probabilities and a fit, a best match that fits badly flattens them as the evaluation's reference
+says, a query unlike any material is ``unknown`` and a material's own sweep is not, and Eq. (12) is
+never unknown."""
 
 from __future__ import annotations
 
@@ -11,11 +13,11 @@ import numpy as np
 import pytest
 
 import tofmat
-from tofmat.evaluation.confidence import fit_temperatures
+from tofmat.evaluation.confidence import fit_temperatures, fit_tempering, probabilities, tail_safe
 from tofmat.evaluation.matchers import CompiledSessionMatcher, Eq12Matcher, SessionParams
 from tofmat.evaluation.open_set import choose_thresholds, open_set_curves
-from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, calibrated_json
-from tofmat.evaluation.sessions import CurveSessions, calibrated_model, draw_queries
+from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, calibrated_json, confidence_scores
+from tofmat.evaluation.sessions import CurveSessions, calibrated_model, draw_queries, scaled_model
 
 
 @pytest.fixture(scope="module")
@@ -23,14 +25,24 @@ def tuning(real_table: tofmat.ExemplarTable):  # type: ignore[no-untyped-def]
     library, device = calibrated_json()
     model = calibrated_model(library, real_table)
     cs = CurveSessions(real_table, model, device, library)
-    return model, draw_queries(cs, list(LENGTHS), 10, SPLIT_SEEDS["tune"])
+    scaled = [
+        draw_queries(
+            CurveSessions(real_table, scaled_model(model, x), device, library), list(LENGTHS), 10, SPLIT_SEEDS["tune"]
+        )
+        for x in TAIL_SCALES
+    ]
+    return model, draw_queries(cs, list(LENGTHS), 10, SPLIT_SEEDS["tune"]), scaled
 
 
 def test_the_tuned_calibration_is_what_the_tuning_split_fits(real_table: tofmat.ExemplarTable, tuning) -> None:  # type: ignore[no-untyped-def]
-    model, q = tuning
+    model, q, scaled = tuning
     params = SessionParams(model.offsets_sd_mm, drift_sd_mm=(5.0, 3.0), floor_mm=0.5, huber_k=3.0)
     for method, matcher in (("eq12", Eq12Matcher(real_table)), ("session", CompiledSessionMatcher(real_table, params))):
-        fitted = fit_temperatures(matcher.scores(q.queries), q.truth, q.lengths)
+        fitted = fit_temperatures(confidence_scores(matcher, q.queries, matcher.scores(q.queries)), q.truth, q.lengths)
+        fitted = tail_safe(
+            fitted,
+            [(confidence_scores(matcher, x.queries, matcher.scores(x.queries)), x.truth, x.lengths) for x in scaled],
+        )
         tuned = tofmat.Calibration.tuned(method)
         assert [n for n, _ in tuned.temperatures] == list(LENGTHS)
         for n, t in tuned.temperatures:
@@ -57,6 +69,26 @@ def test_results_carry_probabilities_and_a_fit(real_table: tofmat.ExemplarTable,
         assert r.confidence == p[0] and 0.0 < r.confidence <= 1.0
         assert r.material == "cork" and r.nearest == "cork" and not r.unknown and r.index == m
         assert math.isnan(r.fit) if method == "eq12" else math.isfinite(r.fit)
+
+
+def test_a_best_match_that_fits_badly_flattens_the_confidence(real_table: tofmat.ExemplarTable) -> None:
+    m = real_table.index_of("cork")
+    q = real_table.features[m].copy()
+    q[:, :40] = np.nan
+    q[:, 70:] = np.nan
+    clf = tofmat.Classifier(real_table, method="session")
+    good = clf.classify(q)
+    q[0, 40:70] += np.tile(np.array([-3.0, 3.0], dtype=np.float32), 15)  # bin to bin: no session does that
+    bad = clf.classify(q)
+    assert fit_tempering([good.ranking[0].fit], [good.ranking[0].valid])[0] == 1.0
+    g = float(fit_tempering([bad.ranking[0].fit], [bad.ranking[0].valid])[0])
+    assert g > 2.0
+    # judge() in the C++ core: softmax(-d / (T g)), T the length's (elements over the table's rows).
+    t = tofmat.Calibration.tuned("session").temperature(bad.ranking[0].valid / real_table.n_rows)
+    d = np.array([[r.distance for r in bad.ranking]])
+    expected = probabilities(d, t * g)[0]
+    assert np.allclose([r.probability for r in bad.ranking], expected, rtol=1e-9, atol=1e-12)
+    assert bad.confidence < probabilities(d, t)[0][0]
 
 
 def test_a_query_unlike_any_material_is_unknown(real_table: tofmat.ExemplarTable) -> None:

@@ -494,9 +494,14 @@ def test_the_classifier_takes_the_tables_calibration(real_table) -> None:
     q = real_table.features[real_table.index_of("cork")].copy()
     q[:, 60:] = np.nan
     plain = tofmat.Classifier(real_table, backend="float", method="eq12").classify(q)
-    hot = tofmat.Classifier(real_table.with_calibration(CALIBRATION), backend="float", method="eq12").classify(q)
-    assert plain.material == hot.material == "cork"
-    assert hot.confidence < plain.confidence  # a temperature of 50 spreads the probabilities
+    own = tofmat.Classifier(real_table.with_calibration(CALIBRATION), backend="float", method="eq12").classify(q)
+    at_50 = tofmat.Classifier(
+        real_table, backend="float", method="eq12", calibration=tofmat.Calibration([(1.0, 50.0)])
+    ).classify(q)
+    assert plain.material == own.material == "cork"
+    # The table's temperature of 50, not the built-in one (hundreds: Eq. (12) is made safe at every session size).
+    assert own.confidence == pytest.approx(at_50.confidence, rel=1e-12)
+    assert own.confidence > plain.confidence
 
 
 @pytest.mark.parametrize(

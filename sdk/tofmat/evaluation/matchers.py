@@ -27,6 +27,7 @@ import numpy.typing as npt
 
 from .. import Classifier, ExemplarTable, SessionPrior
 from ..learn import LearnedClassifier
+from .confidence import fit_tempering
 from .sessions import roughness
 
 F64 = npt.NDArray[np.float64]
@@ -58,6 +59,16 @@ class _ClassifierMatcher:
             for r in res.ranking:
                 out[i, r.index] = r.distance
         return out
+
+    def tempering(self, queries: F32) -> F64:
+        """(N,) each query's fit tempering (confidence.fit_tempering) of its best match: 1 for a
+        matcher without a noise model (Eq. (12)) and a query no candidate shares an element with."""
+        fit, valid = [], []
+        for res in self.classifier.classify_batch(queries):
+            best = res.ranking[0] if res.ranking else None
+            fit.append(best.fit if best else math.nan)
+            valid.append(best.valid if best else 0)
+        return fit_tempering(np.array(fit), np.array(valid))
 
 
 class Eq12Matcher(_ClassifierMatcher):

@@ -11,14 +11,14 @@ accuracy by sweep length, and the share of labels wrong with a confidence of 0.9
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .. import Classifier, ExemplarTable
 from .._progress import Progress
 from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
-from .sessions import CurveSessions, Queries, calibrated_model, draw_queries
+from .sessions import CurveSessions, Queries, calibrated_model, draw_queries, scaled_model
 
 SCALES = (0.0, 0.25, 0.5, 1.0, 2.0)
 CONFIDENT = 0.9
@@ -31,14 +31,16 @@ class ScaleRow:
     accuracy: dict[int, float]  # % right by sweep length
     confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
     queries: dict[int, int]
+    confidently_right: dict[int, float]  # % of labels right with confidence >= 0.9, by sweep length
 
 
 def by_length(
     right: np.ndarray, sure: np.ndarray, lengths: np.ndarray, among: np.ndarray | None = None
-) -> tuple[dict[int, float], dict[int, float], dict[int, int]]:
+) -> tuple[dict[int, float], dict[int, float], dict[int, int], dict[int, float]]:
     """Per sweep length (of the labels ``among`` selects, default all): % right, % wrong with
-    confidence >= CONFIDENT, and the count; a length with no label is left out."""
-    acc, wrong, count = {}, {}, {}
+    confidence >= CONFIDENT, the count, and % right with confidence >= CONFIDENT; a length with no
+    label is left out."""
+    acc, wrong, count, sure_right = {}, {}, {}, {}
     for n in sorted(set(lengths.tolist())):
         sel = lengths == n if among is None else among & (lengths == n)
         if not sel.any():
@@ -46,7 +48,14 @@ def by_length(
         acc[int(n)] = 100.0 * float(right[sel].mean())
         wrong[int(n)] = 100.0 * float((sure & ~right)[sel].mean())
         count[int(n)] = int(sel.sum())
-    return acc, wrong, count
+        sure_right[int(n)] = 100.0 * float((sure & right)[sel].mean())
+    return acc, wrong, count, sure_right
+
+
+def overall(share: dict[int, float], count: dict[int, int]) -> float:
+    """A per-length share (%) over all lengths together, each length weighted by its labels."""
+    total = sum(count[n] for n in share)
+    return sum(share[n] * count[n] for n in share) / total if total else 0.0
 
 
 def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator[tuple[float, CurveSessions]]:
@@ -57,12 +66,7 @@ def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator
     library, device = calibrated_json()
     base = calibrated_model(library, table)
     for s in scales:
-        model = replace(
-            base,
-            offsets_sd_mm=tuple(s * v for v in base.offsets_sd_mm),
-            state_sd=(s * base.state_sd[0], s * base.state_sd[1], s * base.state_sd[2]),
-        )
-        yield s, CurveSessions(table, model, device, library)
+        yield s, CurveSessions(table, scaled_model(base, s), device, library)
 
 
 def _rows(table: ExemplarTable, scale: float, q: Queries) -> list[ScaleRow]:
@@ -97,11 +101,14 @@ def format_markdown(rows: list[ScaleRow]) -> str:
     lengths = sorted({n for r in rows for n in r.accuracy})
     head = " | ".join(f"{n} bins" for n in lengths)
     lines = [
-        f"| scale | matcher | {head} | confident and wrong (worst length) |",
-        "|---|---|" + "---|" * len(lengths) + "---|",
+        f"| scale | matcher | {head} | confident and wrong (worst length) | confident and right (all) |",
+        "|---|---|" + "---|" * len(lengths) + "---|---|",
     ]
     for r in rows:
         cells = " | ".join(f"{r.accuracy[n]:.1f} %" for n in lengths)
         worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
-        lines.append(f"| {r.scale:g} | {r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) |")
+        lines.append(
+            f"| {r.scale:g} | {r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) | "
+            f"{overall(r.confidently_right, r.queries):.1f} % |"
+        )
     return "\n".join(lines)

@@ -20,7 +20,7 @@ from .. import Classifier, ExemplarTable
 from .._progress import Progress
 from ..tools.sweeps import window_starts
 from .run import LENGTHS, SPLIT_SEEDS
-from .scales import CONFIDENT, SCALES, by_length, scaled_sessions
+from .scales import CONFIDENT, SCALES, by_length, overall, scaled_sessions
 from .sessions import CurveSessions
 
 MATCHERS = ("eq12", "session", "learning")
@@ -36,6 +36,7 @@ class SequenceRow:
     accuracy: dict[int, float]  # % right by sweep length
     confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
     sweeps: dict[int, int]
+    confidently_right: dict[int, float]  # % of labels right with confidence >= 0.9, by sweep length
 
 
 @dataclass(frozen=True)
@@ -153,8 +154,8 @@ def format_markdown(rows: list[SequenceRow]) -> str:
     lengths = sorted({n for r in rows for n in r.accuracy})
     head = " | ".join(f"{n} bins" for n in lengths)
     lines = [
-        f"| scale | matcher | sweeps | {head} | confident and wrong (worst length) |",
-        "|---|---|---|" + "---|" * len(lengths) + "---|",
+        f"| scale | matcher | sweeps | {head} | confident and wrong (worst length) | confident and right (all) |",
+        "|---|---|---|" + "---|" * len(lengths) + "---|---|",
     ]
     gap = margins(rows)
     for r in rows:
@@ -170,6 +171,6 @@ def format_markdown(rows: list[SequenceRow]) -> str:
         worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
         lines.append(
             f"| {r.scale:g} | {r.matcher} | {r.stage} | {' | '.join(cells)} | "
-            f"{r.confidently_wrong[worst]:.1f} % ({worst} bins) |"
+            f"{r.confidently_wrong[worst]:.1f} % ({worst} bins) | {overall(r.confidently_right, r.sweeps):.1f} % |"
         )
     return "\n".join(lines)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -103,6 +103,18 @@ class SessionModel:
             p = getattr(self, name)
             if not (math.isfinite(p) and 0 <= p < 1):
                 raise ValueError(f"session model: {name} must be in [0, 1), got {p}")
+
+
+def scaled_model(model: SessionModel, scale: float) -> SessionModel:
+    """``model`` with its session spreads (row offsets and waveform state) times ``scale``, the rest
+    as it is. Raises ValueError for a scale that is negative or not finite."""
+    if not (scale >= 0.0 and math.isfinite(scale)):
+        raise ValueError(f"a session scale must be finite and >= 0, got {scale}")
+    return replace(
+        model,
+        offsets_sd_mm=tuple(scale * v for v in model.offsets_sd_mm),
+        state_sd=(scale * model.state_sd[0], scale * model.state_sd[1], scale * model.state_sd[2]),
+    )
 
 
 def calibrated_model(library: Mapping[str, Any], table: ExemplarTable, drop_p: float = 0.05) -> SessionModel:

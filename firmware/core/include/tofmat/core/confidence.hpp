@@ -3,7 +3,11 @@
 // (docs/evaluation.md). A label's confidence is a probability over the
 // candidates, softmax(-score / T): a score sums over the sweep's elements, so
 // its scale grows with the sweep, and T depends on the sweep's length in bins
-// (fitted on the evaluation's tuning split by the Brier score). A best match
+// (fitted on the evaluation's tuning split by the Brier score, then raised
+// until no label is wrong at 0.9 at any session size tried), times the
+// best match's reduced chi-square when it exceeds 1 (fit_tempering: a query
+// the best candidate explains worse than its noise model allows is one the
+// scores' differences say less about). A best match
 // whose fit (Match::fit, the session matcher's chi-square deviate) exceeds a
 // threshold explains the query worse than the noise model allows: the label
 // is "unknown", not the nearest material.
@@ -55,6 +59,12 @@ struct Verdict {
   bool unknown = false;             // the best match fits worse than Calibration::unknown_fit
   double confidence() const { return probability.empty() ? 0.0 : probability.front(); }
 };
+
+// The factor judge() multiplies the temperature by: the best match's reduced
+// chi-square Q/n, recovered from Match::fit (the Wilson-Hilferty deviate of Q
+// with n = Match::valid degrees of freedom), when it exceeds 1, else 1; 1 for
+// a fit of NaN (Eq. (12): no noise model). At most 1e6.
+double fit_tempering(const Match& best);
 
 // The probabilities of a classification's ranking and whether it is unknown;
 // the sweep's length is the best match's compared elements over the table's
