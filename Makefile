@@ -116,17 +116,18 @@ test-sanitize-all: test-sanitize
 test-python:
 	TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python -q -n $(JOBS)
 
-# libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus.
+# libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus, JOBS at
+# once (each prints its result when it ends; any failure fails the target after all have run).
 fuzz: setup
 	cmake -S . -B $(FUZZDIR) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DTOFMAT_FUZZ=ON -DTOFMAT_BUILD_TESTS=OFF -DTOFMAT_BUILD_BENCH=OFF >/dev/null
 	cmake --build $(FUZZDIR) -j$(JOBS)
-	@for t in $(FUZZDIR)/tests/fuzz/fuzz_*; do \
-	  name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
+	@ls $(FUZZDIR)/tests/fuzz/fuzz_* | grep -v '\.' | xargs -P$(JOBS) -I{} bash -c '\
+	  t={}; name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
+	  out=$$($$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 -dict=tests/fuzz/$${name#fuzz_}.dict \
+	    $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1); rc=$$?; \
 	  echo "fuzz: $$name for $(FUZZ_SECONDS) s"; \
-	  $$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 -dict=tests/fuzz/$${name#fuzz_}.dict \
-	    $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1 | grep -E "stat::number_of_executed_units|ERROR|SUMMARY|Test unit written" ; \
-	  test $${PIPESTATUS[0]} -eq 0 || exit 1; \
-	done
+	  grep -E "stat::number_of_executed_units|ERROR|SUMMARY|Test unit written" <<<"$$out"; \
+	  exit $$rc'
 
 # Everything that runs on the box, for aarch64: tofmatd (with libusb, spdlog,
 # CLI11), the core, the driver, the protocol, the simulator source, and

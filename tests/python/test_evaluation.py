@@ -233,7 +233,7 @@ def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--sessions" in r.output
 
 
-def test_the_session_spread_as_a_variable(real_tmx: Path) -> None:
+def test_the_session_spread_as_a_variable(real_tmx: Path, tmp_path: Path) -> None:
     # The shipped matchers at 0 and 2 times the calibration's session spreads: with no session change
     # Eq. (12) is near perfect at long sweeps, and every matcher loses as sessions move more.
     r = CliRunner().invoke(
@@ -250,10 +250,51 @@ def test_the_session_spread_as_a_variable(real_tmx: Path) -> None:
         assert all(still[n] > moved[n] for n in ("10", "30", "100")), (method, still, moved)
         assert all(0.0 <= v <= 100.0 for v in rows[(2.0, method)]["confidently_wrong"].values())
     assert rows[(0.0, "eq12")]["accuracy"]["100"] >= 95.0
+    # Confidence made safe across session sizes: at twice the spread (87 labels a length here) at most
+    # one label of a length is wrong with a confidence of 0.9 or more; each row has its reliability diagram.
+    for method in ("eq12", "session"):
+        row = rows[(2.0, method)]
+        assert all(v <= 100.0 / 87 + 1e-9 for v in row["confidently_wrong"].values()), (method, row["confidently_wrong"])
+        assert 0.0 <= row["ece"] <= 1.0 and sum(n for _c, _a, n in row["reliability"]) == 5 * 87
+    png = tmp_path / "scales.png"
+    r = CliRunner().invoke(
+        main,
+        ["-q", "evaluate", "--source", "curves", "--table", str(real_tmx), "--sessions", "1",
+         "--session-scales", "0,2", "--plot", str(png)],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    bad = CliRunner().invoke(
+        main, ["evaluate", "--source", "curves", "--session-scales", "1", "--sweeps-per-session", "3", "--plot", str(png)]
+    )
+    assert bad.exit_code != 0 and "--sweeps-per-session" in bad.output
     bad = CliRunner().invoke(main, ["evaluate", "--source", "all", "--session-scales", "1"])
     assert bad.exit_code != 0 and "--source curves" in bad.output
     bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--session-scales", "-1"])
     assert bad.exit_code != 0 and "scales" in bad.output
+
+
+def test_the_session_spread_and_the_angle_on_the_simulator(sim_table: Path) -> None:
+    # Simulator sweeps against the simulated camera's table (recorded at 10 degrees), the target face-on
+    # and at the table's angle, sessions still and at twice the spread: one row per scale, angle, matcher.
+    args = ["-q", "evaluate", "--source", "sim", "--sim-table", str(sim_table), "--sim-sessions", "1"]
+    r = CliRunner().invoke(main, [*args, "--session-scales", "0,2", "--yaws", "0,10", "--json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    assert {(x["scale"], x["yaw_deg"], x["method"]) for x in rows} == {
+        (s, y, m) for s in (0.0, 2.0) for y in (0.0, 10.0) for m in ("eq12", "session")
+    }
+    for x in rows:
+        assert set(x["accuracy"]) <= {"1", "3", "10", "30", "100"} and x["accuracy"]
+        assert all(0.0 <= v <= 100.0 for v in x["accuracy"].values())
+        assert 0.0 <= x["ece"] <= 1.0
+    r = CliRunner().invoke(main, [*args, "--session-scales", "1", "--yaws", "10"])
+    assert r.exit_code == 0, r.output
+    assert "| scale | angle | matcher |" in r.output and "| 1 | 10 deg | session |" in r.output
+    bad = CliRunner().invoke(main, [*args, "--session-scales", "1", "--yaws", "75"])
+    assert bad.exit_code != 0 and "0..60 degrees" in bad.output
+    bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--session-scales", "1", "--yaws", "10"])
+    assert bad.exit_code != 0 and "--yaws goes with --source sim" in bad.output
 
 
 def test_thickness_among_the_acrylics_with_confusions(real_tmx: Path) -> None:

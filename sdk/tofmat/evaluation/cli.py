@@ -63,14 +63,20 @@ from ..report.cli import resolve_table, table_option
 )
 @click.option(
     "--session-scales",
-    help="Instead: the matchers as they ship (not tuned again) on the real curves' test split with the session "
-    "spreads times each of these scales, e.g. 0,0.25,0.5,1,2 (needs --source curves).",
+    help="Instead: the matchers as they ship (not tuned again) on a test split with the session spreads times "
+    "each of these scales, e.g. 0,0.25,0.5,1,2: the real curves' (--source curves) or simulator sweeps against "
+    "--sim-table at each of --yaws (--source sim).",
+)
+@click.option(
+    "--yaws",
+    help="With --source sim --session-scales: the targets' angles, degrees, comma-separated (default 0,10,20,30; "
+    "the simulated camera's table is recorded at 10).",
 )
 @click.option(
     "--sweeps-per-session",
     type=click.IntRange(1, 1000),
     help="With --session-scales: sessions of this many sweeps (materials and lengths at random), labelled in "
-    "turn by Eq. (12), the session matcher and the matcher that learns its session (tofmatd's default); "
+    "turn by Eq. (12), the session matcher and the matcher that learns its session (tofmatd --session-learning); "
     "--sessions x the table's materials sessions per scale.",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
@@ -91,6 +97,7 @@ def evaluate(
     out: Path | None,
     models: tuple[Path, ...],
     session_scales: str | None,
+    yaws: str | None,
     sweeps_per_session: int | None,
     as_json: bool,
     plot: Path | None,
@@ -103,8 +110,14 @@ def evaluate(
 
     if sweeps_per_session is not None and session_scales is None:
         raise UserError("--sweeps-per-session goes with --session-scales (e.g. --session-scales 0,0.25,0.5,1,2)")
+    if yaws is not None and (session_scales is None or source != "sim"):
+        raise UserError("--yaws goes with --source sim --session-scales")
+    if session_scales is not None and source == "sim":
+        return _evaluate_sim_scales(
+            session_scales, yaws, sim_table, sim_materials, sim_sessions, sweeps_per_session, as_json, out, plot
+        )
     if session_scales is not None:
-        return _evaluate_scales(source, table_path, session_scales, sessions, sweeps_per_session, as_json, out)
+        return _evaluate_scales(source, table_path, session_scales, sessions, sweeps_per_session, as_json, out, plot)
     if materials and source == "sim":
         raise UserError("--materials chooses among the real curves' materials (the simulator's: --sim-materials)")
     if sim_table is not None and sim_materials:
@@ -183,19 +196,19 @@ def _evaluate_scales(
     sweeps_per_session: int | None,
     as_json: bool,
     out: Path | None,
+    plot: Path | None = None,
 ) -> None:
     from ..tools.tables import open_table
     from . import scales as single
     from . import sequences
 
     if source != "curves":
-        raise UserError("--session-scales runs on the real curves: give --source curves")
-    try:
-        values = tuple(float(v) for v in scales.split(",") if v.strip())
-    except ValueError as e:
-        raise UserError(f"--session-scales: {e}") from e
-    if not values:
-        raise UserError("--session-scales needs at least one scale")
+        raise UserError("--session-scales runs on the real curves (--source curves) or the simulator (--source sim)")
+    values = _numbers(scales, "--session-scales")
+    if plot is not None and sweeps_per_session is not None:
+        raise UserError(
+            "--plot with --session-scales draws the single sweeps' diagrams: leave out --sweeps-per-session"
+        )
     table = open_table(resolve_table(table_path))
     with progress_bar("session scales") as progress:
         try:
@@ -211,8 +224,68 @@ def _evaluate_scales(
                 text = sequences.format_markdown(sequence_rows)
         except ValueError as e:
             raise UserError(str(e)) from e
+    if plot is not None:
+        from .plots import scale_reliability_diagram
+
+        scale_reliability_diagram(scale_rows, plot)
     if as_json:
         text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n")
+    click.echo(text)
+
+
+def _numbers(text: str, option: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError as e:
+        raise UserError(f"{option}: {e}") from e
+    if not values:
+        raise UserError(f"{option} needs at least one value")
+    return values
+
+
+def _evaluate_sim_scales(
+    scales: str,
+    yaws: str | None,
+    sim_table: Path | None,
+    sim_materials: str | None,
+    sim_sessions: int,
+    sweeps_per_session: int | None,
+    as_json: bool,
+    out: Path | None,
+    plot: Path | None,
+) -> None:
+    from ..tools.tables import open_table
+    from . import scales as single
+
+    if sweeps_per_session is not None:
+        raise UserError("--sweeps-per-session runs on the real curves: give --source curves")
+    values = _numbers(scales, "--session-scales")
+    angles = _numbers(yaws, "--yaws") if yaws is not None else (0.0, 10.0, 20.0, 30.0)
+    with progress_bar("simulator session scales") as progress:
+        try:
+            if sim_table is not None:
+                if sim_materials:
+                    raise UserError("--sim-materials records a table: leave it out with --sim-table")
+                table = open_table(sim_table)
+            else:
+                from .sessions import SessionModel
+                from .sim_sessions import SimSessions
+
+                names = [m.strip() for m in sim_materials.split(",")] if sim_materials else None
+                table = SimSessions(
+                    names, SessionModel((0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0), progress=progress
+                ).table
+            rows = single.evaluate_sim_scales(table, values, angles, sim_sessions, progress=progress)
+        except ValueError as e:
+            raise UserError(str(e)) from e
+    text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2) if as_json else single.format_markdown(rows)
+    if plot is not None:
+        from .plots import scale_reliability_diagram
+
+        scale_reliability_diagram(rows, plot)
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text + "\n")

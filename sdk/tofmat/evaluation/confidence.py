@@ -128,8 +128,15 @@ def reliability(
         sel = lengths == n
         if sel.any():
             p[sel] = probabilities(scores[sel], t)
-    conf = p.max(axis=1)
-    right = (np.argmax(p, axis=1) == truth).astype(np.float64)
+    return reliability_of(p.max(axis=1), np.argmax(p, axis=1) == truth, bins)
+
+
+def reliability_of(
+    confidence: npt.ArrayLike, right: npt.ArrayLike, bins: int = ECE_BINS
+) -> tuple[float, list[tuple[float, float, int]]]:
+    """:func:`reliability` from each label's confidence and whether it is right."""
+    conf = np.asarray(confidence, dtype=np.float64)
+    ok = np.asarray(right, dtype=np.float64)
     edges = np.linspace(0.0, 1.0, bins + 1)
     which = np.clip(np.digitize(conf, edges[1:-1]), 0, bins - 1)
     ece = 0.0
@@ -139,7 +146,7 @@ def reliability(
         n = int(sel.sum())
         if n == 0:
             continue
-        c, a = float(conf[sel].mean()), float(right[sel].mean())
-        ece += n / len(truth) * abs(c - a)
+        c, a = float(conf[sel].mean()), float(ok[sel].mean())
+        ece += n / len(conf) * abs(c - a)
         diagram.append((c, a, n))
     return ece, diagram

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-"""The reliability diagram of ``tofmat evaluate --plot``: for each source and matcher, the test
+"""The reliability diagrams of ``tofmat evaluate --plot``: for each source and matcher, the test
 split's accuracy against its confidence, per confidence bin, with the diagonal of a calibrated
-confidence."""
+confidence; with ``--session-scales``, one panel per matcher and a curve per session spread."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 
 from .._extras import require_pyplot
 from .run import SourceResult
+from .scales import ScaleRow
 
 
 def reliability_diagram(results: Sequence[SourceResult], path: Path) -> Path:
@@ -34,6 +35,49 @@ def reliability_diagram(results: Sequence[SourceResult], path: Path) -> Path:
         ax.set_ylabel("share right")
         ax.set_title(f"{r.source}: test split")
         ax.legend(loc="upper left", fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def scale_reliability_diagram(rows: Sequence[ScaleRow], path: Path) -> Path:
+    """Writes the PNG of ``tofmat evaluate --session-scales ... --plot``: one panel per matcher, a
+    curve per session spread (points sized by their labels), and returns its path."""
+    require_pyplot(extra="plot", feature="tofmat evaluate --plot")
+    import matplotlib.pyplot as plt
+
+    methods = list(dict.fromkeys(r.method for r in rows))
+    fig, axes = plt.subplots(1, max(1, len(methods)), figsize=(5.0 * max(1, len(methods)), 4.6), squeeze=False)
+    for ax, method in zip(axes[0], methods, strict=False):
+        ax.plot([0, 1], [0, 1], color="0.6", linestyle="--", linewidth=1, label="calibrated")
+        ax.axvspan(0.9, 1.0, color="0.9", zorder=0)
+        mine = [r for r in rows if r.method == method]
+        top = max((n for r in mine for _c, _a, n in r.reliability), default=1)
+        for r in mine:
+            if not r.reliability:
+                continue
+            conf = [c for c, _a, _n in r.reliability]
+            acc = [a for _c, a, _n in r.reliability]
+            (line,) = ax.plot(conf, acc, linewidth=1)
+            ax.scatter(
+                conf,
+                acc,
+                s=[8 + 150 * n / top for _c, _a, n in r.reliability],
+                color=line.get_color(),
+                alpha=0.7,
+                label=f"{r.scale:g} x the spread{'' if r.yaw_deg is None else f', {r.yaw_deg:g} deg'}"
+                f" (ECE {100 * r.ece:.1f} %)",
+            )
+        ax.set_xlim(0, 1)
+        ax.set_ylim(0, 1)
+        ax.set_xlabel("confidence of the top label (shaded: 0.9 and more)")
+        ax.set_ylabel("share right")
+        what = "real curves'" if all(r.yaw_deg is None for r in mine) else "simulator's"
+        ax.set_title(f"{method}: the {what} test split, sessions scaled")
+        ax.legend(loc="upper left", fontsize=7 if len(mine) > 6 else 8)
         ax.grid(alpha=0.3)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -18,7 +18,7 @@ import numpy as np
 from .. import ExemplarTable
 from .._progress import Progress
 from ..learn import LearnedClassifier
-from .confidence import ECE_BINS, fit_temperatures, reliability, tail_safe
+from .confidence import ECE_BINS, TAIL_CONFIDENCE, TAIL_SHARE, fit_temperatures, reliability, tail_safe
 from .matchers import CompiledSessionMatcher, Eq12Matcher, LearnedMatcher, Matcher, SessionParams, session_prior
 from .open_set import MAX_FALSE_REJECT, choose_thresholds, open_set_curves, subset
 from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries, scaled_model
@@ -364,10 +364,10 @@ def format_markdown(results: Sequence[SourceResult], confusions: bool = False) -
                 )
                 + f"); ECE over {ECE_BINS} confidence bins, all lengths together."
                 + (
-                    " The exemplar matchers' T raised until at most 0.5 % of a length's tuning labels are wrong"
-                    " with a confidence of 0.9 or more at session spreads of "
-                    + ", ".join(f"{x:g}" for x in r.tail_scales)
-                    + " x the calibration's."
+                    " The exemplar matchers' T raised until "
+                    + (f"at most {100 * TAIL_SHARE:g} %" if TAIL_SHARE > 0 else "none")
+                    + f" of a length's tuning labels are wrong with a confidence of {TAIL_CONFIDENCE:g} or more"
+                    " at session spreads of " + ", ".join(f"{x:g}" for x in r.tail_scales) + " x the calibration's."
                     if r.tail_scales
                     else ""
                 )

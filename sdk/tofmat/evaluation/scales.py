@@ -11,14 +11,15 @@ accuracy by sweep length, and the share of labels wrong with a confidence of 0.9
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import Classifier, ExemplarTable
 from .._progress import Progress
+from .confidence import reliability_of
 from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
-from .sessions import CurveSessions, Queries, calibrated_model, draw_queries, scaled_model
+from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries, scaled_model
 
 SCALES = (0.0, 0.25, 0.5, 1.0, 2.0)
 CONFIDENT = 0.9
@@ -32,6 +33,9 @@ class ScaleRow:
     confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
     queries: dict[int, int]
     confidently_right: dict[int, float]  # % of labels right with confidence >= 0.9, by sweep length
+    ece: float = 0.0  # over all lengths together (0..1)
+    reliability: list[tuple[float, float, int]] = field(default_factory=list)  # (confidence, accuracy, labels)
+    yaw_deg: float | None = None  # the simulator's target angle (None: the real curves, no angle)
 
 
 def by_length(
@@ -69,13 +73,14 @@ def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator
         yield s, CurveSessions(table, scaled_model(base, s), device, library)
 
 
-def _rows(table: ExemplarTable, scale: float, q: Queries) -> list[ScaleRow]:
+def _rows(table: ExemplarTable, scale: float, q: Queries, yaw_deg: float | None = None) -> list[ScaleRow]:
     out = []
     for method in ("eq12", "session"):
         results = Classifier(table, method=method).classify_batch(q.queries)
         right = np.array([r.index == t for r, t in zip(results, q.truth, strict=True)])
-        sure = np.array([r.confidence >= CONFIDENT for r in results])
-        out.append(ScaleRow(scale, method, *by_length(right, sure, q.lengths)))
+        conf = np.array([r.confidence for r in results])
+        ece, diagram = reliability_of(conf, right)
+        out.append(ScaleRow(scale, method, *by_length(right, conf >= CONFIDENT, q.lengths), ece, diagram, yaw_deg))
     return out
 
 
@@ -97,18 +102,52 @@ def evaluate_scales(
     return out
 
 
+def evaluate_sim_scales(
+    table: ExemplarTable,
+    scales: tuple[float, ...] = SCALES,
+    yaws: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0),
+    sessions_per_material: int = 2,
+    lengths: tuple[int, ...] = LENGTHS,
+    progress: Progress | None = None,
+) -> list[ScaleRow]:
+    """The shipped matchers on simulator sweeps against ``table`` (the simulated camera's, recorded
+    at one angle): sessions drawn with the calibration's spreads times each scale, the target at
+    each angle (the same seeds throughout: only the spread and the angle change). Rendered: about
+    5 s a session of 29 materials, per scale and angle."""
+    from ..sim.evaluate import session_offset_spread, session_state_spread
+    from .sim_sessions import SimSessions
+
+    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
+        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
+    library, _ = calibrated_json()
+    base = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
+    out: list[ScaleRow] = []
+    cells = [(s, y) for s in scales for y in yaws]
+    for i, (s, y) in enumerate(cells):
+        if progress:
+            progress(i, len(cells), f"simulator sessions at {s:g} x the spread, {y:g} degrees")
+        q = SimSessions(None, scaled_model(base, s), table=table).draw(
+            list(lengths), sessions_per_material, SPLIT_SEEDS["test"], yaw_deg=y
+        )
+        out.extend(_rows(table, s, q, y))
+    return out
+
+
 def format_markdown(rows: list[ScaleRow]) -> str:
     lengths = sorted({n for r in rows for n in r.accuracy})
     head = " | ".join(f"{n} bins" for n in lengths)
+    angle = any(r.yaw_deg is not None for r in rows)
     lines = [
-        f"| scale | matcher | {head} | confident and wrong (worst length) | confident and right (all) |",
-        "|---|---|" + "---|" * len(lengths) + "---|---|",
+        f"| scale | {'angle | ' if angle else ''}matcher | {head} | confident and wrong (worst length) | "
+        "confident and right (all) |",
+        "|---|---|" + ("---|" if angle else "") + "---|" * len(lengths) + "---|---|",
     ]
     for r in rows:
-        cells = " | ".join(f"{r.accuracy[n]:.1f} %" for n in lengths)
+        cells = " | ".join(f"{r.accuracy[n]:.1f} %" if n in r.accuracy else "-" for n in lengths)
         worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
+        where = f"{r.yaw_deg:g} deg | " if angle else ""
         lines.append(
-            f"| {r.scale:g} | {r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) | "
+            f"| {r.scale:g} | {where}{r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) | "
             f"{overall(r.confidently_right, r.queries):.1f} % |"
         )
     return "\n".join(lines)

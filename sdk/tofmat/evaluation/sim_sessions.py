@@ -69,9 +69,17 @@ class SimSessions:
             return np.where(counts > 0, sums / counts, np.nan)
 
     def draw(
-        self, lengths: list[int], sessions_per_material: int, seed: int, progress: Progress | None = None
+        self,
+        lengths: list[int],
+        sessions_per_material: int,
+        seed: int,
+        progress: Progress | None = None,
+        yaw_deg: float | None = None,
     ) -> Queries:
-        """As :func:`.sessions.draw_queries`, rendered: a session per material and draw."""
+        """As :func:`.sessions.draw_queries`, rendered: a session per material and draw; the target at
+        ``yaw_deg`` degrees, or at random in YAW_RANGE_DEG (None)."""
+        if yaw_deg is not None and not 0.0 <= yaw_deg <= 60.0:
+            raise ValueError(f"a target's angle must be 0..60 degrees, got {yaw_deg}")
         rng = np.random.default_rng(seed)
         truth: list[int] = []
         lens: list[int] = []
@@ -85,7 +93,8 @@ class SimSessions:
                 state = (float(rng.normal(0.0, sd[0])), float(rng.normal(0.0, sd[1])), float(rng.normal(0.0, sd[2])))
                 renderer = Renderer(self.device.in_session(state), self.library, 0)
                 offsets = np.array([rng.normal(0.0, s) for s in self.model.offsets_sd_mm])
-                yaw = float(rng.uniform(*YAW_RANGE_DEG))
+                drawn = float(rng.uniform(*YAW_RANGE_DEG))  # (drawn either way: the same draws at every angle)
+                yaw = drawn if yaw_deg is None else yaw_deg
                 for n in lengths:
                     starts = window_starts(self.table, m, n)
                     if starts.size == 0:
