@@ -254,7 +254,10 @@ def test_the_session_spread_as_a_variable(real_tmx: Path, tmp_path: Path) -> Non
     # one label of a length is wrong with a confidence of 0.9 or more; each row has its reliability diagram.
     for method in ("eq12", "session"):
         row = rows[(2.0, method)]
-        assert all(v <= 100.0 / 87 + 1e-9 for v in row["confidently_wrong"].values()), (method, row["confidently_wrong"])
+        assert all(v <= 100.0 / 87 + 1e-9 for v in row["confidently_wrong"].values()), (
+            method,
+            row["confidently_wrong"],
+        )
         assert 0.0 <= row["ece"] <= 1.0 and sum(n for _c, _a, n in row["reliability"]) == 5 * 87
     png = tmp_path / "scales.png"
     r = CliRunner().invoke(
@@ -265,7 +268,8 @@ def test_the_session_spread_as_a_variable(real_tmx: Path, tmp_path: Path) -> Non
     assert r.exit_code == 0, r.output
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = CliRunner().invoke(
-        main, ["evaluate", "--source", "curves", "--session-scales", "1", "--sweeps-per-session", "3", "--plot", str(png)]
+        main,
+        ["evaluate", "--source", "curves", "--session-scales", "1", "--sweeps-per-session", "3", "--plot", str(png)],
     )
     assert bad.exit_code != 0 and "--sweeps-per-session" in bad.output
     bad = CliRunner().invoke(main, ["evaluate", "--source", "all", "--session-scales", "1"])
