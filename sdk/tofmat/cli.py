@@ -672,6 +672,36 @@ def table_calibrate(path: Path, output: Path | None, source: str, sessions: int,
     click.echo(format_markdown([result]))
 
 
+@table.command("twins")
+@click.argument("path", type=click.Path(exists=True, path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the table.")
+def table_twins(path: Path, as_json: bool) -> None:
+    """Each material's near twin: the other curve closest to it once a per-row offset and slope
+    (what a capture session can do) are taken out, closest pairs first.
+
+    What is left, in mm rms, beside the material's own bin noise: a material within a session's
+    reach of another is labelled among the two with low confidence, and held out of the table it
+    passes as known (docs/evaluation.md, "Open set"). PATH: a .tmx table or a folder of .npy curves."""
+    from dataclasses import asdict
+
+    from .tools.twins import near_twins
+
+    try:
+        twins = near_twins(open_table(path))
+    except ValueError as e:
+        raise click.BadParameter(str(e), param_hint="PATH") from e
+    if as_json:
+        click.echo(json.dumps([asdict(t) for t in twins], indent=2))
+        return
+    click.echo(
+        "| material | near twin | as stored (mm rms) | after an offset | after an offset and slope | bin noise |"
+    )
+    click.echo("|---|---|---:|---:|---:|---:|")
+    for t in twins:
+        click.echo(f"| {t.material} | {t.twin or '-'} | {t.raw_mm:.2f} | {t.after_offset_mm:.2f} | "
+                   f"{t.after_drift_mm:.2f} | {t.noise_mm:.2f} |")  # fmt: skip
+
+
 @table.command("add")
 @click.argument("name")
 @_client_options

@@ -5,6 +5,7 @@ group by ``main.add_command(evaluate)``."""
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -182,10 +183,7 @@ def evaluate(
         from .plots import reliability_diagram
 
         reliability_diagram(results, plot)
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text + "\n")
-    click.echo(text)
+    _emit(text, out)
 
 
 def _evaluate_scales(
@@ -230,10 +228,7 @@ def _evaluate_scales(
         scale_reliability_diagram(scale_rows, plot)
     if as_json:
         text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2)
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text + "\n")
-    click.echo(text)
+    _emit(text, out)
 
 
 def _numbers(text: str, option: str) -> tuple[float, ...]:
@@ -243,6 +238,8 @@ def _numbers(text: str, option: str) -> tuple[float, ...]:
         raise UserError(f"{option}: {e}") from e
     if not values:
         raise UserError(f"{option} needs at least one value")
+    if any(not (math.isfinite(v) and v >= 0.0) for v in values):
+        raise UserError(f"{option}: every value must be finite and >= 0, got {text}")
     return values
 
 
@@ -286,6 +283,11 @@ def _evaluate_sim_scales(
         from .plots import scale_reliability_diagram
 
         scale_reliability_diagram(rows, plot)
+    _emit(text, out)
+
+
+def _emit(text: str, out: Path | None) -> None:
+    """Prints the result, and writes it to ``out`` too when given."""
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text + "\n")

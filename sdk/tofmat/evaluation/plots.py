@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from .._extras import require_pyplot
 from .run import SourceResult
@@ -29,18 +30,8 @@ def reliability_diagram(results: Sequence[SourceResult], path: Path) -> Path:
             size = [8 + 200 * n / max(n for _c, _a, n in row.reliability) for _c, _a, n in row.reliability]
             ax.plot(conf, acc, marker="", linewidth=1)
             ax.scatter(conf, acc, s=size, alpha=0.7, label=f"{row.method} (ECE {100 * row.ece:.1f} %)")
-        ax.set_xlim(0, 1)
-        ax.set_ylim(0, 1)
-        ax.set_xlabel("confidence of the top label")
-        ax.set_ylabel("share right")
-        ax.set_title(f"{r.source}: test split")
-        ax.legend(loc="upper left", fontsize=8)
-        ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+        _frame(ax, "confidence of the top label", f"{r.source}: test split", 8)
+    return _save(fig, path)
 
 
 def scale_reliability_diagram(rows: Sequence[ScaleRow], path: Path) -> Path:
@@ -71,14 +62,30 @@ def scale_reliability_diagram(rows: Sequence[ScaleRow], path: Path) -> Path:
                 label=f"{r.scale:g} x the spread{'' if r.yaw_deg is None else f', {r.yaw_deg:g} deg'}"
                 f" (ECE {100 * r.ece:.1f} %)",
             )
-        ax.set_xlim(0, 1)
-        ax.set_ylim(0, 1)
-        ax.set_xlabel("confidence of the top label (shaded: 0.9 and more)")
-        ax.set_ylabel("share right")
         what = "real curves'" if all(r.yaw_deg is None for r in mine) else "simulator's"
-        ax.set_title(f"{method}: the {what} test split, sessions scaled")
-        ax.legend(loc="upper left", fontsize=7 if len(mine) > 6 else 8)
-        ax.grid(alpha=0.3)
+        _frame(
+            ax,
+            "confidence of the top label (shaded: 0.9 and more)",
+            f"{method}: the {what} test split, sessions scaled",
+            7 if len(mine) > 6 else 8,
+        )
+    return _save(fig, path)
+
+
+def _frame(ax: Any, xlabel: str, title: str, legend_size: int) -> None:
+    """A reliability panel's axes: both 0..1, labelled, with its legend and grid."""
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("share right")
+    ax.set_title(title)
+    ax.legend(loc="upper left", fontsize=legend_size)
+    ax.grid(alpha=0.3)
+
+
+def _save(fig: Any, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
