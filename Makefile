@@ -143,17 +143,18 @@ cross: setup-cross
 # onnxruntime crashes qemu 7.2 while it reads the CPU's features. The tests marked `board` in tests/python/test_daemon.py start the
 # aarch64 tofmatd (tests/cross/tofmatd-qemu) and talk to it with the host's
 # Python client; a replayed recording must give the x86 daemon's labels.
-# Two statistical suites of the simulator (DecodeNoise: 270 s, KinectSimFaults:
+# The board tests run JOBS at once (pytest-xdist; 144 s for the ten daemon tests on two cores
+# against 227 s one at a time). Two statistical suites of the simulator (DecodeNoise: 270 s, KinectSimFaults:
 # 130 s under qemu, over half the suites' time) run natively in `make test` and
 # under qemu only in cross-test-all.
 QEMU_SLOW_SUITES := ^(DecodeNoise|KinectSimFaults)\.
 cross-test: cross check-db setup build-python
 	ctest --test-dir $(CROSS) --output-on-failure -j$(JOBS) -E '$(QEMU_SLOW_SUITES)'
 	TOFMAT_DAEMON=$(abspath tests/cross/tofmatd-qemu) TOFMAT_DAEMON_AARCH64=$(abspath $(CROSS)/firmware/daemon/tofmatd) \
-	  TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python/test_daemon.py -m board -q
+	  TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python/test_daemon.py -m board -q -n $(JOBS)
 	QEMU_AARCH64=$(abspath build/deps/qemu10/qemu-aarch64) TOFMAT_DAEMON=$(abspath tests/cross/tofmatd-qemu) \
 	  TOFMAT_DAEMON_AARCH64=$(abspath $(CROSS)/firmware/daemon/tofmatd) \
-	  TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python/test_learn.py -m board -q
+	  TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python/test_learn.py -m board -q -n $(JOBS)
 
 cross-test-all: cross-test
 	ctest --test-dir $(CROSS) --output-on-failure -j$(JOBS) -R '$(QEMU_SLOW_SUITES)'
