@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from .._extras import require_pyplot
+from .confidence import ECE_BINS
 from .run import SourceResult
 from .scales import ScaleRow
 
@@ -36,7 +37,8 @@ def reliability_diagram(results: Sequence[SourceResult], path: Path) -> Path:
 
 def scale_reliability_diagram(rows: Sequence[ScaleRow], path: Path) -> Path:
     """Writes the PNG of ``tofmat evaluate --session-scales ... --plot``: one panel per matcher, a
-    curve per session spread (points sized by their labels), and returns its path."""
+    curve per session spread (the simulator's target angles pooled; points sized by their labels),
+    and returns its path."""
     require_pyplot(extra="plot", feature="tofmat evaluate --plot")
     import matplotlib.pyplot as plt
 
@@ -46,30 +48,45 @@ def scale_reliability_diagram(rows: Sequence[ScaleRow], path: Path) -> Path:
         ax.plot([0, 1], [0, 1], color="0.6", linestyle="--", linewidth=1, label="calibrated")
         ax.axvspan(0.9, 1.0, color="0.9", zorder=0)
         mine = [r for r in rows if r.method == method]
-        top = max((n for r in mine for _c, _a, n in r.reliability), default=1)
-        for r in mine:
-            if not r.reliability:
+        curves = {
+            scale: _pooled([r for r in mine if r.scale == scale]) for scale in dict.fromkeys(r.scale for r in mine)
+        }
+        top = max((n for diagram, _e in curves.values() for _c, _a, n in diagram), default=1)
+        for scale, (diagram, ece) in curves.items():
+            if not diagram:
                 continue
-            conf = [c for c, _a, _n in r.reliability]
-            acc = [a for _c, a, _n in r.reliability]
+            conf = [c for c, _a, _n in diagram]
+            acc = [a for _c, a, _n in diagram]
             (line,) = ax.plot(conf, acc, linewidth=1)
             ax.scatter(
                 conf,
                 acc,
-                s=[8 + 150 * n / top for _c, _a, n in r.reliability],
+                s=[8 + 150 * n / top for _c, _a, n in diagram],
                 color=line.get_color(),
                 alpha=0.7,
-                label=f"{r.scale:g} x the spread{'' if r.yaw_deg is None else f', {r.yaw_deg:g} deg'}"
-                f" (ECE {100 * r.ece:.1f} %)",
+                label=f"{scale:g} x the spread (ECE {100 * ece:.1f} %)",
             )
-        what = "real curves'" if all(r.yaw_deg is None for r in mine) else "simulator's"
-        _frame(
-            ax,
-            "confidence of the top label (shaded: 0.9 and more)",
-            f"{method}: the {what} test split, sessions scaled",
-            7 if len(mine) > 6 else 8,
-        )
+        angles = sorted({r.yaw_deg for r in mine if r.yaw_deg is not None})
+        what = "real curves" if not angles else f"simulator, {', '.join(f'{y:g}' for y in angles)} deg pooled"
+        _frame(ax, "confidence of the top label (shaded: 0.9 and more)", f"{method}: {what}, test split", 8)
+        ax.legend(loc="lower right", fontsize=8)  # where a confident, wrong label would be
     return _save(fig, path)
+
+
+def _pooled(rows: Sequence[ScaleRow]) -> tuple[list[tuple[float, float, int]], float]:
+    """The rows' reliability diagrams merged bin by bin (the same ECE_BINS edges), with their ECE."""
+    sums: dict[int, list[float]] = {}
+    for r in rows:
+        for c, a, n in r.reliability:
+            b = min(int(c * ECE_BINS), ECE_BINS - 1)
+            acc = sums.setdefault(b, [0.0, 0.0, 0.0])
+            acc[0] += c * n
+            acc[1] += a * n
+            acc[2] += n
+    total = sum(v[2] for v in sums.values())
+    diagram = [(v[0] / v[2], v[1] / v[2], int(v[2])) for _b, v in sorted(sums.items())]
+    ece = sum(n / total * abs(c - a) for c, a, n in diagram) if total else 0.0
+    return diagram, ece
 
 
 def _frame(ax: Any, xlabel: str, title: str, legend_size: int) -> None:
