@@ -21,10 +21,11 @@ APT_PACKAGES := build-essential cmake ninja-build pkg-config libgtest-dev zlib1g
 # The SDK's extension build (scikit-build-core, build/sdk-*) compiles the core, the simulator and the
 # driver again with the flags build-cpp uses (Release, make's $(CXX)): ccache hands it build-cpp's objects. CMake
 # takes its compiler and launcher from these variables when it configures a build tree the first
-# time; ccache keeps its cache in build/ccache (make clean removes it).
+# time; the launcher is looked up when each recipe runs (after `make setup` has installed ccache;
+# none where it is missing); ccache keeps its cache in build/ccache (make clean removes it).
 export CXX CC
-export CMAKE_CXX_COMPILER_LAUNCHER := ccache
-export CMAKE_C_COMPILER_LAUNCHER := ccache
+export CMAKE_CXX_COMPILER_LAUNCHER = $(shell command -v ccache)
+export CMAKE_C_COMPILER_LAUNCHER = $(shell command -v ccache)
 export CCACHE_DIR := $(CURDIR)/build/ccache
 
 CROSS    := build/aarch64
