@@ -122,7 +122,7 @@ test-python:
 fuzz: setup
 	cmake -S . -B $(FUZZDIR) -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DTOFMAT_FUZZ=ON -DTOFMAT_BUILD_TESTS=OFF -DTOFMAT_BUILD_BENCH=OFF >/dev/null
 	cmake --build $(FUZZDIR) -j$(JOBS)
-	@ls $(FUZZDIR)/tests/fuzz/fuzz_* | grep -v '\.' | xargs -P$(JOBS) -I{} bash -c '\
+	@find $(FUZZDIR)/tests/fuzz -maxdepth 1 -name 'fuzz_*' -type f -executable | sort | xargs -P$(JOBS) -I{} bash -c '\
 	  t={}; name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
 	  out=$$($$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 -dict=tests/fuzz/$${name#fuzz_}.dict \
 	    $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1); rc=$$?; \

@@ -16,7 +16,7 @@ import tofmat
 from tofmat.evaluation.confidence import fit_temperatures, fit_tempering, probabilities, tail_safe
 from tofmat.evaluation.matchers import CompiledSessionMatcher, Eq12Matcher, SessionParams
 from tofmat.evaluation.open_set import choose_thresholds, open_set_curves
-from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, calibrated_json, confidence_scores
+from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, calibrated_json, scored
 from tofmat.evaluation.sessions import CurveSessions, calibrated_model, draw_queries, scaled_model
 
 
@@ -38,10 +38,10 @@ def test_the_tuned_calibration_is_what_the_tuning_split_fits(real_table: tofmat.
     model, q, scaled = tuning
     params = SessionParams(model.offsets_sd_mm, drift_sd_mm=(5.0, 3.0), floor_mm=0.5, huber_k=3.0)
     for method, matcher in (("eq12", Eq12Matcher(real_table)), ("session", CompiledSessionMatcher(real_table, params))):
-        fitted = fit_temperatures(confidence_scores(matcher, q.queries, matcher.scores(q.queries)), q.truth, q.lengths)
+        fitted = fit_temperatures(scored(matcher, q.queries)[1], q.truth, q.lengths)
         fitted = tail_safe(
             fitted,
-            [(confidence_scores(matcher, x.queries, matcher.scores(x.queries)), x.truth, x.lengths) for x in scaled],
+            [(scored(matcher, x.queries)[1], x.truth, x.lengths) for x in scaled],
         )
         tuned = tofmat.Calibration.tuned(method)
         assert [n for n, _ in tuned.temperatures] == list(LENGTHS)

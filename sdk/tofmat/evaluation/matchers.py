@@ -54,21 +54,20 @@ class _ClassifierMatcher:
         self.n = len(classifier.table.materials)
 
     def scores(self, queries: F32) -> F64:
+        return self.scored(queries)[0]
+
+    def scored(self, queries: F32) -> tuple[F64, F64]:
+        """The (N, M) scores and, from the same classification, each query's fit tempering of its
+        best match (confidence.fit_tempering): 1 for a matcher without a noise model (Eq. (12)) and
+        a query no candidate shares an element with."""
         out = np.full((queries.shape[0], self.n), np.inf)
+        fit, valid = np.full(queries.shape[0], math.nan), np.zeros(queries.shape[0])
         for i, res in enumerate(self.classifier.classify_batch(queries)):
             for r in res.ranking:
                 out[i, r.index] = r.distance
-        return out
-
-    def tempering(self, queries: F32) -> F64:
-        """(N,) each query's fit tempering (confidence.fit_tempering) of its best match: 1 for a
-        matcher without a noise model (Eq. (12)) and a query no candidate shares an element with."""
-        fit, valid = [], []
-        for res in self.classifier.classify_batch(queries):
-            best = res.ranking[0] if res.ranking else None
-            fit.append(best.fit if best else math.nan)
-            valid.append(best.valid if best else 0)
-        return fit_tempering(np.array(fit), np.array(valid))
+            if res.ranking:
+                fit[i], valid[i] = res.ranking[0].fit, res.ranking[0].valid
+        return out, fit_tempering(fit, valid)
 
 
 class Eq12Matcher(_ClassifierMatcher):

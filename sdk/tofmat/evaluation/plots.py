@@ -68,8 +68,10 @@ def scale_reliability_diagram(rows: Sequence[ScaleRow], path: Path) -> Path:
             )
         angles = sorted({r.yaw_deg for r in mine if r.yaw_deg is not None})
         what = "real curves" if not angles else f"simulator, {', '.join(f'{y:g}' for y in angles)} deg pooled"
-        _frame(ax, "confidence of the top label (shaded: 0.9 and more)", f"{method}: {what}, test split", 8)
-        ax.legend(loc="lower right", fontsize=8)  # where a confident, wrong label would be
+        # (the legend where a confident, wrong label would be)
+        _frame(
+            ax, "confidence of the top label (shaded: 0.9 and more)", f"{method}: {what}, test split", 8, "lower right"
+        )
     return _save(fig, path)
 
 
@@ -89,14 +91,14 @@ def _pooled(rows: Sequence[ScaleRow]) -> tuple[list[tuple[float, float, int]], f
     return diagram, ece
 
 
-def _frame(ax: Any, xlabel: str, title: str, legend_size: int) -> None:
+def _frame(ax: Any, xlabel: str, title: str, legend_size: int, legend_at: str = "upper left") -> None:
     """A reliability panel's axes: both 0..1, labelled, with its legend and grid."""
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("share right")
     ax.set_title(title)
-    ax.legend(loc="upper left", fontsize=legend_size)
+    ax.legend(loc=legend_at, fontsize=legend_size)
     ax.grid(alpha=0.3)
 
 

@@ -107,17 +107,22 @@ def accuracy_by_length(scores: np.ndarray, q: Queries) -> tuple[dict[int, float]
     return acc, count
 
 
-def confidence_scores(matcher: Matcher, queries: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """The scores the confidence's softmax takes: each query's divided by its best match's fit
-    tempering where the matcher has one (the session matcher), as the C++ core's judge() does."""
-    tempering = getattr(matcher, "tempering", None)
-    return scores if tempering is None else scores / tempering(queries)[:, None]
+def scored(matcher: Matcher, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A matcher's scores, and the scores the confidence's softmax takes: each query's divided by
+    its best match's fit tempering where the matcher has one (the C++ core's judge() does so), from
+    one classification."""
+    both = getattr(matcher, "scored", None)
+    if both is None:
+        s = matcher.scores(queries)
+        return s, s
+    s, g = both(queries)
+    return s, s / g[:, None]
 
 
-def _score(matcher: Matcher, q: Queries) -> tuple[np.ndarray, float]:
+def _score(matcher: Matcher, q: Queries) -> tuple[np.ndarray, np.ndarray, float]:
     t0 = time.perf_counter()
-    s = matcher.scores(q.queries)
-    return s, 1e6 * (time.perf_counter() - t0) / max(1, len(q.truth))
+    s, c = scored(matcher, q.queries)
+    return s, c, 1e6 * (time.perf_counter() - t0) / max(1, len(q.truth))
 
 
 def tune(
@@ -167,19 +172,12 @@ def evaluate_source(
         res.tail_scales = TAIL_SCALES
     for split, q in (("tune", tune_q), ("test", test_q)):  # (the tuning split first: it fits T)
         for m in matchers:
-            s, us = _score(m, q)
+            s, c, us = _score(m, q)
             acc, count = accuracy_by_length(s, q)
-            c = confidence_scores(m, q.queries, s)
             if split == "tune":
                 t = fit_temperatures(c, q.truth, q.lengths)
                 if scaled_tune and m.name in ("eq12", "session"):
-                    t = tail_safe(
-                        t,
-                        [
-                            (confidence_scores(m, x.queries, m.scores(x.queries)), x.truth, x.lengths)
-                            for x in scaled_tune
-                        ],
-                    )
+                    t = tail_safe(t, [(scored(m, x.queries)[1], x.truth, x.lengths) for x in scaled_tune])
                 temperature[m.name] = t
             ece, diagram = reliability(c, q.truth, q.lengths, temperature[m.name])
             res.rows.append(
@@ -260,13 +258,9 @@ def evaluate_sim(
     """Simulator captures in new sessions against a table the simulated camera recorded
     (:mod:`.sim_sessions`): ``table`` (e.g. ``tofmat sim table``'s), or one recorded here.
     ``learned``: also a learned model trained for that table."""
-    from .sim_sessions import SimSessions
+    from .sim_sessions import SimSessions, sim_session_model
 
-    library, _ = calibrated_json()
-    # The session spreads as the calibration measured them; the simulator's own noise is the bin noise.
-    from ..sim.evaluate import session_offset_spread, session_state_spread
-
-    model = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
+    model = sim_session_model(calibrated_json()[0])
     ss = SimSessions(materials, model, progress=progress, table=table)
 
     def draw_scaled(scale: float, seed: int) -> Queries:

@@ -19,7 +19,7 @@ from .. import Classifier, ExemplarTable
 from .._progress import Progress
 from .confidence import reliability_of
 from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
-from .sessions import CurveSessions, Queries, SessionModel, calibrated_model, draw_queries, scaled_model
+from .sessions import CurveSessions, Queries, calibrated_model, draw_queries, scaled_model
 
 SCALES = (0.0, 0.25, 0.5, 1.0, 2.0)
 CONFIDENT = 0.9
@@ -62,11 +62,16 @@ def overall(share: dict[int, float], count: dict[int, int]) -> float:
     return sum(share[n] * count[n] for n in share) / total if total else 0.0
 
 
+def _check(scales: tuple[float, ...]) -> None:
+    """Before any draw: ValueError for a scale that is negative or not finite."""
+    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
+        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
+
+
 def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator[tuple[float, CurveSessions]]:
     """The real curves' sessions with the calibration's spreads (row offsets and waveform state)
     times each scale. Raises ValueError for a scale that is negative or not finite."""
-    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
-        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
+    _check(scales)
     library, device = calibrated_json()
     base = calibrated_model(library, table)
     for s in scales:
@@ -114,13 +119,10 @@ def evaluate_sim_scales(
     at one angle): sessions drawn with the calibration's spreads times each scale, the target at
     each angle (the same seeds throughout: only the spread and the angle change). Rendered: about
     5 s a session of 29 materials, per scale and angle."""
-    from ..sim.evaluate import session_offset_spread, session_state_spread
-    from .sim_sessions import SimSessions
+    from .sim_sessions import SimSessions, sim_session_model
 
-    if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
-        raise ValueError(f"session scales must be finite and >= 0, got {scales}")
-    library, _ = calibrated_json()
-    base = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
+    _check(scales)
+    base = sim_session_model(calibrated_json()[0])
     out: list[ScaleRow] = []
     cells = [(s, y) for s in scales for y in yaws]
     for i, (s, y) in enumerate(cells):

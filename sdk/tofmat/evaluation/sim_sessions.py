@@ -11,6 +11,8 @@ combined depth (a bin no frame lands in is missing, as in a real sweep).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .. import ExemplarTable
@@ -21,6 +23,15 @@ from ..tools.sweeps import window_starts
 from .sessions import Queries, SessionModel
 
 YAW_RANGE_DEG = (0.0, 20.0)  # the queries' target orientation (the table's is 10 degrees)
+
+
+def sim_session_model(library: dict[str, Any]) -> SessionModel:
+    """The simulator's sessions: the spreads the calibration measured (``library``: the calibrated
+    material library's JSON, run.calibrated_json); the simulator's own noise is the bin noise, so
+    no dropped or outlier bins are added."""
+    from ..sim.evaluate import session_offset_spread, session_state_spread
+
+    return SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
 
 
 class SimSessions:

@@ -57,12 +57,9 @@ def training_set(
     q = draw_queries(cs, lengths, sessions_per_material, seed)
     if sim_sessions_per_material == 0:
         return q.queries, q.truth
-    from ..evaluation.sessions import SessionModel
-    from ..evaluation.sim_sessions import SimSessions
-    from ..sim.evaluate import session_offset_spread, session_state_spread
+    from ..evaluation.sim_sessions import SimSessions, sim_session_model
 
-    model = SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
-    ss = SimSessions(None, model, progress=progress, table=table)
+    ss = SimSessions(None, sim_session_model(library), progress=progress, table=table)
     sim = ss.draw(lengths, sim_sessions_per_material, seed, progress)
     return np.concatenate([q.queries, sim.queries]), np.concatenate([q.truth, sim.truth])
 
