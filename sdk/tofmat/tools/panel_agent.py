@@ -37,9 +37,12 @@ def run_panel(
     status_every: float = 2.0,
     max_fps: float = 10.0,
     echo: Callable[[str], None] | None = None,
+    until: Callable[[list[str], PanelView], bool] | None = None,
 ) -> PanelResult:
-    """Runs the panel for ``seconds`` (None: until interrupted); the display is left showing the last
-    lines and blanked only by its owner."""
+    """Runs the panel for ``seconds`` (None: until interrupted), or until ``until`` holds for the lines
+    just drawn and the view (a script's or a test's end, which then waits on what the panel shows
+    rather than on how fast the machine runs); the display is left showing the last lines and blanked
+    only by its owner."""
     say = echo or (lambda _line: None)
     view, result = PanelView(), PanelResult()
     result.view = view
@@ -82,6 +85,8 @@ def run_panel(
                 display.show(render_text(lines))
                 result.shown, result.draws, last_draw = lines, result.draws + 1, now
                 result.drawn.append(lines)
+                if until is not None and until(lines, view):
+                    break
             if client is None:
                 time.sleep(min(1.0, max(0.0, end - time.monotonic())) if end is not None else 1.0)
     finally:
