@@ -315,12 +315,13 @@ TEST(KinectSimCommands, DeviceThatNeverAnswersTimesOut) {
 
 TEST(KinectSimCommands, AStoppingCallerIsNotHeldUpByRetries) {
   // DriverOptions::cancel set (the daemon stopping): the command that timed
-  // out is not tried again, and the sequence ends as cancelled.
+  // out is not tried again, and the sequence ends as cancelled. (The flag is
+  // declared first: the devices read it as they close, when the rigs end.)
+  std::atomic<bool> stopping{true};
   Rig rig;
   KinectFaults f;
   f.lost_responses = 100;
   rig.sim->set_faults(f);
-  std::atomic<bool> stopping{true};
   kinect::DriverOptions o;
   o.cancel = &stopping;
   try {
