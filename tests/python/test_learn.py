@@ -252,7 +252,55 @@ def test_tofmat_evaluate_reports_the_model(small_model: tuple[Path, Any], db_dir
     assert p.returncode == 2 and "trained for none of the evaluated tables" in p.stderr
 
 
-def test_tofmat_evaluate_reports_a_model_on_the_simulators_table(tmp_path: Path) -> None:
+def test_the_models_confidence_holds_when_sessions_move_more(
+    small_model: tuple[Path, Any], real_table: tofmat.ExemplarTable, db_dir: Path
+) -> None:
+    # The temperatures train() stores are the Brier fit raised until no tuning label is wrong with a
+    # confidence of 0.9 or more at 0 to 2 times the session spread (as the exemplar matchers').
+    from tofmat.evaluation.confidence import fit_temperatures, probabilities
+    from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, calibrated_json
+    from tofmat.evaluation.sessions import CurveSessions, calibrated_model, draw_queries, scaled_model
+
+    path, t = small_model
+    stored = dict(t.contract.temperatures)
+    library, device = calibrated_json()
+    base = calibrated_model(library, real_table)
+    raised = 0
+    for scale in TAIL_SCALES:
+        q = draw_queries(CurveSessions(real_table, scaled_model(base, scale), device, library), list(LENGTHS), 10,
+                         SPLIT_SEEDS["tune"])  # fmt: skip
+        with np.errstate(divide="ignore"):
+            scores = -np.log(t.network.probabilities(q.queries))
+        if scale == 1.0:
+            brier = fit_temperatures(scores, q.truth, q.lengths)
+            assert all(stored[float(n)] >= brier[n] * (1 - 1e-9) for n in brier)
+            raised = sum(stored[float(n)] > brier[n] * 1.5 for n in brier)
+        for n in LENGTHS:
+            sel = q.lengths == n
+            p = probabilities(scores[sel], stored[float(n)])
+            wrong = (np.argmax(p, axis=1) != q.truth[sel]) & (p.max(axis=1) >= 0.9)
+            assert not wrong.any(), (scale, n, int(wrong.sum()))
+    assert raised >= 1  # the Brier fit alone was too sharp somewhere
+    # `tofmat evaluate --session-scales ... --model`: the model's rows beside the exemplar matchers', on
+    # the test split (never tuned on), with its own temperatures.
+    p = run_cli("evaluate", "--source", "curves", "--table", db_dir, "--session-scales", "0,2", "--sessions", "3",
+                "--model", path, "--json")  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    import json
+
+    rows = json.loads(p.stdout)
+    assert [(r["scale"], r["method"]) for r in rows] == [
+        (s, m) for s in (0.0, 2.0) for m in ("eq12", "session", "onnx")
+    ]
+    for r in rows:
+        assert r["queries"] == {str(n): 87 for n in LENGTHS}
+        assert max(r["confidently_wrong"].values()) <= 3.5, r  # at most 3 of a length's 87 labels
+    p = run_cli("evaluate", "--source", "curves", "--table", db_dir, "--session-scales", "2", "--model", path,
+                "--model", path)  # fmt: skip
+    assert p.returncode == 2 and "one --model" in p.stderr
+
+
+def test_tofmat_evaluate_reports_a_model_on_the_simulators_table(tmp_path: Path, small_model: tuple[Path, Any]) -> None:
     # A simulated table of three materials, a model trained for it on simulator sweeps too, and the
     # simulator source evaluated against that table.
     table, model = tmp_path / "sim3.tmx", tmp_path / "sim3.onnx"
@@ -270,6 +318,18 @@ def test_tofmat_evaluate_reports_a_model_on_the_simulators_table(tmp_path: Path)
     assert {(r["method"], r["split"]) for r in result["rows"]} >= {("onnx", "tune"), ("onnx", "test")}
     p = run_cli("evaluate", "--source", "sim", "--sim-table", table, "--sim-materials", "cork", "--model", model)
     assert p.returncode == 2 and "leave out --sim-materials" in p.stderr
+    # At other session spreads and angles, beside the exemplar matchers, with its own temperatures.
+    p = run_cli("evaluate", "--source", "sim", "--sim-table", table, "--sim-sessions", "1", "--session-scales", "0,2",
+                "--yaws", "0", "--model", model, "--json")  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    rows = json.loads(p.stdout)
+    assert [(r["scale"], r["yaw_deg"], r["method"]) for r in rows] == [
+        (s, 0.0, m) for s in (0.0, 2.0) for m in ("eq12", "session", "onnx")
+    ]
+    assert all(0.0 <= r["confidently_wrong"]["100"] <= 100.0 and r["queries"]["100"] == 3 for r in rows)
+    # A model of other curves (the real table's) is refused for it, before anything is rendered.
+    p = run_cli("evaluate", "--source", "sim", "--sim-table", table, "--session-scales", "2", "--model", small_model[0])
+    assert p.returncode == 2 and str(small_model[0]) in p.stderr
 
 
 # --- tofmatd ---------------------------------------------------------------------------------------

@@ -60,7 +60,8 @@ from ..report.cli import resolve_table, table_option
     multiple=True,
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Also a learned model (tofmat train; repeat for one per source): its row 'onnx' is reported for the "
-    "source whose table it was trained for (the real curves', or with --sim-table the simulator's).",
+    "source whose table it was trained for (the real curves', or with --sim-table the simulator's). With "
+    "--session-scales: one model, trained for the table evaluated.",
 )
 @click.option(
     "--session-scales",
@@ -115,10 +116,12 @@ def evaluate(
         raise UserError("--yaws goes with --source sim --session-scales")
     if session_scales is not None and source == "sim":
         return _evaluate_sim_scales(
-            session_scales, yaws, sim_table, sim_materials, sim_sessions, sweeps_per_session, as_json, out, plot
+            session_scales, yaws, sim_table, sim_materials, sim_sessions, sweeps_per_session, as_json, out, plot, models
         )
     if session_scales is not None:
-        return _evaluate_scales(source, table_path, session_scales, sessions, sweeps_per_session, as_json, out, plot)
+        return _evaluate_scales(
+            source, table_path, session_scales, sessions, sweeps_per_session, as_json, out, plot, models
+        )
     if materials and source == "sim":
         raise UserError("--materials chooses among the real curves' materials (the simulator's: --sim-materials)")
     if sim_table is not None and sim_materials:
@@ -195,6 +198,7 @@ def _evaluate_scales(
     as_json: bool,
     out: Path | None,
     plot: Path | None = None,
+    models: tuple[Path, ...] = (),
 ) -> None:
     from ..tools.tables import open_table
     from . import scales as single
@@ -208,10 +212,11 @@ def _evaluate_scales(
             "--plot with --session-scales draws the single sweeps' diagrams: leave out --sweeps-per-session"
         )
     table = open_table(resolve_table(table_path))
+    learned = _scales_model(models, table, sweeps_per_session)
     with progress_bar("session scales") as progress:
         try:
             if sweeps_per_session is None:
-                scale_rows = single.evaluate_scales(table, values, sessions, progress=progress)
+                scale_rows = single.evaluate_scales(table, values, sessions, progress=progress, learned=learned)
                 rows: list[Any] = scale_rows
                 text = single.format_markdown(scale_rows)
             else:
@@ -229,6 +234,21 @@ def _evaluate_scales(
     if as_json:
         text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2)
     _emit(text, out)
+
+
+def _scales_model(models: tuple[Path, ...], table: Any, sweeps_per_session: int | None) -> Any:
+    """The learned model --session-scales reports beside the exemplar matchers (None without
+    --model); a usage error for more than one, with --sweeps-per-session, or one for another table."""
+    if not models:
+        return None
+    from ..learn import LearnedClassifier
+
+    if len(models) > 1 or sweeps_per_session is not None:
+        raise UserError("--session-scales takes one --model, for single sweeps: leave out --sweeps-per-session")
+    try:
+        return LearnedClassifier(models[0], table)
+    except ValueError as e:  # not a tofmat model, or one for other curves
+        raise UserError(f"{models[0]}: {e}") from e
 
 
 def _numbers(text: str, option: str) -> tuple[float, ...]:
@@ -253,6 +273,7 @@ def _evaluate_sim_scales(
     as_json: bool,
     out: Path | None,
     plot: Path | None,
+    models: tuple[Path, ...] = (),
 ) -> None:
     from ..tools.tables import open_table
     from . import scales as single
@@ -275,7 +296,8 @@ def _evaluate_sim_scales(
                 table = SimSessions(
                     names, SessionModel((0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0), progress=progress
                 ).table
-            rows = single.evaluate_sim_scales(table, values, angles, sim_sessions, progress=progress)
+            learned = _scales_model(models, table, None)
+            rows = single.evaluate_sim_scales(table, values, angles, sim_sessions, progress=progress, learned=learned)
         except ValueError as e:
             raise UserError(str(e)) from e
     text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2) if as_json else single.format_markdown(rows)

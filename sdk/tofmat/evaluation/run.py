@@ -154,8 +154,9 @@ def evaluate_source(
 ) -> SourceResult:
     """``draw(seed)``: the queries of one split. ``learned``: learned models' matchers, reported
     beside the exemplar matchers. ``draw_scaled(scale, seed)``: the queries of a split with the
-    session spreads times ``scale``; given, the exemplar matchers' temperatures are made safe
-    (confidence.tail_safe) on the tuning split at each of TAIL_SCALES."""
+    session spreads times ``scale``; given, every matcher's temperatures (the learned models' too, as
+    ``tofmat train`` fits them) are made safe (confidence.tail_safe) on the tuning split at each of
+    TAIL_SCALES."""
     t0 = time.perf_counter()
     res = SourceResult(source, description, len(table.materials), names=list(table.materials))
     tune_q = draw(SPLIT_SEEDS["tune"])
@@ -176,7 +177,7 @@ def evaluate_source(
             acc, count = accuracy_by_length(s, q)
             if split == "tune":
                 t = fit_temperatures(c, q.truth, q.lengths)
-                if scaled_tune and m.name in ("eq12", "session"):
+                if scaled_tune:
                     t = tail_safe(t, [(scored(m, x.queries)[1], x.truth, x.lengths) for x in scaled_tune])
                 temperature[m.name] = t
             ece, diagram = reliability(c, q.truth, q.lengths, temperature[m.name])
@@ -358,7 +359,7 @@ def format_markdown(results: Sequence[SourceResult], confusions: bool = False) -
                 )
                 + f"); ECE over {ECE_BINS} confidence bins, all lengths together."
                 + (
-                    " The exemplar matchers' T raised until "
+                    " Every matcher's T raised until "
                     + (f"at most {100 * TAIL_SHARE:g} %" if TAIL_SHARE > 0 else "none")
                     + f" of a length's tuning labels are wrong with a confidence of {TAIL_CONFIDENCE:g} or more"
                     " at session spreads of " + ", ".join(f"{x:g}" for x in r.tail_scales) + " x the calibration's."

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +22,9 @@ from .confidence import reliability_of
 from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
 from .sessions import CurveSessions, Queries, calibrated_model, draw_queries, scaled_model
 
+if TYPE_CHECKING:
+    from ..learn import LearnedClassifier
+
 SCALES = (0.0, 0.25, 0.5, 1.0, 2.0)
 CONFIDENT = 0.9
 
@@ -28,7 +32,7 @@ CONFIDENT = 0.9
 @dataclass(frozen=True)
 class ScaleRow:
     scale: float  # of the calibration's session spreads (row offsets and waveform state)
-    method: str  # "eq12" or "session", as tofmat.Classifier ships them
+    method: str  # "eq12" or "session", as tofmat.Classifier ships them; "onnx": a learned model (tofmat train)
     accuracy: dict[int, float]  # % right by sweep length
     confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
     queries: dict[int, int]
@@ -78,15 +82,47 @@ def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator
         yield s, CurveSessions(table, scaled_model(base, s), device, library)
 
 
-def _rows(table: ExemplarTable, scale: float, q: Queries, yaw_deg: float | None = None) -> list[ScaleRow]:
+def _rows(
+    table: ExemplarTable,
+    scale: float,
+    q: Queries,
+    yaw_deg: float | None = None,
+    learned: LearnedClassifier | None = None,
+) -> list[ScaleRow]:
     out = []
     for method in ("eq12", "session"):
         results = Classifier(table, method=method).classify_batch(q.queries)
         right = np.array([r.index == t for r, t in zip(results, q.truth, strict=True)])
         conf = np.array([r.confidence for r in results])
-        ece, diagram = reliability_of(conf, right)
-        out.append(ScaleRow(scale, method, *by_length(right, conf >= CONFIDENT, q.lengths), ece, diagram, yaw_deg))
+        out.append(_row(scale, method, right, conf, q.lengths, yaw_deg))
+    if learned is not None:
+        right, conf = learned_labels(learned, q.queries, q.truth)
+        out.append(_row(scale, "onnx", right, conf, q.lengths, yaw_deg))
     return out
+
+
+def _row(
+    scale: float, method: str, right: np.ndarray, conf: np.ndarray, lengths: np.ndarray, yaw_deg: float | None
+) -> ScaleRow:
+    ece, diagram = reliability_of(conf, right)
+    return ScaleRow(scale, method, *by_length(right, conf >= CONFIDENT, lengths), ece, diagram, yaw_deg)
+
+
+def learned_labels(model: LearnedClassifier, queries: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A learned model's labels as it ships (LearnedClassifier.classify over every material, with the
+    temperatures its metadata carries): whether each is right, and its confidence."""
+    from ..learn.model import SMALLEST_SHARE
+    from .confidence import probabilities
+
+    p = model.probabilities(queries).astype(np.float64)
+    p = p / np.maximum(p.sum(axis=1, keepdims=True), np.finfo(np.float64).tiny)
+    distance = -np.log(np.maximum(p, SMALLEST_SHARE))
+    rows = model.contract.rows
+    conf = np.empty(len(queries))
+    for i, q in enumerate(queries):
+        t = model.calibration.temperature(float(np.isfinite(q).sum()) / rows)
+        conf[i] = probabilities(distance[i : i + 1], t)[0].max()
+    return np.argmin(distance, axis=1) == truth, conf
 
 
 def evaluate_scales(
@@ -95,15 +131,17 @@ def evaluate_scales(
     sessions_per_material: int = 10,
     lengths: tuple[int, ...] = LENGTHS,
     progress: Progress | None = None,
+    learned: LearnedClassifier | None = None,
 ) -> list[ScaleRow]:
     """The shipped matchers on the real curves' test split, sessions drawn with the calibration's
-    spreads times each scale (the same seeds at every scale: only the spread changes)."""
+    spreads times each scale (the same seeds at every scale: only the spread changes); ``learned``:
+    also a learned model trained for ``table``."""
     out: list[ScaleRow] = []
     for i, (s, sessions) in enumerate(scaled_sessions(table, scales)):
         if progress:
             progress(i, len(scales), f"sessions at {s:g} x the calibration's spread")
         q = draw_queries(sessions, list(lengths), sessions_per_material, SPLIT_SEEDS["test"])
-        out.extend(_rows(table, s, q))
+        out.extend(_rows(table, s, q, learned=learned))
     return out
 
 
@@ -114,8 +152,9 @@ def evaluate_sim_scales(
     sessions_per_material: int = 2,
     lengths: tuple[int, ...] = LENGTHS,
     progress: Progress | None = None,
+    learned: LearnedClassifier | None = None,
 ) -> list[ScaleRow]:
-    """The shipped matchers on simulator sweeps against ``table`` (the simulated camera's, recorded
+    """The shipped matchers (and ``learned``, a model trained for ``table``) on simulator sweeps against ``table`` (the simulated camera's, recorded
     at one angle): sessions drawn with the calibration's spreads times each scale, the target at
     each angle (the same seeds throughout: only the spread and the angle change). Rendered: about
     5 s a session of 29 materials, per scale and angle."""
@@ -131,7 +170,7 @@ def evaluate_sim_scales(
         q = SimSessions(None, scaled_model(base, s), table=table).draw(
             list(lengths), sessions_per_material, SPLIT_SEEDS["test"], yaw_deg=y
         )
-        out.extend(_rows(table, s, q, y))
+        out.extend(_rows(table, s, q, y, learned))
     return out
 
 

@@ -124,16 +124,27 @@ def temperatures(
     net: Network, table: ExemplarTable, sessions_per_material: int = 10
 ) -> tuple[tuple[float, float], ...]:
     """The confidence's temperature at each of the evaluation's sweep lengths, fitted (Brier score)
-    on the evaluation's tuning split, which the network was not trained on either."""
-    from ..evaluation.confidence import fit_temperatures
-    from ..evaluation.run import LENGTHS, SPLIT_SEEDS, calibrated_json
+    on the evaluation's tuning split, which the network was not trained on either, then made safe as
+    the exemplar matchers' are (:func:`tofmat.evaluation.confidence.tail_safe`): raised until none of
+    a length's tuning labels is wrong with a confidence of 0.9 or more at session spreads of
+    :data:`tofmat.evaluation.run.TAIL_SCALES` times the calibration's."""
+    from ..evaluation.confidence import fit_temperatures, tail_safe
+    from ..evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, calibrated_json
+    from ..evaluation.sessions import scaled_model
 
     library, device = calibrated_json()
-    cs = CurveSessions(table, calibrated_model(library, table), device, library)
-    q = draw_queries(cs, [n for n in LENGTHS if n <= table.n_bins], sessions_per_material, SPLIT_SEEDS["tune"])
-    with np.errstate(divide="ignore"):
-        scores = -np.log(net.probabilities(q.queries))
-    return tuple((float(n), float(t)) for n, t in sorted(fit_temperatures(scores, q.truth, q.lengths).items()))
+    base = calibrated_model(library, table)
+    lengths = [n for n in LENGTHS if n <= table.n_bins]
+
+    def scored(scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        cs = CurveSessions(table, scaled_model(base, scale), device, library)
+        q = draw_queries(cs, lengths, sessions_per_material, SPLIT_SEEDS["tune"])
+        with np.errstate(divide="ignore"):
+            return -np.log(net.probabilities(q.queries)), q.truth, q.lengths
+
+    fitted = fit_temperatures(*scored(1.0))
+    safe = tail_safe(fitted, [scored(s) for s in TAIL_SCALES])
+    return tuple((float(n), float(t)) for n, t in sorted(safe.items()))
 
 
 def check_export(blob: bytes, net: Network, queries: np.ndarray, table: ExemplarTable) -> float:
