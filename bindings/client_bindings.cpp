@@ -48,7 +48,12 @@ pyb::object make_class(pyb::module_& m, const char* name, const pyb::tuple& base
       cls = err.code() == protocol::codes::kPermission ? e.not_permitted : e.command;
       break;
   }
-  pyb::object exc = cls(err.what());
+  // (never a UnicodeDecodeError in place of the error: bytes that are not UTF-8 come out as \xNN)
+  const std::string what = err.what();
+  pyb::object message = pyb::reinterpret_steal<pyb::object>(
+      PyUnicode_DecodeUTF8(what.data(), static_cast<Py_ssize_t>(what.size()), "backslashreplace"));
+  if (!message) throw pyb::error_already_set();
+  pyb::object exc = cls(message);
   exc.attr("code") = err.code();
   exc.attr("kind") = protocol::client_error_kind_name(err.kind());
   PyErr_SetObject(cls.ptr(), exc.ptr());
@@ -161,6 +166,9 @@ class PyConnection {
     return d;
   }
   bool connected() const { return client_ && client_->connected(); }
+  std::size_t pending_events() const { return client_->pending_events(); }
+  std::size_t pending_bytes() const { return client_->pending_bytes(); }
+  std::uint64_t dropped_events() const { return client_->dropped_events(); }
   void close() {
     if (client_) client_->close();
   }
@@ -203,6 +211,9 @@ void register_client(pyb::module_& m) {
       .def("next_event", &PyConnection::next_event, pyb::arg("timeout"))
       .def_property_readonly("hello", &PyConnection::hello)
       .def_property_readonly("connected", &PyConnection::connected)
+      .def_property_readonly("pending_events", &PyConnection::pending_events)
+      .def_property_readonly("pending_bytes", &PyConnection::pending_bytes)
+      .def_property_readonly("dropped_events", &PyConnection::dropped_events)
       .def("close", &PyConnection::close);
   m.attr("PROTOCOL_VERSION") = protocol::kProtocolVersion;
   m.attr("PROTOCOL_MINOR") = protocol::kProtocolMinor;

@@ -14,7 +14,16 @@ import click
 import numpy as np
 
 from . import ClassificationResult, Classifier, ExemplarTable, __version__, curve_roughness
-from ._clikit import CliState, Failure, FiniteFloat, NumberList, TofmatGroup, progress_bar, setup_logging
+from ._clikit import (
+    CliState,
+    Failure,
+    FiniteFloat,
+    NumberList,
+    TofmatGroup,
+    classify_exception,
+    progress_bar,
+    setup_logging,
+)
 from ._extras import require_pyplot
 from .client import Backend
 from .tools.tables import open_table
@@ -582,7 +591,7 @@ def _connect(address: str, token_file: Path | None) -> Any:
     try:
         return Client(address, token=token)
     except ClientError as e:
-        raise click.ClickException(str(e)) from e
+        raise classify_exception(e) from e
 
 
 @table.command("distortion")
@@ -863,9 +872,12 @@ def watch(address: str, token_file: Path | None, top: int, count: int, as_json: 
                 else:
                     if e.state == "no_target":
                         line = f"frame {e.frame:6d}  (no target)"
+                    elif e.state == "out_of_range":
+                        line = f"frame {e.frame:6d}  (a target outside the table's depth range: see tofmat status)"
                     else:
                         ranks = "  ".join(f"{r.material} {r.distance:.2f}" for r in e.ranking[:top])
-                        line = f"frame {e.frame:6d}  bins {e.bins_covered:3d}  {e.material:12s}  | {ranks} mm^2"
+                        name = e.material or e.state  # ("unknown": no material fits)
+                        line = f"frame {e.frame:6d}  bins {e.bins_covered:3d}  {name:12s}  | {ranks} mm^2"
                     if e.truth is not None and e.truth.material:
                         line += f"  [truth {e.truth.material}]"
                     if e.simulated:
@@ -876,7 +888,7 @@ def watch(address: str, token_file: Path | None, top: int, count: int, as_json: 
         except KeyboardInterrupt:
             pass
         except ClientError as err:
-            raise click.ClickException(str(err)) from err
+            raise classify_exception(err) from err
         if redraw:
             click.echo("")
 

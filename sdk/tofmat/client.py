@@ -42,6 +42,13 @@ from .geometry import Intrinsics, range_to_points
 
 DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
 
+# What a Client keeps of the events that come while it waits for another (label_map(), depth()),
+# for next_event() to hand out later: the oldest are dropped past either bound (Client.dropped_events),
+# so nothing a daemon sends can grow a client without end. The C++ connection keeps the events that
+# come while a command waits for its reply under bounds of its own (docs/protocol.md, Bounds).
+MAX_PENDING_EVENTS = 1024
+MAX_PENDING_BYTES = 64 << 20
+
 # The names the protocol uses (docs/protocol.md), as types: a checker catches a misspelt one.
 Stream = Literal[
     "labels",
@@ -60,7 +67,7 @@ Profile = Literal["handheld", "segmentation", "sorting"]
 Backend = Literal["fixed", "float"]
 ClassifierMethod = Literal["eq12", "session"]
 DepthKind = Literal["80", "16", "120", "combined", "corrected"]
-LabelState = Literal["tracking", "no_target", "final", "mixed", "unknown"]
+LabelState = Literal["tracking", "no_target", "out_of_range", "final", "mixed", "unknown"]
 DeviceState = Literal["opening", "streaming", "disconnected", "stopped", "failed"]
 Role = Literal["read", "control"]
 
@@ -114,6 +121,7 @@ class Status(TypedDict):
     last_reload: ReloadStatus | None
     button: NotRequired[dict[str, Any]]
     line: NotRequired[dict[str, Any]]
+    target: NotRequired[dict[str, Any]]  # minor 11 on, handheld and sorting: {"state", "depth_mm", "reason"?}
 
 
 @dataclass(frozen=True)
@@ -136,8 +144,10 @@ class Label:
     timestamp_ns: int  # CLOCK_MONOTONIC when the daemon had the whole frame
     received_ns: int  # CLOCK_MONOTONIC when this client read it
     profile: Profile
-    state: LabelState  # "mixed": a sorting burst whose frames disagreed; "unknown": no material fits
-    material: str | None  # None when state is "no_target" or "unknown" (the nearest: ranking[0])
+    # "mixed": a sorting burst whose frames disagreed; "unknown": no material fits; "out_of_range": a
+    # target at a depth the table's bins miss (status()["target"]["reason"] says so)
+    state: LabelState
+    material: str | None  # None when state is "no_target", "out_of_range" or "unknown" (the nearest: ranking[0])
     index: int
     distance: float
     valid: int
@@ -254,6 +264,48 @@ class ResetEvent:
 Event = Label | LabelMap | DepthImage | DeviceEvent | SortDecision | LineEvent | ResetEvent
 
 
+def _held_bytes(event: Event) -> int:
+    """An event's weight against MAX_PENDING_BYTES: its image, or 1 KiB for one without."""
+    if isinstance(event, LabelMap):
+        return int(event.labels.nbytes)
+    if isinstance(event, DepthImage):
+        return int(event.depth_mm.nbytes)
+    return 1024
+
+
+class _PendingEvents:
+    """The events kept back for next_event(), oldest first, within MAX_PENDING_EVENTS and
+    MAX_PENDING_BYTES: past either the oldest goes, and is counted."""
+
+    def __init__(self) -> None:
+        self._events: deque[Event] = deque()
+        self.bytes = 0
+        self.dropped = 0
+
+    def __len__(self) -> int:
+        return len(self._events)
+
+    def append(self, event: Event) -> None:
+        self._events.append(event)
+        self.bytes += _held_bytes(event)
+        while len(self._events) > MAX_PENDING_EVENTS or self.bytes > MAX_PENDING_BYTES:
+            self.bytes -= _held_bytes(self._events.popleft())
+            self.dropped += 1
+
+    def popleft(self) -> Event:
+        event = self._events.popleft()
+        self.bytes -= _held_bytes(event)
+        return event
+
+    def take_first(self, wanted: Callable[[Event], bool]) -> Event | None:
+        for k, event in enumerate(self._events):
+            if wanted(event):
+                del self._events[k]
+                self.bytes -= _held_bytes(event)
+                return event
+        return None
+
+
 def _event(meta: dict[str, Any], blob: bytes) -> Event | None:
     """The typed event, or None for an event this client does not know (a later minor version's:
     skipped, as docs/protocol.md's Versions asks of clients)."""
@@ -345,7 +397,8 @@ class Client:
         self._reconnect_timeout = reconnect_timeout
         self._streams: set[str] = set()
         # Events that came while label_map()/depth() waited for theirs: next_event() hands them out first.
-        self._pending: deque[Event] = deque(maxlen=1024)
+        self._pending = _PendingEvents()
+        self._dropped_before = 0  # by the connections before a reconnect
         self.reconnects = 0
         self._conn: _tofmat.ClientConnection | None = _tofmat.ClientConnection(self.address, self._token, timeout)
 
@@ -372,6 +425,14 @@ class Client:
         reading connection raises NotPermittedError."""
         return cast(Role, self._connection().hello["role"])
 
+    @property
+    def dropped_events(self) -> int:
+        """Events this client dropped because the ones it kept back (while a command waited for its
+        reply, or label_map()/depth() for theirs) reached MAX_PENDING_EVENTS or MAX_PENDING_BYTES.
+        (What the daemon dropped for a slow client is in its status: ``clients``.)"""
+        conn = self._conn.dropped_events if self._conn is not None else 0
+        return self._dropped_before + conn + self._pending.dropped
+
     def _connection(self) -> _tofmat.ClientConnection:
         if self._conn is None:
             raise ConnectionClosedError("the client is closed")
@@ -381,6 +442,8 @@ class Client:
         """Connects again until reconnect_timeout, restoring the subscriptions."""
         deadline = time.monotonic() + self._reconnect_timeout
         delay = 0.05
+        if self._conn is not None:
+            self._dropped_before += self._conn.dropped_events
         while True:
             try:
                 self._conn = _tofmat.ClientConnection(self.address, self._token, self._timeout)
@@ -530,23 +593,18 @@ class Client:
 
     def _wait_for(self, wanted: Callable[[Event], bool], timeout: float | None) -> Event:
         """The first event (kept back ones first) that is ``wanted``; the others are kept, in order."""
-        for k, e in enumerate(self._pending):
-            if wanted(e):
-                del self._pending[k]
-                return e
+        kept = self._pending.take_first(wanted)
+        if kept is not None:
+            return kept
         deadline = None if timeout is None else time.monotonic() + timeout
-        kept: list[Event] = []
-        try:
-            while True:
-                left = None if deadline is None else max(0.0, deadline - time.monotonic())
-                event = self._next_from_daemon(left)
-                if event is None:
-                    raise DaemonTimeoutError(f"no event from tofmatd within {timeout} s")
-                if wanted(event):
-                    return event
-                kept.append(event)
-        finally:
-            self._pending.extend(kept)
+        while True:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            event = self._next_from_daemon(left)
+            if event is None:
+                raise DaemonTimeoutError(f"no event from tofmatd within {timeout} s")
+            if wanted(event):
+                return event
+            self._pending.append(event)  # (in order, after those kept before)
 
 
 def daemon_binary() -> Path:
@@ -565,6 +623,8 @@ def sim_data_dir() -> Path:
 
 
 __all__ = [
+    "MAX_PENDING_BYTES",
+    "MAX_PENDING_EVENTS",
     "STREAMS",
     "AuthenticationError",
     "Backend",

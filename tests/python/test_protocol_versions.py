@@ -6,85 +6,17 @@ a field, a stream and a depth kind this client has never heard of: the client re
 
 from __future__ import annotations
 
-import json
 import socket
-import struct
-import threading
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from scripted_daemon import EVENT, LABEL, frame, scripted_daemon
 
 import tofmat
 from tofmat import _tofmat
 from tofmat.client import DepthImage, Label, ResetEvent
-
-HELLO, REQUEST, REPLY, EVENT = 1, 2, 3, 4
-
-
-def frame(kind: int, meta: dict[str, Any], blob: bytes = b"") -> bytes:
-    body = json.dumps(meta).encode()
-    payload = struct.pack("<I", len(body)) + body + blob
-    return b"TMAT" + struct.pack("<HBBI", 1, kind, 0, len(payload)) + payload
-
-
-def read_message(conn: socket.socket) -> dict[str, Any]:
-    def exactly(n: int) -> bytes:
-        data = b""
-        while len(data) < n:
-            chunk = conn.recv(n - len(data))
-            if not chunk:
-                raise ConnectionError("client went away")
-            data += chunk
-        return data
-
-    header = exactly(12)
-    (length,) = struct.unpack("<I", header[8:12])
-    payload = exactly(length)
-    (meta_len,) = struct.unpack("<I", payload[:4])
-    return dict(json.loads(payload[4 : 4 + meta_len]))
-
-
-LABEL = {"event": "label", "frame": 7, "timestamp_ns": 1, "profile": "handheld", "state": "tracking",
-         "material": "cork", "index": 0, "distance": 1.5, "valid": 9, "bins_covered": 1,
-         "ranking": [{"material": "cork", "distance": 1.5}]}  # fmt: skip
-
-
-def scripted_daemon(
-    path: Path, minor: int | None, after_subscribe: Callable[[socket.socket], None] = lambda _conn: None
-) -> threading.Thread:
-    """A daemon of protocol 1.`minor` (None: one that predates minor versions and roles) that answers
-    hello and subscribe, then runs the script."""
-    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    server.bind(str(path))
-    server.listen(1)
-
-    def serve() -> None:
-        conn, _ = server.accept()
-        with conn, server:
-            hello: dict[str, Any] = {"protocol": 1, "server": "tofmatd 0.0.9", "capabilities": ["labels"],
-                                     "auth_required": False}  # fmt: skip
-            result: dict[str, Any] = {"protocol": 1, "client_id": 1}
-            if minor is not None:
-                hello |= {"minor": minor, "server": "tofmatd 9.9", "capabilities": ["labels", "sparkles", "depth"],
-                          "a_later_field": [1, 2]}  # fmt: skip
-                result |= {"minor": minor, "role": "control"}
-            conn.sendall(frame(HELLO, hello))
-            while True:
-                try:
-                    req = read_message(conn)
-                except ConnectionError:
-                    return
-                answer = {"streams": req["args"]["streams"]} if req["cmd"] == "subscribe" else result
-                conn.sendall(frame(REPLY, {"id": req["id"], "ok": True, "result": answer, "later": True}))
-                if req["cmd"] == "subscribe":
-                    after_subscribe(conn)
-
-    t = threading.Thread(target=serve, daemon=True)
-    t.start()
-    return t
 
 
 def test_this_client_says_its_minor_and_the_daemon_says_its_own(start: Any) -> None:

@@ -12,6 +12,14 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+// A kept event's weight against max_pending_bytes: its blob, and its metadata
+// at 16 bytes in memory per byte on the wire (nlohmann's values are 16 bytes;
+// a "[0,0,...]" array's elements take 2 bytes each on the wire).
+std::size_t held_bytes(const Message& m) {
+  const std::size_t meta_wire = m.wire_bytes > m.blob.size() ? m.wire_bytes - m.blob.size() : 0;
+  return m.blob.size() + 16 * meta_wire;
+}
+
 int ms_left(Clock::time_point deadline) {
   const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
   return left < 0 ? 0 : static_cast<int>(left);
@@ -47,6 +55,15 @@ Client::Client(const std::string& address, ClientOptions options) : options_(std
     throw ClientError(ClientErrorKind::kRefused, std::string("cannot connect to tofmatd at ") + address_.describe() +
                                                      " (is it running?): " + e.what());
   }
+  handshake();
+}
+
+Client::Client(Fd connected, const Address& address, ClientOptions options)
+    : address_(address), options_(std::move(options)), fd_(std::move(connected)) {
+  handshake();
+}
+
+void Client::handshake() {
   const auto first = read_message(options_.timeout_ms);
   if (!first) throw ClientError(ClientErrorKind::kTimeout, "tofmatd at " + address_.describe() + " sent no hello");
   try {
@@ -61,6 +78,14 @@ Client::Client(const std::string& address, ClientOptions options) : options_(std
   if (!options_.token.empty()) args["token"] = options_.token;
   try {
     const Json result = request("hello", args);
+    // The reply says the major again (docs/protocol.md, hello): it must be the one both sides framed with.
+    if (result.contains("protocol") &&
+        (!result["protocol"].is_number_unsigned() || result["protocol"].get<std::uint64_t>() != kProtocolVersion)) {
+      fd_.reset();
+      throw ClientError(ClientErrorKind::kVersion, "tofmatd's hello reply claims protocol version " +
+                                                       printable(result["protocol"].dump()) + ", this client speaks " +
+                                                       std::to_string(kProtocolVersion));
+    }
     if (result.contains("role") && result["role"].is_string()) role_ = result["role"].get<std::string>();
   } catch (const ClientError& e) {
     if (e.kind() == ClientErrorKind::kCommand && e.code() == codes::kAuth)
@@ -80,6 +105,17 @@ void Client::send(const Message& m) {
     fd_.reset();
     if (e.os_error() == ETIMEDOUT) throw ClientError(ClientErrorKind::kTimeout, e.what());
     throw ClientError(ClientErrorKind::kClosed, std::string("connection to tofmatd lost: ") + e.what());
+  }
+}
+
+void Client::keep_event(Message&& m) {
+  pending_bytes_ += held_bytes(m);
+  events_.push_back(std::move(m));
+  while (!events_.empty() &&
+         (events_.size() > options_.max_pending_events || pending_bytes_ > options_.max_pending_bytes)) {
+    pending_bytes_ -= held_bytes(events_.front());
+    events_.pop_front();
+    ++dropped_events_;
   }
 }
 
@@ -116,11 +152,16 @@ Json Client::request(const std::string& cmd, const Json& args) {
   r.args = args;
   send(encode_request(r));
   const auto deadline = Clock::now() + std::chrono::milliseconds(options_.timeout_ms);
+  const auto timed_out = [&] {
+    return ClientError(ClientErrorKind::kTimeout, "tofmatd did not answer \"" + cmd + "\" in time");
+  };
   for (;;) {
+    // (checked here too: a peer that never stops sending would otherwise keep read_message() busy forever)
+    if (Clock::now() >= deadline) throw timed_out();
     auto m = read_message(ms_left(deadline));
-    if (!m) throw ClientError(ClientErrorKind::kTimeout, "tofmatd did not answer \"" + cmd + "\" in time");
+    if (!m) throw timed_out();
     if (m->type == MessageType::kEvent) {
-      events_.push_back(std::move(*m));
+      keep_event(std::move(*m));
       continue;
     }
     Reply reply;
@@ -131,7 +172,7 @@ Json Client::request(const std::string& cmd, const Json& args) {
       throw ClientError(ClientErrorKind::kProtocol, std::string("malformed reply from tofmatd: ") + e.what());
     }
     if (reply.id != r.id) continue;  // a late reply to a command that timed out
-    if (!reply.ok) throw ClientError(ClientErrorKind::kCommand, cmd + ": " + reply.error, reply.code);
+    if (!reply.ok) throw ClientError(ClientErrorKind::kCommand, cmd + ": " + printable(reply.error), reply.code);
     return reply.result;
   }
 }
@@ -140,11 +181,14 @@ std::optional<Message> Client::next_event(int timeout_ms) {
   if (!events_.empty()) {
     Message m = std::move(events_.front());
     events_.pop_front();
+    pending_bytes_ -= held_bytes(m);
     return m;
   }
   const auto deadline =
       timeout_ms < 0 ? Clock::time_point::max() : Clock::now() + std::chrono::milliseconds(timeout_ms);
-  for (;;) {
+  for (bool first = true;; first = false) {
+    // (a stream of replies nobody waits for must not hold the wait past its deadline)
+    if (!first && timeout_ms >= 0 && Clock::now() >= deadline) return std::nullopt;
     auto m = read_message(timeout_ms < 0 ? -1 : ms_left(deadline));
     if (!m) return std::nullopt;
     if (m->type == MessageType::kEvent) return m;

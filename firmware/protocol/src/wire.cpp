@@ -56,6 +56,23 @@ std::vector<std::uint8_t> encode(const Message& message) {
   return out;
 }
 
+std::string printable(std::string_view text) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out;
+  out.reserve(text.size());
+  for (const char c : text) {
+    const auto b = static_cast<unsigned char>(c);
+    if (b >= 0x20 && b < 0x7f && b != '\\') {
+      out += c;
+    } else {
+      out += "\\x";
+      out += kHex[b >> 4];
+      out += kHex[b & 0xf];
+    }
+  }
+  return out;
+}
+
 Json parse_meta(const std::uint8_t* data, std::size_t size) {
   // The callback refuses nesting deeper than kMaxJsonDepth while parsing, so
   // a hostile "[[[[..." costs neither stack nor memory.
@@ -73,7 +90,8 @@ Json parse_meta(const std::uint8_t* data, std::size_t size) {
   try {
     meta = Json::parse(data, data + size, limit_depth, /*allow_exceptions=*/true, /*ignore_comments=*/false);
   } catch (const Json::exception& e) {
-    throw ProtocolError(std::string("message metadata is not valid JSON: ") + e.what());
+    // (the parser quotes what it read last: the peer's bytes, escaped before they reach a log or a terminal)
+    throw ProtocolError("message metadata is not valid JSON: " + printable(e.what()));
   }
   if (!meta.is_object()) throw ProtocolError("message metadata must be a JSON object");
   return meta;
@@ -127,6 +145,7 @@ std::optional<Message> MessageReader::next() {
   m.type = static_cast<MessageType>(h[6]);
   m.meta = parse_meta(p + 4, meta_len);
   m.blob.assign(p + 4 + meta_len, p + payload);
+  m.wire_bytes = kHeaderBytes + payload;
   start_ += kHeaderBytes + payload;
   return m;
 }

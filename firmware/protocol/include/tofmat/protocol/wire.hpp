@@ -11,6 +11,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -26,7 +27,7 @@ inline constexpr std::uint16_t kProtocolVersion = 1;
 // adds (fields, events, streams, commands, values), and clients ignore what
 // they do not know, so a client of any minor talks to a daemon of any other
 // (docs/protocol.md, Versions; its change list says what each one added).
-inline constexpr std::uint16_t kProtocolMinor = 10;
+inline constexpr std::uint16_t kProtocolMinor = 11;
 inline constexpr char kMagic[4] = {'T', 'M', 'A', 'T'};
 inline constexpr std::size_t kHeaderBytes = 12;
 // The metadata of any message (the largest, a hello or status with 255
@@ -53,6 +54,8 @@ struct Message {
   MessageType type = MessageType::kEvent;
   Json meta = Json::object();
   std::vector<std::uint8_t> blob;
+  // What a reader took it from: header + payload bytes (0 for a message built here).
+  std::size_t wire_bytes = 0;
 };
 
 class ProtocolError : public std::runtime_error {
@@ -86,6 +89,11 @@ class MessageReader {
   std::vector<std::uint8_t> buffer_;
   std::size_t start_ = 0;  // consumed prefix of buffer_
 };
+
+// Text that came from a peer or a file, fit for a log line, a terminal or a
+// Python str: printable ASCII as it is, every other byte (and the backslash)
+// as \xNN, so an error that quotes hostile bytes is still one valid line.
+std::string printable(std::string_view text);
 
 // The payload's JSON object, parsed with a depth limit (no exceptions escape
 // but ProtocolError). Exposed for the fuzz target.
