@@ -5,12 +5,14 @@
 #include <pybind11/stl.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <memory>
 #include <optional>
 
 #include "bindings.hpp"
 #include "tofmat/core/classifier.hpp"
+#include "tofmat/core/compact_table.hpp"
 #include "tofmat/core/confidence.hpp"
 #include "tofmat/core/fixed_classifier.hpp"
 #include "tofmat/core/fixed_session_classifier.hpp"
@@ -72,6 +74,7 @@ class Classifier {
     }
     backend_ = backend;
     method_ = method;
+    query_limit_mm_ = fixed_query_limit_mm(*table_);
     calibration_ = calibration ? *calibration : Calibration::tuned(method, *table_);
     if (learning && method != "session") {
       throw pyb::value_error("learning needs method='session': it learns the session prior's scale");
@@ -83,12 +86,15 @@ class Classifier {
     std::vector<std::uint32_t> candidates;
     if (materials) {
       if (materials->empty()) throw pyb::value_error("materials: give at least one candidate, or None for all");
-      for (const auto& name : *materials) {
-        const auto i = table_->index_of(name);
-        if (i < 0) throw pyb::value_error("materials: '" + name + "' is not in the table");
-        candidates.push_back(static_cast<std::uint32_t>(i));
+      try {
+        candidates = candidate_names_to_indices(*table_, *materials);
+      } catch (const std::invalid_argument& e) {
+        throw pyb::value_error(std::string("materials: ") + e.what());
       }
     }
+    // (FormatError, a ValueError: a material import and tofmatd refuse too; a table built in memory may
+    // have constant rows)
+    check_measured(*table_, "the table", {}, /*rows_must_vary=*/false);
     if (method == "session") {
       std::vector<double> noise;
       if (!noise_mm.is_none()) {
@@ -112,8 +118,28 @@ class Classifier {
     }
   }
 
+  // A query value beyond the fixed-point range (32767 steps of the table) saturates in the fixed
+  // backend, which then ranks the clamped value where the float backend (the reference) ranks the
+  // value itself: near float32's limits they answer different materials. The fixed backend says so
+  // with a RuntimeWarning (docs/numerics.md, the headroom).
+  void check_range(const float* q, std::size_t n, const std::string& what) const {
+    if (backend_ != "fixed") return;
+    std::size_t saturated = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const float a = std::fabs(q[i]);  // (NaN: missing; infinite: the core refuses it)
+      if (a > query_limit_mm_ && !std::isinf(a)) ++saturated;
+    }
+    if (saturated == 0) return;
+    const std::string warning = what + ": " + std::to_string(saturated) + " value(s) beyond +-" +
+                                std::to_string(query_limit_mm_) +
+                                " mm saturate in the fixed-point backend (32767 steps of this table): its ranking "
+                                "may differ from the float backend's";
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, warning.c_str(), 1) != 0) throw pyb::error_already_set();
+  }
+
   Result classify(const pyb::handle& query) const {
     auto q = as_float32(query, shape(), "query");
+    check_range(q.data(), static_cast<std::size_t>(q.size()), "query");
     Classification c;
     {
       pyb::gil_scoped_release nogil;
@@ -126,6 +152,7 @@ class Classifier {
   void learn(const pyb::handle& query) {
     SessionLearner& learner = require_learning();
     auto q = as_float32(query, shape(), "query");
+    check_range(q.data(), static_cast<std::size_t>(q.size()), "query");
     pyb::gil_scoped_release nogil;
     learner.learn(learner.classify(q.data(), static_cast<std::size_t>(q.size()), true));
   }
@@ -147,6 +174,7 @@ class Classifier {
     auto q = as_float32(queries, s, "queries");
     const auto n = static_cast<std::size_t>(q.shape(0));
     const std::size_t len = table_->elements_per_material();
+    for (std::size_t i = 0; i < n; ++i) check_range(q.data() + i * len, len, "queries[" + std::to_string(i) + "]");
     std::vector<Classification> cs(n);
     {
       pyb::gil_scoped_release nogil;
@@ -212,6 +240,7 @@ class Classifier {
 
   std::shared_ptr<ExemplarTable> table_;
   std::string backend_, method_;
+  double query_limit_mm_ = 0.0;  // fixed_query_limit_mm: the fixed backend saturates beyond it
   Calibration calibration_;
   std::unique_ptr<FloatClassifier> float_;  // one of the four, by method and backend
   std::unique_ptr<FixedClassifier> fixed_;

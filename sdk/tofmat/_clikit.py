@@ -15,7 +15,9 @@ from __future__ import annotations
 import errno
 import logging
 import math
+import signal
 import sys
+import threading
 import traceback
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -71,9 +73,15 @@ def _one_line(text: str) -> str:
 def classify_exception(e: BaseException) -> click.ClickException:
     """The one-line message and exit status for an exception a command let through."""
     from ._extras import MissingExtraError
+    from ._tofmat import ClientError
 
     if isinstance(e, MissingExtraError):
         return Failure(_one_line(str(e)))
+    # Before OSError: DaemonTimeoutError and DaemonUnavailableError are OSErrors too. What the daemon
+    # refused as an invalid argument is the user's; a timeout, a refusal, a bad peer are failures.
+    if isinstance(e, ClientError):
+        code = getattr(e, "code", "")
+        return UserError(_one_line(str(e))) if code == "invalid_argument" else Failure(_one_line(str(e)))
     if isinstance(e, KeyError):  # an unknown name (material, stream): str() of a KeyError quotes it
         return UserError(_one_line(str(e.args[0]) if e.args else "unknown key"))
     if isinstance(e, OSError):
@@ -122,6 +130,10 @@ class NumberList(click.ParamType):  # type: ignore[type-arg]
         return items
 
 
+def _terminated(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signal.SIGTERM)
+
+
 class TofmatCommand(click.Command):
     """A command whose help ends with the exit statuses (groups too: click.Group is a Command)."""
 
@@ -148,6 +160,10 @@ class TofmatGroup(TofmatCommand, click.Group):
         """Runs the command line; in standalone mode every error is one line on stderr and its exit status."""
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        # SIGTERM (systemd, kill, a CI's timeout) ends a command as Ctrl-C does: its `finally` and `with`
+        # blocks run (children stopped, temporaries removed), then status 143 (128 + 15).
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, _terminated)
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as e:  # one line, with where to find help, instead of click's three

@@ -76,6 +76,22 @@ TEST(BeltSim, TheBarrierIsDrivenWhenEachItemCrossesIt) {
   EXPECT_EQ(items[1].arrival_ns, 1500 * kMs);
 }
 
+TEST(BeltSim, AnItemsTruthIsFoundByItsBarrierEdge) {
+  // (issue 33) A sort decision's truth travels with its item: the barrier edge's moment names it,
+  // whatever frame its burst ended on.
+  BeltSim belt(spec(), nullptr);
+  belt.start(5000 * kMs);
+  const auto items = belt.items_until(5000 * kMs + 3000 * kMs);
+  ASSERT_GE(items.size(), 4u);
+  for (const auto& it : items) {
+    const std::uint64_t edge = 5000 * kMs + it.arrival_ns;
+    EXPECT_EQ(belt.item_at(edge), it.material);
+    EXPECT_EQ(belt.item_at(edge + 15 * kMs), it.material);  // (a debounced edge: within 20 ms)
+  }
+  EXPECT_FALSE(belt.item_at(5000 * kMs + items[0].arrival_ns + 250 * kMs).has_value()) << "between items";
+  EXPECT_FALSE(belt.item_at(0).has_value());
+}
+
 TEST(BeltSim, ItemsNeverLandOnEachOther) {
   BeltSpec s = spec();
   s.rate_per_min = 6000;  // asked for far more than fits

@@ -53,27 +53,63 @@ TEST(ClientAccess, ReadingAndControlCommands) {
 
 TEST(ClientAccess, SlotsPerKindAndPerPeer) {
   ClientAccess a(options());
-  EXPECT_EQ(a.admit(unix_peer(1)), "");
-  EXPECT_EQ(a.admit(unix_peer(1)), "");
-  EXPECT_NE(a.admit(unix_peer(1)).find("uid 1 has 2"), std::string::npos);  // its share
-  EXPECT_EQ(a.admit(unix_peer(2)), "");
-  EXPECT_EQ(a.admit(unix_peer(2)), "");
-  EXPECT_EQ(a.admit(unix_peer(3)), "");
-  EXPECT_NE(a.admit(unix_peer(4)).find("5 Unix clients"), std::string::npos);  // the Unix slots
+  EXPECT_EQ(a.admit(unix_peer(1), Role::kControl), "");
+  EXPECT_EQ(a.admit(unix_peer(1), Role::kControl), "");
+  EXPECT_NE(a.admit(unix_peer(1), Role::kControl).find("uid 1 has 2"), std::string::npos);  // its share
+  EXPECT_EQ(a.admit(unix_peer(2), Role::kControl), "");
+  EXPECT_EQ(a.admit(unix_peer(2), Role::kControl), "");
+  EXPECT_EQ(a.admit(unix_peer(3), Role::kControl), "");
+  EXPECT_NE(a.admit(unix_peer(4), Role::kControl).find("5 Unix clients"), std::string::npos);  // the Unix slots
   // TCP counts apart: the Unix slots are full, TCP's are not.
-  EXPECT_EQ(a.admit(tcp_peer("10.0.0.1")), "");
-  EXPECT_EQ(a.admit(tcp_peer("10.0.0.1")), "");
-  EXPECT_NE(a.admit(tcp_peer("10.0.0.1")), "");
-  EXPECT_EQ(a.admit(tcp_peer("10.0.0.2")), "");
-  EXPECT_NE(a.admit(tcp_peer("10.0.0.3")).find("3 TCP clients"), std::string::npos);
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.1"), Role::kRead), "");
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.1"), Role::kRead), "");
+  EXPECT_NE(a.admit(tcp_peer("10.0.0.1"), Role::kRead), "");
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.2"), Role::kRead), "");
+  EXPECT_NE(a.admit(tcp_peer("10.0.0.3"), Role::kRead).find("3 TCP clients"), std::string::npos);
   EXPECT_EQ(a.unix_clients(), 5u);
   EXPECT_EQ(a.tcp_clients(), 3u);
   // Released slots come back, to the peer and the kind.
-  a.release(unix_peer(1));
+  a.release(unix_peer(1), Role::kControl);
   EXPECT_EQ(a.unix_clients(), 4u);
-  EXPECT_EQ(a.admit(unix_peer(1)), "");
-  a.release(tcp_peer("10.0.0.2"));
-  EXPECT_EQ(a.admit(tcp_peer("10.0.0.3")), "");
+  EXPECT_EQ(a.admit(unix_peer(1), Role::kControl), "");
+  a.release(tcp_peer("10.0.0.2"), Role::kRead);
+  EXPECT_EQ(a.admit(tcp_peer("10.0.0.3"), Role::kRead), "");
+}
+
+TEST(ClientAccess, ReadersLeaveTheLastUnixSlotsToControl) {
+  // (issue 33) Local users who may only read cannot hold every Unix slot: the daemon's own user,
+  // root and the control group always find one.
+  AccessOptions o = options();
+  o.max_unix = 64;
+  o.max_per_peer = 16;
+  ClientAccess a(o);
+  EXPECT_EQ(a.control_reserve(), 4u);
+  for (uid_t uid = 1; uid <= 4; ++uid)
+    for (int i = 0; i < 16; ++i) {
+      const std::string why = a.admit(unix_peer(uid), Role::kRead);
+      if (uid < 4 || i < 12) {
+        EXPECT_EQ(why, "") << uid << " " << i;
+      } else {
+        EXPECT_NE(why.find("kept for control"), std::string::npos) << why;
+      }
+    }
+  EXPECT_EQ(a.unix_readers(), 60u);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(a.admit(unix_peer(4242), Role::kControl), "");
+  EXPECT_NE(a.admit(unix_peer(4242), Role::kControl).find("64 Unix clients"), std::string::npos);
+  // A reader that leaves frees a reader's slot; control's are still control's.
+  a.release(unix_peer(1), Role::kRead);
+  EXPECT_EQ(a.unix_readers(), 59u);
+  EXPECT_EQ(a.admit(unix_peer(5), Role::kRead), "");
+  EXPECT_NE(a.admit(unix_peer(6), Role::kRead), "");
+  // Small limits keep a share for each: 2 slots, 1 for control; 1 slot, none kept.
+  o.max_unix = 2;
+  ClientAccess two(o);
+  EXPECT_EQ(two.admit(unix_peer(1), Role::kRead), "");
+  EXPECT_NE(two.admit(unix_peer(2), Role::kRead), "");
+  EXPECT_EQ(two.admit(unix_peer(4242), Role::kControl), "");
+  o.max_unix = 1;
+  ClientAccess one(o);
+  EXPECT_EQ(one.admit(unix_peer(1), Role::kRead), "");
 }
 
 TEST(ClientAccess, UnixRoles) {

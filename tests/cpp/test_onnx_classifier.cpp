@@ -12,6 +12,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tofmat/core/npy.hpp"
@@ -266,6 +267,23 @@ TEST(OnnxClassifier, RefusesModelsThatDoNotFit) {
   std::filesystem::resize_file(tmp, tofmat::learn::kMaxModelBytes + 1);
   EXPECT_THROW(OnnxClassifier(real_table(), tmp.string(), {}, kLibrary), std::exception);
   std::filesystem::remove(tmp);
+}
+
+TEST(OnnxClassifier, RefusesAtLoadAModelWhoseOutputIsNoProbability) {
+  // (issue 33) Each used to load and then fail every frame: the probe on each material's own curve
+  // refuses them at load, naming the model, the material and what came out.
+  for (const auto& [file, says] : std::vector<std::pair<std::string, std::string>>{
+           {"logits.onnx", "not a probability"}, {"nan.onnx", "not a probability"}, {"short.onnx", "28 outputs"}}) {
+    SCOPED_TRACE(file);
+    try {
+      const OnnxClassifier accepted(real_table(), (kData / file).string(), {}, kLibrary);
+      ADD_FAILURE() << file << " was accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(file), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("own curve"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << e.what();
+    }
+  }
 }
 
 TEST(OnnxClassifier, SaysWhenTheLibraryCannotBeLoaded) {

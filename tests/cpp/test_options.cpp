@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tofmat/daemon/options.hpp"
@@ -187,6 +188,71 @@ TEST(Options, TheConfigurationFileIsStrictAndBounded) {
   EXPECT_EQ(ok.cl->daemon.profile.smooth, 5);
   EXPECT_TRUE(ok.cl->daemon.profile.region_vote);  // (false: the vote stays)
   for (const auto& f : {typo, garbage, big, right}) std::filesystem::remove(f);
+}
+
+// The usage error's text on stderr, and its status.
+std::pair<std::string, int> usage_text(std::vector<std::string> args) {
+  testing::internal::CaptureStderr();
+  const auto p = parse(std::move(args));
+  const std::string text = testing::internal::GetCapturedStderr();
+  EXPECT_FALSE(p.cl.has_value());
+  return {text, p.exit_code};
+}
+
+TEST(Options, RangesOfTheProfilesFlagsAreUsageErrors) {
+  // (issue 33) Out of range these once reached the profile and exited 1 at start.
+  for (const auto& [flag, value] : std::vector<std::pair<std::string, std::string>>{{"--top-k", "0"},
+                                                                                    {"--top-k", "65"},
+                                                                                    {"--burst", "0"},
+                                                                                    {"--burst", "301"},
+                                                                                    {"--smooth", "4"},
+                                                                                    {"--smooth", "17"},
+                                                                                    {"--smooth", "-1"}}) {
+    SCOPED_TRACE(flag);
+    SCOPED_TRACE(value);
+    const auto [text, status] = usage_text({"--table", "t", flag, value});
+    EXPECT_EQ(status, 2);
+    EXPECT_NE(text.find(flag), std::string::npos) << text;
+  }
+  for (const auto& [flag, value] :
+       std::vector<std::pair<std::string, std::string>>{{"--top-k", "64"}, {"--burst", "300"}, {"--smooth", "15"}}) {
+    EXPECT_TRUE(parse({"--table", "t", flag, value}).cl.has_value()) << flag;
+  }
+  // A number too large says the range, not "must be a number >= 0".
+  const auto [text, status] = usage_text({"--table", "t", "--line-margin-ms", "1e308"});
+  EXPECT_EQ(status, 2);
+  EXPECT_NE(text.find("from 0 to 1e9"), std::string::npos) << text;
+}
+
+TEST(Options, AConfigurationErrorNamesItsLineAndEscapesWhatTheFileHeld) {
+  const auto bad_value = temp_file("line.toml", "table = \"t.tmx\"\n# a comment\ntop-k = 0\n");
+  {
+    const auto [text, status] = usage_text({"--config", bad_value.string()});
+    EXPECT_EQ(status, 2);
+    EXPECT_NE(text.find("line 3"), std::string::npos) << text;
+    EXPECT_NE(text.find(bad_value.string()), std::string::npos) << text;
+  }
+  {  // (the command line's own value is not the file's: no line)
+    const auto [text, status] = usage_text({"--config", bad_value.string(), "--top-k", "99"});
+    EXPECT_EQ(status, 2);
+    EXPECT_EQ(text.find("line "), std::string::npos) << text;
+  }
+  const auto unknown = temp_file("unknown.toml", "table = \"t.tmx\"\n\nsmooht = 5\n");
+  {
+    const auto [text, status] = usage_text({"--config", unknown.string()});
+    EXPECT_EQ(status, 2);
+    EXPECT_NE(text.find("line 3"), std::string::npos) << text;
+  }
+  const auto garbage = temp_file("bytes.toml",
+                                 "table = \"t.tmx\"\n\xff\xfe\x1b[2J\x07 = \x9b"
+                                 "31m\n");
+  const auto [text, status] = usage_text({"--config", garbage.string()});
+  EXPECT_EQ(status, 2);
+  for (const char c : text) {
+    const auto b = static_cast<unsigned char>(c);
+    EXPECT_TRUE(c == '\n' || (b >= 0x20 && b < 0x7f)) << "raw byte " << int(b) << " in: " << text;
+  }
+  for (const auto& f : {bad_value, unknown, garbage}) std::filesystem::remove(f);
 }
 
 TEST(Options, HelpAndVersionExitWithZero) {

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gc
 import threading
+import warnings
 
 import numpy as np
 import pytest
@@ -132,9 +133,18 @@ def test_materials_restrict_the_ranking(real_table, rng) -> None:
     assert clf.classify(real_table.features[pvc]).material == "pvc"
 
 
-def test_duplicate_candidate_names_count_once(real_table) -> None:
-    clf = tofmat.Classifier(real_table, materials=["pvc", "pvc"], method="eq12")
-    assert [m.material for m in clf.classify(real_table.features[0]).ranking] == ["pvc"]
+def test_a_candidate_named_twice_is_refused(real_table) -> None:
+    # (issue 33) as tofmatd's --candidates: a repeat is a mistake to report, not to fold away
+    with pytest.raises(ValueError, match='"pvc" is given twice'):
+        tofmat.Classifier(real_table, materials=["pvc", "pvc"], method="eq12")
+
+
+def test_a_material_without_a_measured_value_is_refused(real_table) -> None:
+    feats = real_table.features.copy()
+    feats[3] = np.nan
+    t = tofmat.ExemplarTable(real_table.materials, feats, real_table.bins, real_table.rows)
+    with pytest.raises(tofmat.FormatError, match=f'material "{real_table.materials[3]}" has no measured value'):
+        tofmat.Classifier(t)
 
 
 @pytest.mark.parametrize("materials", [["pvc", "granite"], ["granite"], ["PVC"], [""]])
@@ -234,6 +244,30 @@ def test_float64_beyond_float32_range_names_the_range(real_table, real_clf, big)
     q[0, 7] = big
     with pytest.raises(ValueError, match="outside the float32 range"):
         real_clf.classify(q)
+
+
+@pytest.mark.parametrize("backend", ["float", "fixed"])
+def test_the_fixed_backend_says_when_a_value_saturates(real_table, backend) -> None:
+    # (issue 33) Near float32's limits (3e38 mm) the backends answered different materials without a
+    # word. Beyond the fixed-point range (32767 steps: 1024 mm for this table built from the .npy
+    # curves with 2 bits of headroom, 256 mm for the real .tmx) the fixed backend ranks the clamped
+    # value and says so with a RuntimeWarning; the float one (the reference) ranks the value itself.
+    q = real_table.features[3].copy()
+    for method in ("eq12", "session"):
+        clf = tofmat.Classifier(real_table, backend=backend, method=method)
+        for big in (3e38, -5000.0):
+            q[1, 50] = big
+            for batch in (False, True):
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    clf.classify_batch(q[None]) if batch else clf.classify(q)
+                said = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+                assert len(said) == (1 if backend == "fixed" else 0), said
+                assert all("saturate in the fixed-point backend" in w for w in said)
+        q[1, 50] = 900.0  # (inside: nothing to say)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert clf.classify(q).material
 
 
 @pytest.mark.parametrize("bad", [np.inf, -np.inf])
@@ -354,25 +388,17 @@ def test_constructor_table_properties(rng) -> None:
     assert not np.all(t.features == 0.0)
 
 
-def test_all_nan_material_never_in_any_ranking(rng) -> None:
+def test_a_table_with_an_all_nan_material_is_refused_whatever_the_candidates(rng) -> None:
+    # (issue 33: such a material could never be matched; tofmatd and `tofmat table import` refuse it too)
     feats = rng.normal(0, 3, (4, 2, 20)).astype(np.float32)
     feats[2] = np.nan
     t = make_table(["a", "b", "gone", "d"], feats)
     assert t.valid_counts[2] == 0
-    clf = tofmat.Classifier(t, method="eq12")
-    # Even a query identical to the would-be values (0) or of any shape of mask.
-    for _ in range(50):
-        q = rng.normal(0, 3, (2, 20))
-        q[rng.random((2, 20)) < rng.uniform(0, 0.95)] = np.nan
-        if np.isnan(q).all():
-            q[0, 0] = 0.0
-        r = clf.classify(q.astype(np.float32))
-        assert "gone" not in [x.material for x in r.ranking]
-        assert len(r.ranking) == 3
-        check_against_reference(r, q, t)
-    # Restricting the candidates to it alone leaves nothing to compare with.
-    with pytest.raises(ValueError, match="no valid element"):
-        tofmat.Classifier(t, materials=["gone"], method="eq12").classify(np.zeros((2, 20), np.float32))
+    for materials in (None, ["a", "b"], ["gone"]):
+        with pytest.raises(ValueError, match='material "gone" has no measured value'):
+            tofmat.Classifier(t, materials=materials, method="eq12")
+    feats[2, 0, 5] = 1.0  # one measured value is enough
+    tofmat.Classifier(make_table(["a", "b", "gone", "d"], feats), method="eq12")
 
 
 def test_candidate_sharing_no_element_is_skipped_and_none_is_error() -> None:

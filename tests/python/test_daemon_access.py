@@ -42,10 +42,10 @@ def shared_dir() -> Iterator[Path]:
 
 
 class OtherUser:
-    """`work` run in a forked child as OTHER_UID (primary group `gid`): its JSON result comes back
+    """`work` run in a forked child as `uid` (OTHER_UID; primary group `gid`): its JSON result comes back
     at once; the child keeps what it opened until `release()`."""
 
-    def __init__(self, work: Callable[[], Any], gid: int = 0) -> None:
+    def __init__(self, work: Callable[[], Any], gid: int = 0, uid: int = OTHER_UID) -> None:
         self._result_r, result_w = os.pipe()
         release_r, self._release_w = os.pipe()
         self.pid = os.fork()
@@ -56,7 +56,7 @@ class OtherUser:
                 os.close(self._release_w)
                 os.setgroups([])
                 os.setgid(gid)
-                os.setuid(OTHER_UID)
+                os.setuid(uid)
                 out: dict[str, Any] = {"result": work()}
             except BaseException as e:  # everything goes back to the parent
                 out = {"error": f"{type(e).__name__}: {e}"}
@@ -193,3 +193,40 @@ def test_one_user_holds_only_its_share_of_the_slots(start: Callable[..., Daemon]
             c.close()
     finally:
         other.release()
+
+
+def test_readers_cannot_lock_control_out(start: Callable[..., Daemon], shared_dir: Path) -> None:
+    # Issue 33: local users who may only read, each within its share, fill what they can; the
+    # daemon's own user (control) still gets in, and its commands work.
+    d = start(SOURCE, "--max-clients", "12", "--max-clients-per-peer", "4", socket_dir=shared_dir)
+    d.client().close()  # (listening)
+    socket_path = str(d.socket)
+
+    def subscribe_all() -> dict[str, int]:
+        held: list[tofmat.Client] = []
+        refused = 0
+        for _ in range(4):
+            try:
+                c = tofmat.Client(socket_path, reconnect=False)
+                c.subscribe("labels")
+                held.append(c)
+            except tofmat.ClientError:
+                refused += 1
+        globals()["_held"] = held  # (kept open until released)
+        return {"held": len(held), "refused": refused}
+
+    readers = [OtherUser(subscribe_all, uid=OTHER_UID + k) for k in range(3)]
+    try:
+        results = [r.result() for r in readers]
+        # 12 slots, 4 kept for control: the readers as a whole hold 8 of them.
+        assert sum(r["held"] for r in results) == 8 and sum(r["refused"] for r in results) == 4, results
+        mine = [d.client() for _ in range(4)]
+        assert all(c.role == "control" for c in mine)
+        mine[0].reset()  # (a control command)
+        clients = mine[1].status()["clients"]
+        assert clients["unix_clients"] == 12 and clients["unix_readers"] == 8
+        for c in mine:
+            c.close()
+    finally:
+        for r in readers:
+            r.release()

@@ -61,7 +61,15 @@ def test_the_fixture_is_what_its_script_writes(tmp_path: Path, db_dir: Path) -> 
     p = subprocess.run([sys.executable, str(FIXTURE / "make_fixture.py"), str(db_dir), str(tmp_path)],
                        capture_output=True, text=True, timeout=120)  # fmt: skip
     assert p.returncode == 0, p.stderr
-    for name in ("tiny_mlp.onnx", "queries.npy", "expected.npy", "saturated.onnx"):
+    for name in (
+        "tiny_mlp.onnx",
+        "queries.npy",
+        "expected.npy",
+        "saturated.onnx",
+        "logits.onnx",
+        "nan.onnx",
+        "short.onnx",
+    ):
         assert (tmp_path / name).read_bytes() == (FIXTURE / name).read_bytes(), name
 
 

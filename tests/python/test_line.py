@@ -69,6 +69,8 @@ def test_items_go_to_their_own_outlet_or_to_reject(line_run: tuple[LineSetup, Li
             assert d.outlet == d.material, "sorted to another material's outlet than its label's"
         else:
             assert d.outlet == "reject", d
+    # (issue 33) Every item's truth travels with it from the barrier: none is found missing by time.
+    assert r.missing_truth() == 0, [d for d in r.decided if not d.truth]
     right = r.right_fraction()
     assert right >= 0.8, f"only {right:.0%} to the right outlet: {r.reasons()}"
     assert r.wrong() <= 1, "items sorted to a wrong material's outlet"
@@ -169,6 +171,11 @@ def test_bench_line_reports_the_highest_rate_that_sorts_99_percent_right() -> No
     out = "\n".join(format_markdown(cells, seeds=2, seconds=20.0))
     assert "| 500 | 4 | 0.90 |" in out and "| 99.7 % | 99.5 % | 1 |" in out
     assert "at least 99 % right up to 165 items/min sorted (offered 60, load 1.00)" in out
+    # An item whose truth is missing is neither right nor wrong (it used to count as wrong).
+    missing = run(99, 0, 2.5)
+    missing.decided.append(SortDecision("decided", 200, 0, "acryl", 1.0, "acryl", "sorted", 0, None, 900.0, None))
+    assert missing.missing_truth() == 1 and missing.right_fraction() == 1.0 and missing.wrong() == 0
+    assert Cell(base, 0.9, [missing]).right_fraction() == 1.0
     worse = [Cell(base, 1.0, [run(97, 3, 2.75)])]
     assert "below 99 % right at every rate tried" in "\n".join(format_markdown(worse, seeds=1, seconds=20.0))
 

@@ -179,8 +179,8 @@ def test_from_npy_dir_synthetic(tmp_path, rng) -> None:
 
 
 def test_from_npy_dir_other_row_counts_have_unknown_rows(tmp_path) -> None:
-    np.save(tmp_path / "a.npy", np.ones((3, 10)))
-    np.save(tmp_path / "b.npy", np.full((3, 10), 2.0))
+    np.save(tmp_path / "a.npy", 1.0 + np.arange(30.0).reshape(3, 10))  # (curves: a constant row is refused)
+    np.save(tmp_path / "b.npy", 2.0 + np.arange(30.0).reshape(3, 10))
     t = tofmat.ExemplarTable.from_npy_dir(tmp_path)
     assert t.n_rows == 3 and t.rows == [(0, 0)] * 3
 

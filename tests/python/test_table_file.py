@@ -4,9 +4,14 @@ atomic saving."""
 
 from __future__ import annotations
 
+import fcntl
 import math
 import os
+import signal
 import struct
+import subprocess
+import sys
+import time
 import types
 import zlib
 from pathlib import Path
@@ -15,6 +20,7 @@ import numpy as np
 import pytest
 
 import tofmat
+import tofmat.client
 
 HEADER = struct.Struct("<8sHHIIIddd")  # magic, major, minor, n_materials, n_rows, n_bins, start, width, step
 MISSING = -32768
@@ -416,6 +422,64 @@ def test_save_over_a_directory_is_oserror_and_cleans_up(real_table, tmp_path) ->
         real_table.save(tmp_path / "t.tmx")
     assert os.listdir(tmp_path) == ["t.tmx"]
     assert (tmp_path / "t.tmx").is_dir()
+
+
+def test_a_later_save_removes_what_a_killed_writer_left(real_table, tmp_path) -> None:
+    # (issue 33) Temporaries of the target that no writer holds and that are older than 2 s go; one a
+    # live writer holds locked stays, and so do another target's.
+    stale = tmp_path / ".t.tmx.tmp.a1b2c3"
+    held = tmp_path / ".t.tmx.tmp.d4e5f6"
+    other = tmp_path / ".u.tmx.tmp.a1b2c3"
+    for p in (stale, held, other):
+        p.write_bytes(b"half a table")
+        os.utime(p, (1e9, 1e9))
+    with open(held, "rb") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        real_table.save(tmp_path / "t.tmx")
+        assert sorted(os.listdir(tmp_path)) == sorted([held.name, other.name, "t.tmx"])
+    real_table.save(tmp_path / "t.tmx")  # (no longer held)
+    assert sorted(os.listdir(tmp_path)) == sorted([other.name, "t.tmx"])
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+def test_an_import_killed_midway_leaves_nothing(db_dir, tmp_path, sig) -> None:
+    # (issue 33) Killed at several points of `tofmat table import`, the folder holds the table or
+    # nothing: never a temporary. SIGTERM ends it as Ctrl-C does (status 143, or 0 if it was done).
+    target = tmp_path / "t.tmx"
+    for delay in (0.4, 0.8, 1.2, 1.6, 2.0):
+        p = subprocess.Popen([sys.executable, "-m", "tofmat", "table", "import", str(db_dir), "-o", str(target)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)  # fmt: skip
+        time.sleep(delay)
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=60)
+        assert sorted(os.listdir(tmp_path)) in ([], ["t.tmx"]), (delay, os.listdir(tmp_path))
+        if sig == signal.SIGTERM:  # (-15: it came before the interpreter had started the command)
+            assert p.returncode in (0, 143, -15) and b"Traceback" not in err, (p.returncode, err)
+
+
+@pytest.mark.parametrize(
+    ("curve", "says"),
+    [("nan", "has no measured value"), ("zero", "has no measured value"), ("constant", "row 0 constant")],
+)
+def test_a_curve_that_is_no_measurement_is_refused_alike_by_import_and_tofmatd(db_files, tmp_path, curve, says) -> None:
+    # (issue 33) One check, naming the file and the material: `tofmat table import` and tofmatd
+    # refuse the same folder (tofmatd used to serve it), and the SDK's Classifier the same table.
+    folder = tmp_path / "db"
+    folder.mkdir()
+    for name in ("cork", "wood"):
+        (folder / f"{name}.npy").write_bytes(db_files[name].read_bytes())
+    shape = tofmat.ExemplarTable.from_npy_dir(folder).features.shape[1:]  # (rows, bins)
+    bad = np.full(shape, {"nan": np.nan, "zero": 0.0, "constant": 3.5}[curve])
+    np.save(folder / "paper.npy", bad)
+    p = subprocess.run([sys.executable, "-m", "tofmat", "table", "import", str(folder), "-o", str(tmp_path / "t.tmx")],
+                       capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert p.returncode == 2 and "paper.npy" in p.stderr and 'material "paper"' in p.stderr and says in p.stderr, (
+        p.stderr
+    )
+    assert not (tmp_path / "t.tmx").exists()
+    d = subprocess.run([str(tofmat.client.daemon_binary()), "--source", "sim:static,material=cork", "--table",
+                        str(folder), "--socket", str(tmp_path / "d.sock")], capture_output=True, text=True, timeout=60)  # fmt: skip
+    assert d.returncode != 0 and "paper.npy" in d.stderr and says in d.stderr, (d.returncode, d.stderr)
 
 
 def test_oversized_file_is_refused_before_reading(tmp_path) -> None:

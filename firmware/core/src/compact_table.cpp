@@ -16,17 +16,23 @@ std::int16_t quantise_to_step(float value_mm, double inv_step) {
   return static_cast<std::int16_t>(std::clamp(q, -32767.0, 32767.0));
 }
 
-CompactTable::CompactTable(const ExemplarTable& table, std::vector<std::uint32_t> candidates)
-    : n_rows_(table.n_rows()),
-      n_bins_(table.n_bins()),
-      candidates_(candidate_indices(table.n_materials(), std::move(candidates))) {
+double compact_step_mm(const ExemplarTable& table) {
   // A table read from a .tmx file keeps the file's step (the same int16 values
   // bit for bit). One built from floats gets four times the step that would
   // just fit its largest value: queries share the int16 range, and a query
   // element beyond it saturates, which can reorder candidates; 2 bits of
   // headroom keep real queries (noise, outliers of a few times the table's
   // range) inside it.
-  step_mm_ = table.quant_step_mm() > 0.0 ? table.quant_step_mm() : 4.0 * choose_quant_step_mm(table);
+  return table.quant_step_mm() > 0.0 ? table.quant_step_mm() : 4.0 * choose_quant_step_mm(table);
+}
+
+double fixed_query_limit_mm(const ExemplarTable& table) { return 32767.0 * compact_step_mm(table); }
+
+CompactTable::CompactTable(const ExemplarTable& table, std::vector<std::uint32_t> candidates)
+    : n_rows_(table.n_rows()),
+      n_bins_(table.n_bins()),
+      candidates_(candidate_indices(table.n_materials(), std::move(candidates))) {
+  step_mm_ = compact_step_mm(table);
   const double inv = 1.0 / step_mm_;
   padded_bins_ = (n_bins_ + kCompactBlock - 1) / kCompactBlock * kCompactBlock;
   const std::size_t len = padded_elements();

@@ -199,7 +199,51 @@ ExemplarTable ExemplarTable::from_npy_dir(const std::filesystem::path& dir, doub
   if (n_bins < 2 || n_bins > kMaxBins)
     throw FormatError(dir.string() + ": files hold " + std::to_string(n_bins) + " bins, need 2..65535");
   const BinSpec bins = BinSpec::linspace(bin_start_mm, bin_stop_mm, static_cast<std::uint32_t>(n_bins));
-  return ExemplarTable(std::move(names), std::move(rows), bins, std::move(values));
+  ExemplarTable table(std::move(names), std::move(rows), bins, std::move(values));
+  std::vector<std::string> sources;
+  sources.reserve(files.size());
+  for (const auto& f : files) sources.push_back(f.string());
+  check_measured(table, dir.string(), sources);
+  return table;
+}
+
+void check_measured(const ExemplarTable& table, const std::string& source,
+                    const std::vector<std::string>& material_files, bool rows_must_vary) {
+  for (std::size_t m = 0; m < table.n_materials(); ++m) {
+    const std::string where =
+        (m < material_files.size() ? material_files[m] : source) + ": material \"" + table.materials()[m] + "\" ";
+    if (table.valid_count(m) == 0)
+      throw FormatError(where +
+                        "has no measured value (every bin is NaN, or 0 in every row: the database's mark "
+                        "for a bin never measured)");
+    for (std::uint32_t r = 0; rows_must_vary && r < table.n_rows(); ++r) {
+      const float* v = table.material_values(m) + static_cast<std::size_t>(r) * table.n_bins();
+      float first = NAN;
+      std::size_t valid = 0;
+      bool constant = true;
+      for (std::uint32_t j = 0; j < table.n_bins(); ++j) {
+        if (std::isnan(v[j])) continue;
+        if (valid++ == 0) first = v[j];
+        constant = constant && v[j] == first;
+      }
+      if (valid >= 2 && constant)
+        throw FormatError(where + "has row " + std::to_string(r) + " constant (" + std::to_string(first) +
+                          " mm in all " + std::to_string(valid) + " of its bins): not a measured curve");
+    }
+  }
+}
+
+std::vector<std::uint32_t> candidate_names_to_indices(const ExemplarTable& table,
+                                                      const std::vector<std::string>& names) {
+  std::vector<std::uint32_t> out;
+  for (const auto& n : names) {
+    const auto i = table.index_of(n);
+    if (i < 0) throw std::invalid_argument("candidate \"" + n + "\" is not in the table");
+    if (std::find(out.begin(), out.end(), static_cast<std::uint32_t>(i)) != out.end())
+      throw std::invalid_argument("candidate \"" + n + "\" is given twice");
+    out.push_back(static_cast<std::uint32_t>(i));
+  }
+  return out;
 }
 
 std::vector<std::uint32_t> candidate_indices(std::size_t n_materials, std::vector<std::uint32_t> candidates) {

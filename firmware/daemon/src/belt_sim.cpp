@@ -105,6 +105,16 @@ std::vector<BeltSim::Item> BeltSim::items_until(std::uint64_t now_ns) {
   return out;
 }
 
+std::optional<std::string> BeltSim::item_at(std::uint64_t edge_ns) const {
+  const std::uint64_t t0 = t0_ns_.load();
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (const Item& it : items_) {
+    const std::uint64_t at = t0 + it.arrival_ns;
+    if ((at > edge_ns ? at - edge_ns : edge_ns - at) <= 20'000'000ull) return it.material;
+  }
+  return std::nullopt;
+}
+
 void BeltSim::run(const std::atomic<bool>& stop) {
   if (!gpio_) return;
   const bool blocked_level = !spec_.barrier_active_low;

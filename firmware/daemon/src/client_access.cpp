@@ -90,20 +90,29 @@ bool user_in_group(uid_t uid, gid_t primary, gid_t group) {
   return std::find(groups.begin(), groups.end(), group) != groups.end();
 }
 
-std::string ClientAccess::admit(const Peer& peer) {
+std::size_t ClientAccess::control_reserve() const { return std::min<std::size_t>(4, options_.max_unix / 2); }
+
+std::string ClientAccess::admit(const Peer& peer, Role role) {
   std::size_t& kind = peer.tcp ? tcp_ : unix_;
   const std::size_t max = peer.tcp ? options_.max_tcp : options_.max_unix;
   if (kind >= max) return std::to_string(kind) + (peer.tcp ? " TCP" : " Unix") + " clients connected already";
-  std::size_t& mine = per_peer_[peer.key()];
+  const bool unix_reader = !peer.tcp && role == Role::kRead;
+  if (unix_reader && unix_readers_ + control_reserve() >= max)
+    return std::to_string(unix_readers_) + " reading Unix clients connected already (the last " +
+           std::to_string(control_reserve()) + " slots are kept for control)";
+  const auto it = per_peer_.find(peer.key());
+  const std::size_t mine = it == per_peer_.end() ? 0 : it->second;
   if (mine >= options_.max_per_peer) return peer.key() + " has " + std::to_string(mine) + " connections already";
-  ++mine;
+  ++per_peer_[peer.key()];
   ++kind;
+  if (unix_reader) ++unix_readers_;
   return "";
 }
 
-void ClientAccess::release(const Peer& peer) {
+void ClientAccess::release(const Peer& peer, Role role) {
   std::size_t& kind = peer.tcp ? tcp_ : unix_;
   if (kind > 0) --kind;
+  if (!peer.tcp && role == Role::kRead && unix_readers_ > 0) --unix_readers_;
   auto it = per_peer_.find(peer.key());
   if (it == per_peer_.end()) return;
   if (--it->second == 0) per_peer_.erase(it);

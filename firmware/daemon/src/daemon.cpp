@@ -32,7 +32,9 @@ std::shared_ptr<const ExemplarTable> load_table_file(const std::string& path) {
   if (std::filesystem::is_directory(path))
     return std::make_shared<const ExemplarTable>(
         ExemplarTable::from_npy_dir(path, kDatabaseBinStartMm, kDatabaseBinStopMm));
-  return std::make_shared<const ExemplarTable>(load_table(path));
+  auto table = std::make_shared<const ExemplarTable>(load_table(path));
+  check_measured(*table, path);  // (a folder's are checked as it is read)
+  return table;
 }
 
 // A client's table name resolved inside `dir` (canonical: the daemon made
@@ -61,10 +63,10 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
                                   "set_profile", "set_roi",   "set_candidates", "load_table", "trigger", "latest"};
   if (options_.line.enabled())
     options_.server.capabilities.insert(options_.server.capabilities.end(), {"sort", "line"});
-  // The sockets first: a second daemon started on a live one's socket is
-  // refused before it spends anything on a table or a camera (requests are
-  // only handled once start() runs, after the rest is built).
-  server_ = std::make_unique<Server>(options_.server, [this](const protocol::Request& r) { return handle(r); });
+  // The table, the profile and the source are checked before the sockets
+  // listen: a client never connects to a daemon that is about to refuse its
+  // start (none of them opens the camera yet, so a second daemon on a live
+  // one's socket disturbs nothing before the socket refuses it).
   auto table = load_table_file(options_.table);
   pipeline_ = std::make_unique<Pipeline>(table, options_.table, options_.profile, options_.queue_frames);
   // --gpio sim: one simulated chip, the line's and the simulated belt's (sim:belt drives its barrier).
@@ -84,13 +86,17 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
       }
     };
     hooks.publish = [this](const protocol::Message& m, const std::string& stream) { server_->publish(stream, m); };
+    hooks.item_truth = [this](std::uint64_t trigger_ns) { return source_->item_truth(trigger_ns); };
     line_ = std::make_unique<SortingLine>(options_.line, gpio_backend, table->materials(), std::move(hooks));
   }
   if (options_.button.enabled())
     button_ = std::make_unique<ResetButton>(options_.button, gpio_backend, [this](std::uint64_t t) {
       pipeline_->reset();
+      server_->forget("labels");
       publish_reset("button", t);
     });
+  // (requests are only handled once start() runs)
+  server_ = std::make_unique<Server>(options_.server, [this](const protocol::Request& r) { return handle(r); });
   Emitter emit;
   emit.label = [this](const protocol::LabelEvent& e) {
     if (line_) line_->label(e);
@@ -222,6 +228,7 @@ bool Daemon::reload_table() {
   const std::string path = pipeline_->table_path();
   try {
     pipeline_->set_table(load_table_file(path), path);
+    server_->forget("labels");  // (`latest` serves no label of the old table)
     logger(LogCategory::kDaemon).info("reloaded table {}", path);
     std::lock_guard<std::mutex> lock(state_mutex_);
     last_reload_ = {{"ok", true}, {"path", path}};
@@ -264,9 +271,11 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
       const bool session = a.contains("session") && protocol::get_bool(a, "session");
       pipeline_->reset();
       if (session) pipeline_->reset_session();
+      server_->forget("labels");
       publish_reset("command", protocol::monotonic_ns());
     } else if (req.cmd == "set_profile") {
       pipeline_->set_profile(protocol::get_string(a, "name", protocol::kMaxNameBytes));
+      server_->forget("labels");
     } else if (req.cmd == "set_roi") {
       PixelRegion roi;
       roi.x0 = static_cast<int>(protocol::get_int(a, "x0", 0, kWidth));
@@ -274,9 +283,11 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
       roi.x1 = static_cast<int>(protocol::get_int(a, "x1", 0, kWidth));
       roi.y1 = static_cast<int>(protocol::get_int(a, "y1", 0, kHeight));
       pipeline_->set_roi(roi);
+      server_->forget("labels");
     } else if (req.cmd == "set_candidates") {
       pipeline_->set_candidates(
           protocol::get_string_list(a, "materials", protocol::kMaxMaterials, protocol::kMaxNameBytes));
+      server_->forget("labels");
     } else if (req.cmd == "load_table") {
       const std::string path = table_in(options_.table_dir, protocol::get_string(a, "path", protocol::kMaxTextBytes));
       std::shared_ptr<const ExemplarTable> table;
@@ -287,6 +298,7 @@ protocol::Reply Daemon::handle(const protocol::Request& req) {
                        "table \"" + path + "\" not loaded (the old one keeps serving): " + e.what());
       }
       pipeline_->set_table(table, path);
+      server_->forget("labels");
       r.result = {{"materials", table->materials()}};
     } else if (req.cmd == "trigger") {
       if (line_)

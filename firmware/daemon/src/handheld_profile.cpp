@@ -5,6 +5,7 @@
 // real-time demo does.
 #include <cmath>
 
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/daemon/region_matcher.hpp"
 
 namespace tofmat::daemon {
@@ -33,15 +34,24 @@ class HandheldProfile : public Profile {
     tracking_ = false;
   }
 
+  std::optional<TargetView> target() const override { return view_; }
+
  private:
   // Tracks the target and emits this frame's label; returns its material's
   // table index, or -1 when there is none.
   std::int64_t label(const RegionMatcher::Decoded& d, const RawFrame& frame, const Emitter& emit) {
     const BinSpec& bins = table_->bins();
     // A target is there when most of the ROI decodes and its depth is in (or
-    // near) the table's range; a jump in depth means another target.
-    const bool present = static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels) &&
-                         d.median_mm >= bins.start_mm - 50.0 && d.median_mm <= bins.end_mm() + 50.0;
+    // near) the table's range; a jump in depth means another target. One that
+    // fills the ROI outside the range cannot be labelled: that is said (status's
+    // target at once; a label event out_of_range and the log when it stays),
+    // never left silent.
+    const bool filled = static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels);
+    const bool present = filled && in_table_range(d.median_mm, bins);
+    const bool out_of_range = filled && !present;
+    view_.state = !filled ? "none" : present ? "in_range" : "out_of_range";
+    view_.depth_mm = filled ? d.median_mm : 0.0;
+    view_.reason = out_of_range ? out_of_range_reason(d.median_mm, bins) : "";
     if (!present) {
       if (tracking_) {
         matcher_.learn_sweep();  // the target left: its sweep is finished
@@ -51,8 +61,31 @@ class HandheldProfile : public Profile {
         e.state = "no_target";
         emit.label(stamp(e, frame));
       }
+      // A sweep passes beyond the bins at its ends as a matter of course; a target that stays
+      // there for kOutOfRangeNs (a still one, or a table whose bins miss the scene) is reported,
+      // once per stay: a label event, and the log (warn the first time for this table).
+      if (!out_of_range) {
+        reported_out_of_range_ = false;
+      } else {
+        if (!was_out_of_range_) out_of_range_since_ns_ = frame.arrival_ns;
+        if (!reported_out_of_range_ && frame.arrival_ns >= out_of_range_since_ns_ + kOutOfRangeNs) {
+          reported_out_of_range_ = true;
+          if (warned_out_of_range_) {
+            logger(LogCategory::kProfile).info("handheld: {}", view_.reason);
+          } else {
+            logger(LogCategory::kProfile).warn("handheld: {}", view_.reason);
+            warned_out_of_range_ = true;
+          }
+          protocol::LabelEvent e;
+          e.state = "out_of_range";
+          emit.label(stamp(e, frame));
+        }
+      }
+      was_out_of_range_ = out_of_range;
       return -1;
     }
+    was_out_of_range_ = false;
+    reported_out_of_range_ = false;
     if (tracking_ && std::abs(d.median_mm - last_mm_) > config_.jump_mm) {
       matcher_.learn_sweep();  // another target: the last one's sweep is finished
       matcher_.reset();
@@ -81,7 +114,13 @@ class HandheldProfile : public Profile {
   std::shared_ptr<const ExemplarTable> table_;
   RegionMatcher matcher_;
   bool tracking_ = false;
+  static constexpr std::uint64_t kOutOfRangeNs = 1'000'000'000ull;
+  bool was_out_of_range_ = false;       // the last frame's target was out of the table's range
+  bool reported_out_of_range_ = false;  // this stay out of range has had its label event
+  bool warned_out_of_range_ = false;    // the log warned once for this table (a reload makes a new profile)
+  std::uint64_t out_of_range_since_ns_ = 0;
   double last_mm_ = 0.0;
+  TargetView view_;
 };
 
 }  // namespace

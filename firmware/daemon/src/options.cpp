@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 
@@ -18,6 +19,7 @@
 #include <system_error>
 
 #include "tofmat/daemon/log.hpp"
+#include "tofmat/protocol/wire.hpp"
 
 namespace tofmat::daemon {
 namespace {
@@ -128,6 +130,82 @@ std::string check_config_file(int argc, char** argv) {
   return named;
 }
 
+// The line of the configuration file that sets the flag an error names
+// ("--top-k", or the key CLI11 quotes), so the error can point at it: 0 when
+// the error names no flag, the flag came from the command line, or no line
+// sets it. Keys may use '-' or '_'; a TOML/INI line is `key = value`.
+int config_line_of(const std::string& config_file, const std::string& error, int argc, char** argv) {
+  if (config_file.empty()) return 0;
+  std::vector<std::string> keys;
+  for (std::size_t at = error.find("--"); at != std::string::npos; at = error.find("--", at + 2)) {
+    std::size_t end = at + 2;
+    while (end < error.size() && (std::isalnum(static_cast<unsigned char>(error[end])) || error[end] == '-')) ++end;
+    if (end > at + 2) keys.push_back(error.substr(at + 2, end - at - 2));
+  }
+  for (const char quote : {'"', '\''}) {  // ("The following argument was not expected: ..." quotes none; others do)
+    for (std::size_t at = error.find(quote); at != std::string::npos; at = error.find(quote, at + 1)) {
+      const std::size_t end = error.find(quote, at + 1);
+      if (end == std::string::npos) break;
+      keys.push_back(error.substr(at + 1, end - at - 1));
+      at = end;
+    }
+  }
+  // CLI11's "INI was not able to parse KEY" (a key that is no flag), or the whole line it could not read.
+  std::string unparsed;
+  if (const std::size_t at = error.find("able to parse "); at != std::string::npos) {
+    unparsed = error.substr(at + 14);
+    keys.push_back(unparsed);
+  }
+  const auto norm = [](std::string k) {
+    for (char& c : k) c = c == '_' ? '-' : c;
+    return k;
+  };
+  std::ifstream in(config_file);
+  std::vector<std::string> lines;
+  for (std::string line; lines.size() < 10000 && std::getline(in, line);) lines.push_back(line);
+  const auto trimmed = [](const std::string& t) {
+    const std::size_t a = t.find_first_not_of(" \t\r"), b = t.find_last_not_of(" \t\r");
+    return a == std::string::npos ? std::string() : t.substr(a, b - a + 1);
+  };
+  if (!unparsed.empty())
+    for (std::size_t n = 0; n < lines.size(); ++n)
+      if (trimmed(lines[n]) == trimmed(unparsed)) return static_cast<int>(n + 1);
+  for (const std::string& raw : keys) {
+    const std::string key = norm(raw);
+    if (key.empty()) continue;
+    bool on_command_line = false;
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      on_command_line |= a == "--" + key || a.rfind("--" + key + "=", 0) == 0;
+    }
+    if (on_command_line) continue;
+    for (std::size_t n = 0; n < lines.size(); ++n) {
+      const std::string& line = lines[n];
+      const std::size_t start = line.find_first_not_of(" \t");
+      const std::size_t eq = line.find('=');
+      if (start == std::string::npos || eq == std::string::npos || eq <= start) continue;
+      std::string k = line.substr(start, eq - start);
+      while (!k.empty() && (k.back() == ' ' || k.back() == '\t')) k.pop_back();
+      if (norm(k) == key) return static_cast<int>(n + 1);
+    }
+  }
+  return 0;
+}
+
+// Prints a usage error the way CLI11 does, but with the bytes a file or an
+// argument held escaped (a configuration file of garbage must not write raw
+// bytes to a terminal or a journal), and, when a line of the configuration
+// file set the flag it names, that file and line.
+void usage_error(CLI::App& app, const std::string& what, const std::string& config_file, int argc, char** argv,
+                 bool config_error) {
+  std::string where;
+  if (const int line = config_line_of(config_file, what, argc, argv); line > 0)
+    where = "configuration file \"" + config_file + "\", line " + std::to_string(line) + ": ";
+  else if (config_error)
+    where = "configuration file \"" + config_file + "\": ";
+  app.exit(CLI::ParseError(protocol::printable(where + what), static_cast<int>(CLI::ExitCodes::ValidationError)));
+}
+
 }  // namespace
 
 std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_code) {
@@ -216,9 +294,23 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                "(docs/evaluation.md; --classifier session)");
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
   app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
-  app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")->capture_default_str();
-  app.add_option("--burst", o.profile.burst, "sorting: frames per trigger")->capture_default_str();
-  app.add_option("--smooth", o.profile.smooth, "segmentation: window side (odd pixels)")->capture_default_str();
+  // (the ranges profile.cpp's check_config enforces, checked here so they are usage errors: status 2)
+  app.add_option("--top-k", o.profile.top_k, "ranking entries per label event")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  app.add_option("--burst", o.profile.burst, "sorting: frames per trigger")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 300));
+  app.add_option("--smooth", o.profile.smooth, "segmentation: window side (odd pixels)")
+      ->capture_default_str()
+      ->check(CLI::Validator(
+          [](std::string& text) {
+            int v = 0;
+            return CLI::detail::lexical_cast(text, v) && v >= 1 && v <= 15 && v % 2 == 1
+                       ? std::string()
+                       : std::string("must be an odd number from 1 to 15");
+          },
+          "ODD in [1 - 15]"));
   app.add_option("--accumulate", o.profile.accumulate,
                  "segmentation: frames each pixel's features are averaged over, starting over where its depth "
                  "jumps (1: each frame on its own)")
@@ -244,9 +336,10 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
   const CLI::Validator non_negative(
       [](std::string& text) {
         double v = 0;
-        return CLI::detail::lexical_cast(text, v) && v >= 0.0 && v <= 1e9 ? std::string() : "must be a number >= 0";
+        return CLI::detail::lexical_cast(text, v) && v >= 0.0 && v <= 1e9 ? std::string()
+                                                                          : "must be a number from 0 to 1e9";
       },
-      "NUMBER >= 0");
+      "NUMBER in [0 - 1e9]");
   app.add_option("--gpio", line.gpio,
                  "GPIO of the sorting line and the reset button: libgpiod (the board's chips) | sim (a simulated "
                  "chip); none by default")
@@ -376,19 +469,19 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       throw CLI::ValidationError("--socket-mode",
                                  "\"" + socket_mode + "\" is wider than 0660: give access through the socket's group");
     o.server.socket_mode = static_cast<unsigned>(mode);
-  } catch (const CLI::ConfigError& e) {
-    // (CLI11's text names the key, not the file: say which file.)
-    app.exit(CLI::ConfigError("configuration file \"" + config_file + "\": " + e.what()));
-    exit_code = 2;
-    return std::nullopt;
   } catch (const CLI::ParseError& e) {
     // --help and --version are CLI11's "errors" with status 0; every other is
     // a usage error: status 2 (CLI11's own codes are 100 and up).
-    exit_code = app.exit(e) == 0 ? 0 : 2;
+    if (e.get_exit_code() == 0) {
+      exit_code = app.exit(e);
+      return std::nullopt;
+    }
+    exit_code = 2;
+    usage_error(app, e.what(), config_file, argc, argv, dynamic_cast<const CLI::ConfigError*>(&e) != nullptr);
     return std::nullopt;
   } catch (const std::exception& e) {
-    app.exit(CLI::ValidationError(e.what()));
     exit_code = 2;
+    usage_error(app, e.what(), config_file, argc, argv, false);
     return std::nullopt;
   }
   return cl;

@@ -197,6 +197,10 @@ nlohmann::json Pipeline::status() const {
                       {"last_error", last_error_},
                       {"fps", static_cast<double>(recent_ns_.size())},
                       {"process_ms", process_ms_ewma_}};
+  if (const auto t = profile_->target()) {  // (minor 11)
+    s["target"] = {{"state", t->state}, {"depth_mm", t->depth_mm}};
+    if (!t->reason.empty()) s["target"]["reason"] = t->reason;
+  }
   if (config_.method == Method::kOnnx) s["model"] = config_.model.path;  // (minor 8)
   if (learner_) {                                                        // (minor 10)
     const auto l = learner_->state();

@@ -4,6 +4,8 @@
 
 #include <stdexcept>
 
+#include <spdlog/fmt/fmt.h>
+
 #include "tofmat/core/features.hpp"
 
 namespace tofmat::daemon {
@@ -37,13 +39,7 @@ const char* method_name(Method method) {
 std::uint64_t Profile::trigger(int) { throw std::logic_error("only the sorting profile takes triggers"); }
 
 std::vector<std::uint32_t> candidate_indices(const ExemplarTable& table, const std::vector<std::string>& names) {
-  std::vector<std::uint32_t> out;
-  for (const auto& n : names) {
-    const auto i = table.index_of(n);
-    if (i < 0) throw std::invalid_argument("candidate \"" + n + "\" is not in the table");
-    out.push_back(static_cast<std::uint32_t>(i));
-  }
-  return out;
+  return candidate_names_to_indices(table, names);
 }
 
 void validate(const ProfileConfig& c, const ExemplarTable& table) {
@@ -77,6 +73,17 @@ std::unique_ptr<Profile> make_profile(const ProfileConfig& config, std::shared_p
   if (config.name == "handheld") return make_handheld(config, std::move(table));
   if (config.name == "segmentation") return make_segmentation(config, std::move(table));
   return make_sorting(config, table);
+}
+
+std::string out_of_range_reason(double depth_mm, const BinSpec& bins) {
+  return fmt::format(
+      "the target at {:.0f} mm lies outside the table's bins ({:.0f} to {:.0f} mm): no label until it moves into "
+      "them, or a table recorded at its depth is loaded",
+      depth_mm, bins.start_mm, bins.end_mm());
+}
+
+bool in_table_range(double depth_mm, const BinSpec& bins) {
+  return depth_mm >= bins.start_mm - 50.0 && depth_mm <= bins.end_mm() + 50.0;
 }
 
 }  // namespace tofmat::daemon

@@ -64,10 +64,11 @@ std::string unknown_stream(const std::string& s) {
 struct Server::Connection {
   std::uint64_t id = 0;
   protocol::Fd fd;
-  Peer peer;                // (peer.tcp: which socket it came in on)
-  Role role = Role::kRead;  // Unix: from the peer at accept; TCP: from the token at hello
-  bool ready = false;       // hello done
-  bool closing = false;     // close once the queue is written (a refused hello's reply)
+  Peer peer;                         // (peer.tcp: which socket it came in on)
+  Role role = Role::kRead;           // Unix: from the peer at accept; TCP: from the token at hello
+  Role admitted_role = Role::kRead;  // the role its slot was counted with (released with it)
+  bool ready = false;                // hello done
+  bool closing = false;              // close once the queue is written (a refused hello's reply)
   std::uint64_t accepted_ns = 0;
   std::uint64_t last_request_ns = 0;   // the last request handled (hello included)
   std::uint64_t last_progress_ns = 0;  // the last time its queue was empty or a send took bytes
@@ -126,6 +127,11 @@ Server::~Server() {
 }
 
 void Server::wake() { wake_fd_.wake(); }
+
+void Server::forget(const std::string& stream) {
+  std::lock_guard<std::mutex> lock(inbox_mutex_);
+  latest_.erase(stream);
+}
 
 void Server::publish(const std::string& stream, const protocol::Message& message) {
 #ifndef NDEBUG
@@ -199,7 +205,9 @@ void Server::accept_from(int listener, bool tcp) {
       note("refuse", spdlog::level::warn, "refusing a client: " + peer.key() + " connects too often");
       continue;
     }
-    if (const std::string why = access_.admit(peer); !why.empty()) {
+    // (a Unix peer's role is known now; a TCP one reads until its hello's token says otherwise)
+    const Role role = tcp ? Role::kRead : access_.unix_role(peer);
+    if (const std::string why = access_.admit(peer, role); !why.empty()) {
       ++rejected_;
       note("refuse", spdlog::level::warn, "refusing a client: " + why);
       continue;  // closes it
@@ -215,7 +223,8 @@ void Server::accept_from(int listener, bool tcp) {
     c->id = next_id_++;
     c->fd = std::move(fd);
     c->peer = std::move(peer);
-    c->role = tcp ? Role::kRead : access_.unix_role(c->peer);
+    c->role = role;
+    c->admitted_role = role;
     c->accepted_ns = c->last_request_ns = c->last_progress_ns = protocol::monotonic_ns();
     protocol::Hello h;
     h.server = options_.server_name;
@@ -232,6 +241,7 @@ void Server::accept_from(int listener, bool tcp) {
 void Server::count_clients() {
   clients_ = connections_.size();
   unix_clients_ = access_.unix_clients();
+  unix_readers_ = access_.unix_readers();
   tcp_clients_ = access_.tcp_clients();
 }
 
@@ -571,7 +581,7 @@ void Server::run(const std::atomic<bool>& stop) {
       note(
           "disconnect", spdlog::level::info,
           "client " + std::to_string(c.id) + " disconnected (" + std::to_string(c.dropped) + " events dropped for it)");
-      access_.release(c.peer);
+      access_.release(c.peer, c.admitted_role);
       it = connections_.erase(it);
       changed = true;
     }
@@ -583,6 +593,7 @@ void Server::run(const std::atomic<bool>& stop) {
 nlohmann::json Server::status() const {
   return {{"clients", clients_.load()},
           {"unix_clients", unix_clients_.load()},
+          {"unix_readers", unix_readers_.load()},
           {"tcp_clients", tcp_clients_.load()},
           {"accepted", accepted_.load()},
           {"rejected", rejected_.load()},

@@ -46,6 +46,7 @@ class BeltSource : public Source {
   std::string describe() const override { return camera_->describe(); }
   bool simulated() const override { return true; }
   nlohmann::json counters() const override { return camera_->counters(); }
+  std::optional<std::string> item_truth(std::uint64_t edge_ns) const override { return belt_->item_at(edge_ns); }
   void run(const SourceCallbacks& callbacks, const std::atomic<bool>& stop) override {
     belt_->start(protocol::monotonic_ns());
     std::atomic<bool> belt_stop{false};

@@ -207,7 +207,12 @@ void SortingLine::publish_sort(const line::SortEvent& e) {
             {"decided_ns", e.decided_ns},
             {"margin_ms", e.margin_ms}};
   if (e.fire_ns) m.meta["fire_ns"] = *e.fire_ns;  // (absent: no pusher, or the belt stands)
-  if (e.truth) m.meta["truth"] = *e.truth;        // (simulated items only)
+  // (simulated items only: the belt's own item when it knows it, else what the burst saw)
+  const std::optional<std::string> truth = hooks_.item_truth ? hooks_.item_truth(e.trigger_ns) : std::nullopt;
+  if (truth)
+    m.meta["truth"] = *truth;
+  else if (e.truth)
+    m.meta["truth"] = *e.truth;
   if (hooks_.publish) hooks_.publish(m, "sort");
 }
 

@@ -13,6 +13,7 @@
 // burst's majority; the item's label is Eq. (12) on those frames together.
 // With no strict majority, or when the kept frames together say another
 // material, the burst's state is "mixed": the line rejects it.
+#include "tofmat/daemon/log.hpp"
 #include "tofmat/daemon/region_matcher.hpp"
 
 #include <map>
@@ -45,7 +46,15 @@ class SortingProfile : public Profile {
     auto d = matcher_.decode(frame, config_.roi);
     RegionMatcher::emit_depths(d, frame, emit);
     std::optional<Classification> c;
-    if (static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels)) {
+    const bool filled = static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels);
+    view_.state = !filled ? "none" : in_table_range(d.median_mm, table_->bins()) ? "in_range" : "out_of_range";
+    view_.depth_mm = filled ? d.median_mm : 0.0;
+    view_.reason = view_.state == "out_of_range" ? out_of_range_reason(d.median_mm, table_->bins()) : "";
+    if (view_.state == "out_of_range") {
+      ++out_of_range_frames_;
+      out_of_range_why_ = view_.reason;
+    }
+    if (filled) {
       frame_matcher_.reset();
       frame_matcher_.accumulate(d);
       c = frame_matcher_.classify();
@@ -57,12 +66,16 @@ class SortingProfile : public Profile {
     if (--remaining_ > 0) return;
     emit.label(burst_label(frame));
     frames_.clear();
+    out_of_range_frames_ = 0;
   }
+
+  std::optional<TargetView> target() const override { return view_; }
 
   void reset() override {
     matcher_.reset();
     frames_.clear();
     remaining_ = 0;
+    out_of_range_frames_ = 0;
   }
 
  private:
@@ -92,6 +105,14 @@ class SortingProfile : public Profile {
         matcher_.learn_sweep();  // (after its label: a sweep teaches the ones after it)
       }
     }
+    const bool out_of_range = e.state == "no_target" && out_of_range_frames_ > 0;
+    if (out_of_range) {
+      // The item was there, at a depth the table's bins miss: say so (the line rejects it as no_target).
+      e.state = "out_of_range";
+      if (!was_out_of_range_)  // (once until a burst is labelled again: not a line per item)
+        logger(LogCategory::kProfile).warn("sorting: trigger {}: {}", trigger_, out_of_range_why_);
+    }
+    was_out_of_range_ = out_of_range;
     e.frame = last.sequence;
     e.timestamp_ns = last.arrival_ns;
     e.profile = "sorting";
@@ -107,6 +128,10 @@ class SortingProfile : public Profile {
   std::vector<Frame> frames_;
   int remaining_ = 0;
   std::uint64_t trigger_ = 0;
+  TargetView view_;
+  std::size_t out_of_range_frames_ = 0;  // of this burst
+  std::string out_of_range_why_;
+  bool was_out_of_range_ = false;  // the last burst's label
 };
 
 }  // namespace

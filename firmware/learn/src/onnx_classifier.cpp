@@ -29,6 +29,34 @@ OnnxClassifier::OnnxClassifier(std::shared_ptr<const ExemplarTable> table, const
     for (std::uint32_t i = 0; i < table_->n_materials(); ++i) candidates_.push_back(i);
   impl_ = std::make_unique<Impl>(Impl{OnnxSession(model_path, library, table_->elements_per_material())});
   check_table(impl_->session.contract(), *table_);
+  probe(model_path);
+}
+
+void OnnxClassifier::probe(const std::string& model_path) const {
+  // Once at load, on each material's own curve: a model whose output has the
+  // wrong count, or values that are not probabilities, is refused here
+  // rather than failing every frame after a start that looked fine.
+  for (std::size_t m = 0; m < table_->n_materials(); ++m) {
+    if (table_->valid_count(m) == 0) continue;  // (no query to make of it)
+    const std::string on = model_path + ": on material \"" + table_->materials()[m] + "\"'s own curve the model gave ";
+    std::vector<float> p;
+    try {
+      p = impl_->session.run(table_->material_values(m), table_->elements_per_material());
+    } catch (const std::runtime_error& e) {
+      throw std::invalid_argument(on + "no usable output: " + e.what());
+    }
+    if (p.size() != table_->n_materials())
+      throw std::invalid_argument(on + std::to_string(p.size()) + " outputs for the table's " +
+                                  std::to_string(table_->n_materials()) + " materials");
+    double total = 0.0;
+    for (const float v : p) {
+      if (!(v >= 0.0F && v <= 1.0F))
+        throw std::invalid_argument(on + "the value " + std::to_string(v) + ": not a probability in [0, 1]");
+      total += v;
+    }
+    if (std::fabs(total - 1.0) > 1e-3)
+      throw std::invalid_argument(on + "probabilities summing to " + std::to_string(total) + ", not 1");
+  }
 }
 
 OnnxClassifier::~OnnxClassifier() = default;

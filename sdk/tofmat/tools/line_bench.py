@@ -43,8 +43,9 @@ class Cell:
         return sum(r.items for r in self.runs)
 
     def right_fraction(self) -> float:
-        items = self.items()
-        return sum(r.right() for r in self.runs) / items if items else 0.0
+        """Right among the items whose truth is known (the simulated belt's item, from the barrier)."""
+        known = self.items() - sum(r.missing_truth() for r in self.runs)
+        return sum(r.right() for r in self.runs) / known if known else 0.0
 
     def worst_seed(self) -> float:
         return min((r.right_fraction() for r in self.runs), default=0.0)

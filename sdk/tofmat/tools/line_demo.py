@@ -116,7 +116,13 @@ class LineResult:
         return sum(1 for d in self.decided if d.truth and d.outlet == d.truth and d.reason == "sorted")
 
     def right_fraction(self) -> float:
-        return self.right() / self.items if self.items else 0.0
+        """Right among the items whose truth is known (an item without one is neither right nor wrong)."""
+        known = self.items - self.missing_truth()
+        return self.right() / known if known else 0.0
+
+    def missing_truth(self) -> int:
+        """Items the simulator's truth did not reach (none once it travels with the item from the barrier)."""
+        return sum(1 for d in self.decided if not d.truth)
 
     def reasons(self) -> Counter[str]:
         return Counter(d.reason for d in self.decided)
@@ -200,10 +206,11 @@ def run_line(
                             t_end = now + seconds
                         if event.state == "decided":
                             result.decided.append(event)
-                            right = event.truth is not None and event.outlet == event.truth
+                            wrong = bool(event.truth) and event.outlet != event.truth and event.reason == "sorted"
+                            truth = event.truth or "unknown"
                             say(f"item {event.item:4d}: {event.material or '-':10s} {event.distance:7.2f} mm^2 -> "
                                 f"{event.outlet or 'belt end':10s} "
-                                f"({event.reason}; truth {event.truth or '?'}{'' if right or event.reason != 'sorted' else ', WRONG'}; "
+                                f"({event.reason}; truth {truth}{', WRONG' if wrong else ''}; "
                                 f"margin {event.margin_ms:.0f} ms)")  # fmt: skip
                         else:
                             result.fired.append(event)
@@ -238,8 +245,8 @@ def summary(setup: LineSetup, r: LineResult) -> list[str]:
         f"line: {len(setup.materials)} materials at {setup.speed_mm_s:g} mm/s, {setup.rate_per_min:g} items/min "
         f"offered, burst {setup.burst} frames",
         f"items: {r.items} in {r.seconds:.0f} s ({r.per_min():.0f}/min); "
-        f"to the right outlet {r.right()} ({100.0 * r.right_fraction():.1f} %), to a wrong one {r.wrong()}; "
-        f"rejects: {rejects}",
+        f"to the right outlet {r.right()} ({100.0 * r.right_fraction():.1f} % of those with a known truth), to a "
+        f"wrong one {r.wrong()}; truth unknown {r.missing_truth()}; rejects: {rejects}",
         f"timing margin (fire time - decision): p50 {pct(margins, 50)} ms, p1 {pct(margins, 1)} ms; "
         f"barrier -> decision p50 {pct(decision, 50)} ms, p99 {pct(decision, 99)} ms; "
         f"pushers late against plan p50 {pct(fire, 50) if fire.size else '-'} ms, max {fire.max() if fire.size else 0:.1f} ms",

@@ -8,7 +8,10 @@
 - queries.npy: (8, 400) float32 queries: windows of real curves of 1 to 200 bins, NaN elsewhere;
 - expected.npy: (8, 29) float64, the reference network's probabilities for them;
 - saturated.onnx: a network whose softmax gives material 0 everything (float32's exp underflows
-  to 0 for the others), for the distances' bound.
+  to 0 for the others), for the distances' bound;
+- logits.onnx, nan.onnx, short.onnx: models tofmatd must refuse at load (its probe on each
+  material's own curve): tiny_mlp without its softmax (values that are no probabilities), with a
+  NaN bias (NaN out), and with one output fewer than the table's materials.
 
 Usage: python3 make_fixture.py DB_DIR [OUT_DIR]. Deterministic: tests/python/test_learn.py checks
 that it gives the committed files again.
@@ -20,8 +23,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import onnx
 
-from tofmat.learn.export import Network, to_onnx
+from tofmat.learn.export import OUTPUT, Network, to_onnx
 from tofmat.learn.features import features, n_features
 from tofmat.learn.model import ModelContract
 from tofmat.tools.tables import open_table
@@ -59,6 +63,22 @@ def main(db: str, out: Path) -> None:
     bias[0] = 200.0
     saturated = Network(net.exemplars, net.mean, net.scale, [np.zeros((f, 4)), np.zeros((4, m))], [np.zeros(4), bias])
     (out / "saturated.onnx").write_bytes(to_onnx(saturated, ModelContract.of_table(table), doc="tofmat test fixture"))
+    contract = ModelContract.of_table(table)
+    nan_bias = [b.copy() for b in net.biases]
+    nan_bias[-1][2] = np.nan
+    nan = Network(net.exemplars, net.mean, net.scale, net.weights, nan_bias)
+    (out / "nan.onnx").write_bytes(to_onnx(nan, contract, doc="tofmat test fixture"))
+    short = Network(net.exemplars, net.mean, net.scale, [net.weights[0], net.weights[1][:, :-1]],
+                    [net.biases[0], net.biases[1][:-1]])  # fmt: skip
+    model = onnx.load_from_string(to_onnx(net, contract, doc="tofmat test fixture"))
+    softmax = model.graph.node[-1]
+    assert softmax.op_type == "Softmax"
+    model.graph.node.remove(softmax)
+    model.graph.node[-1].output[0] = OUTPUT  # (the logits are the output)
+    (out / "logits.onnx").write_bytes(model.SerializeToString())
+    model = onnx.load_from_string(to_onnx(short, contract, doc="tofmat test fixture"))
+    model.graph.output[0].type.tensor_type.shape.dim[1].dim_value = m - 1
+    (out / "short.onnx").write_bytes(model.SerializeToString())
 
 
 if __name__ == "__main__":

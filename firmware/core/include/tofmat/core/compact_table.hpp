@@ -18,6 +18,14 @@ namespace tofmat {
 // Elements per SIMD block (one NEON int16x8 register) and per validity byte.
 inline constexpr std::size_t kCompactBlock = 8;
 
+// The step a CompactTable of `table` quantises with (see its constructor).
+double compact_step_mm(const ExemplarTable& table);
+// The largest query value, in mm, the fixed-point path holds for `table`
+// without saturating: 32767 steps. Beyond it the fixed path ranks the
+// saturated value and the float path the value itself, so the two may
+// answer differently (docs/numerics.md: the headroom).
+double fixed_query_limit_mm(const ExemplarTable& table);
+
 class CompactTable {
  public:
   // candidates: indices into `table` (empty: all), kept in increasing order

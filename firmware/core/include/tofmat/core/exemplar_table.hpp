@@ -150,6 +150,24 @@ std::vector<RowSpec> kinect2_database_rows();
 // Throws std::invalid_argument unless the name is 1..64 bytes of printable ASCII.
 void validate_material_name(const std::string& name);
 
+// Every material holds a measured curve: at least one valid value, and (with
+// `rows_must_vary`, for curves read from files) no row whose valid values,
+// two or more, are all one number (a fill value, a placeholder). One check
+// for `tofmat table import` and ExemplarTable::from_npy_dir, tofmatd's table
+// loads and the SDK's Classifier (which takes tables built in memory, whose
+// rows may be constant on purpose: rows_must_vary false), so none of them
+// serves a material the others refuse. Throws FormatError naming `source`
+// (or, when given, the material's own file in `material_files`) and the
+// material.
+void check_measured(const ExemplarTable& table, const std::string& source,
+                    const std::vector<std::string>& material_files = {}, bool rows_must_vary = true);
+
+// Candidate names as indices into `table`, in the order given. Throws
+// std::invalid_argument naming a name that is not in the table or that is
+// given twice.
+std::vector<std::uint32_t> candidate_names_to_indices(const ExemplarTable& table,
+                                                      const std::vector<std::string>& names);
+
 // A classifier's candidates: indices into a table of n_materials (empty:
 // all), sorted and without repeats. Throws std::invalid_argument on an
 // index outside the table.

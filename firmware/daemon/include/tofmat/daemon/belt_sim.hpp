@@ -20,6 +20,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -66,6 +67,9 @@ class BeltSim {
   void run(const std::atomic<bool>& stop);
   // The items that have reached the barrier by `now_ns`, oldest first (bounded).
   std::vector<Item> items_until(std::uint64_t now_ns);
+  // The material of the item whose leading edge reached the barrier at
+  // `edge_ns` (within 20 ms), if it is still remembered.
+  std::optional<std::string> item_at(std::uint64_t edge_ns) const;
   const BeltSpec& spec() const { return spec_; }
 
  private:

@@ -12,7 +12,9 @@
 //
 // Slots: Unix and TCP have separate counts, so connections nobody
 // authenticated cannot take the local clients' places, and every peer has
-// its own bound within them.
+// its own bound within them. The last few Unix slots are kept for control
+// (control_reserve()): however many local users connect to read, the
+// daemon's own user, root and the control group can still get in.
 //
 // Rates: every peer has a bucket of requests and one of new connections
 // (a rate per second, and as many at once), so that one user or address
@@ -84,11 +86,15 @@ class ClientAccess {
   explicit ClientAccess(AccessOptions options) : options_(std::move(options)) {}
   const AccessOptions& options() const { return options_; }
 
-  // A new connection: "" if it may stay (its slot is then counted; release
-  // it when the connection ends), else why not.
-  std::string admit(const Peer& peer);
-  void release(const Peer& peer);
+  // A new connection of a role (TCP: kRead until its hello; Unix: from the
+  // peer): "" if it may stay (its slot is then counted; release it with the
+  // same role when the connection ends), else why not.
+  std::string admit(const Peer& peer, Role role);
+  void release(const Peer& peer, Role role);
   std::size_t unix_clients() const { return unix_; }
+  std::size_t unix_readers() const { return unix_readers_; }
+  // The Unix slots only control may take: 4, or half of max_unix if that is fewer.
+  std::size_t control_reserve() const;
   std::size_t tcp_clients() const { return tcp_; }
 
   // The role of a Unix peer.
@@ -111,7 +117,7 @@ class ClientAccess {
 
  private:
   AccessOptions options_;
-  std::size_t unix_ = 0, tcp_ = 0;
+  std::size_t unix_ = 0, tcp_ = 0, unix_readers_ = 0;
   std::map<std::string, std::size_t> per_peer_;
   struct Failures {
     unsigned count = 0;

@@ -91,6 +91,21 @@ struct Emitter {
   std::function<void(const protocol::DepthEvent&)> depth;
 };
 
+// What the handheld and sorting profiles' region shows (status's `target`):
+// whether a target fills it and whether its depth lies where the table can
+// label it. A table whose bins miss the target's depth gives no label; this
+// says so, and why.
+struct TargetView {
+  std::string state = "none";  // "none" (nothing fills the region), "in_range", "out_of_range"
+  double depth_mm = 0.0;       // the region's median depth (in_range, out_of_range)
+  std::string reason;          // out_of_range: why no label comes
+};
+// The reason of an out_of_range view: the depth and the table's range.
+std::string out_of_range_reason(double depth_mm, const BinSpec& bins);
+// A target is in the table's range when its median depth lies within the
+// bins or 50 mm beyond either end (a partial sweep that still reaches them).
+bool in_table_range(double depth_mm, const BinSpec& bins);
+
 class Profile {
  public:
   virtual ~Profile() = default;
@@ -100,6 +115,8 @@ class Profile {
   virtual std::optional<PixelRegion> input_region() const = 0;
   virtual void process(const RawFrame& frame, const Emitter& emit) = 0;
   virtual void reset() = 0;
+  // What the region shows (handheld, sorting); nothing for segmentation.
+  virtual std::optional<TargetView> target() const { return std::nullopt; }
   // sorting: arm a burst of `burst` frames; returns the trigger's number.
   // Other profiles throw std::logic_error.
   virtual std::uint64_t trigger(int burst);

@@ -65,6 +65,9 @@ class SortingLine {
     // (with why) when it cannot.
     std::function<std::optional<std::uint64_t>(std::string& why)> start_burst;
     std::function<void(const protocol::Message&, const std::string& stream)> publish;
+    // A simulated belt's truth for the item its barrier edge at `trigger_ns`
+    // announced (Source::item_truth); unset or nothing: the burst's own.
+    std::function<std::optional<std::string>(std::uint64_t trigger_ns)> item_truth;
   };
   // Validates everything and requests every line (throws
   // std::invalid_argument for a bad option, gpio::GpioError for a line that

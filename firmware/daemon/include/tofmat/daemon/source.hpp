@@ -54,6 +54,12 @@ class Source {
   // True when no frame may be dropped: the daemon then waits for the
   // pipeline instead of dropping the oldest frame (a replay with pace=0).
   virtual bool lossless() const { return false; }
+  // A simulated belt only: the real material of the item whose leading edge
+  // crossed the light barrier at `edge_ns` (CLOCK_MONOTONIC), so that a
+  // sorting decision's truth travels with its item rather than being read off
+  // whatever frame its burst ended on (on a loaded machine, often the gap
+  // after it). Nothing for every other source.
+  virtual std::optional<std::string> item_truth(std::uint64_t /*edge_ns*/) const { return std::nullopt; }
 };
 
 struct SourceOptions {

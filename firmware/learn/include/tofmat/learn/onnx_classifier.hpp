@@ -37,8 +37,9 @@ class OnnxClassifier {
  public:
   // Loads `library` (once per process; later calls must name the same one),
   // reads the model (at most kMaxModelBytes), checks its contract against the
-  // table and its input and output against the contract, and runs it on one
-  // thread. `candidates`: indices into the table to rank; empty means all.
+  // table and its input and output against the contract, runs it once on
+  // each material's own curve (an output per material, each a probability,
+  // summing to 1), and runs it on one thread. `candidates`: indices into the table to rank; empty means all.
   // Throws std::runtime_error when onnxruntime is unavailable or fails, and
   // std::invalid_argument when the model or a candidate does not fit.
   OnnxClassifier(std::shared_ptr<const ExemplarTable> table, const std::string& model_path,
@@ -64,6 +65,8 @@ class OnnxClassifier {
   const ExemplarTable& table() const { return *table_; }
 
  private:
+  // The load's probe: throws std::invalid_argument naming the model and the material.
+  void probe(const std::string& model_path) const;
   // The query's checks (probabilities()'s), its valid elements, and the model's output.
   std::vector<float> run(const float* query, std::size_t n, std::uint32_t& valid) const;
 
