@@ -112,6 +112,21 @@ TEST(ClientAccess, ReadersLeaveTheLastUnixSlotsToControl) {
   EXPECT_EQ(one.admit(unix_peer(1), Role::kRead), "");
 }
 
+TEST(ClientAccess, TcpReadersLeaveTheLastSlotsToTheControlToken) {
+  AccessOptions o = options();
+  o.max_tcp = 16;
+  ClientAccess a(o);  // (a control token is set)
+  for (int i = 0; i < 12; ++i) EXPECT_EQ(a.admit_tcp_reader(), "") << i;
+  EXPECT_NE(a.admit_tcp_reader().find("kept for the control token"), std::string::npos);
+  EXPECT_EQ(a.tcp_readers(), 12u);
+  a.release_tcp_reader();
+  EXPECT_EQ(a.admit_tcp_reader(), "");
+  // Without a control token nobody controls over TCP: readers may take every slot.
+  o.control_token.clear();
+  ClientAccess none(o);
+  for (int i = 0; i < 16; ++i) EXPECT_EQ(none.admit_tcp_reader(), "") << i;
+}
+
 TEST(ClientAccess, UnixRoles) {
   AccessOptions o = options();
   ClientAccess a(o);

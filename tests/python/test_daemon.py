@@ -278,6 +278,35 @@ def test_tcp_needs_the_token(start: Callable[..., Daemon], tmp_path: Path) -> No
         assert clients["auth_failures"] == 2 and clients["auth_throttled"] == 1
 
 
+def test_tcp_readers_cannot_lock_the_control_token_out(start: Callable[..., Daemon], tmp_path: Path) -> None:
+    # (issue 33) With a control token, reading hellos hold at most --max-tcp-clients less 4 slots
+    # (half of it when fewer): the control token still gets in and controls.
+    for name, token in (("read", "read-token-0123456789"), ("control", "control-token-0123456789")):
+        (tmp_path / name).write_text(token + "\n")
+        (tmp_path / name).chmod(0o600)
+    port = free_port()
+    d = start(sweep(["cork"]), "--tcp", f"127.0.0.1:{port}", "--token-file", str(tmp_path / "read"),
+              "--control-token-file", str(tmp_path / "control"), "--max-tcp-clients", "8",
+              "--max-clients-per-peer", "16")  # fmt: skip
+    d.client().close()  # (listening)
+    address = f"127.0.0.1:{port}"
+    readers: list[tofmat.Client] = []
+    refused = 0
+    for _ in range(6):
+        try:
+            readers.append(tofmat.Client(address, token="read-token-0123456789", reconnect=False))
+        except tofmat.DaemonUnavailableError as e:
+            assert "kept for the control token" in str(e)
+            refused += 1
+    assert (len(readers), refused) == (4, 2)
+    with tofmat.Client(address, token="control-token-0123456789", reconnect=False) as c:
+        assert c.role == "control"
+        c.reset()
+        assert c.status()["clients"]["tcp_readers"] == 4
+    for r in readers:
+        r.close()
+
+
 def test_tcp_without_a_token_file_is_refused_at_start(tmp_path: Path, sim_table: Path) -> None:
     p = subprocess.run([str(daemon_binary()), "--table", str(sim_table), "--socket", str(tmp_path / "s"),
                         "--tcp", "127.0.0.1:7020"], capture_output=True, text=True, timeout=30)  # fmt: skip

@@ -109,6 +109,19 @@ std::string ClientAccess::admit(const Peer& peer, Role role) {
   return "";
 }
 
+std::string ClientAccess::admit_tcp_reader() {
+  const std::size_t reserve = options_.control_token.empty() ? 0 : std::min<std::size_t>(4, options_.max_tcp / 2);
+  if (tcp_readers_ + reserve >= options_.max_tcp)
+    return std::to_string(tcp_readers_) + " reading TCP clients connected already (the last " +
+           std::to_string(reserve) + " slots are kept for the control token)";
+  ++tcp_readers_;
+  return "";
+}
+
+void ClientAccess::release_tcp_reader() {
+  if (tcp_readers_ > 0) --tcp_readers_;
+}
+
 void ClientAccess::release(const Peer& peer, Role role) {
   std::size_t& kind = peer.tcp ? tcp_ : unix_;
   if (kind > 0) --kind;

@@ -67,6 +67,7 @@ struct Server::Connection {
   Peer peer;                         // (peer.tcp: which socket it came in on)
   Role role = Role::kRead;           // Unix: from the peer at accept; TCP: from the token at hello
   Role admitted_role = Role::kRead;  // the role its slot was counted with (released with it)
+  bool tcp_reader = false;           // TCP: counted among the reading hellos (released with it)
   bool ready = false;                // hello done
   bool closing = false;              // close once the queue is written (a refused hello's reply)
   std::uint64_t accepted_ns = 0;
@@ -242,6 +243,7 @@ void Server::count_clients() {
   clients_ = connections_.size();
   unix_clients_ = access_.unix_clients();
   unix_readers_ = access_.unix_readers();
+  tcp_readers_ = access_.tcp_readers();
   tcp_clients_ = access_.tcp_clients();
 }
 
@@ -330,7 +332,16 @@ void Server::handle(Connection& c, const protocol::Message& m) {
                "client " + std::to_string(c.id) + " (" + c.peer.key() + "): wrong or missing token");
           return refuse(protocol::codes::kAuth, "a TCP client must send the daemon's token", true);
         case ClientAccess::Verdict::kControl: c.role = Role::kControl; break;
-        case ClientAccess::Verdict::kRead: c.role = Role::kRead; break;
+        case ClientAccess::Verdict::kRead: {
+          c.role = Role::kRead;
+          if (const std::string why = access_.admit_tcp_reader(); !why.empty()) {
+            ++rejected_;
+            note("refuse", spdlog::level::warn, "refusing client " + std::to_string(c.id) + ": " + why);
+            return refuse(protocol::codes::kFull, why, true);
+          }
+          c.tcp_reader = true;
+          break;
+        }
       }
     }
     c.ready = true;
@@ -582,6 +593,7 @@ void Server::run(const std::atomic<bool>& stop) {
           "disconnect", spdlog::level::info,
           "client " + std::to_string(c.id) + " disconnected (" + std::to_string(c.dropped) + " events dropped for it)");
       access_.release(c.peer, c.admitted_role);
+      if (c.tcp_reader) access_.release_tcp_reader();
       it = connections_.erase(it);
       changed = true;
     }
@@ -594,6 +606,7 @@ nlohmann::json Server::status() const {
   return {{"clients", clients_.load()},
           {"unix_clients", unix_clients_.load()},
           {"unix_readers", unix_readers_.load()},
+          {"tcp_readers", tcp_readers_.load()},
           {"tcp_clients", tcp_clients_.load()},
           {"accepted", accepted_.load()},
           {"rejected", rejected_.load()},

@@ -92,6 +92,8 @@ void Client::handshake() {
       throw ClientError(ClientErrorKind::kAuth, e.what(), e.code());
     if (e.kind() == ClientErrorKind::kCommand && e.code() == codes::kVersion)
       throw ClientError(ClientErrorKind::kVersion, e.what(), e.code());
+    if (e.kind() == ClientErrorKind::kCommand && e.code() == codes::kFull)  // (as a connection over a limit)
+      throw ClientError(ClientErrorKind::kRefused, e.what(), e.code());
     throw;
   }
 }

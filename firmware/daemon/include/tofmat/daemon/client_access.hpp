@@ -14,7 +14,9 @@
 // authenticated cannot take the local clients' places, and every peer has
 // its own bound within them. The last few Unix slots are kept for control
 // (control_reserve()): however many local users connect to read, the
-// daemon's own user, root and the control group can still get in.
+// daemon's own user, root and the control group can still get in. On TCP
+// the role is known at the hello: with a control token, a reading hello
+// past max_tcp less the same reserve is refused, so the control token gets in.
 //
 // Rates: every peer has a bucket of requests and one of new connections
 // (a rate per second, and as many at once), so that one user or address
@@ -95,6 +97,12 @@ class ClientAccess {
   std::size_t unix_readers() const { return unix_readers_; }
   // The Unix slots only control may take: 4, or half of max_unix if that is fewer.
   std::size_t control_reserve() const;
+  // TCP, at a hello that gives the reading role: "" if a reader may stay
+  // (counted; release_tcp_reader() when it ends), else why not. With a
+  // control token, readers hold at most max_tcp less min(4, max_tcp / 2).
+  std::string admit_tcp_reader();
+  void release_tcp_reader();
+  std::size_t tcp_readers() const { return tcp_readers_; }
   std::size_t tcp_clients() const { return tcp_; }
 
   // The role of a Unix peer.
@@ -117,7 +125,7 @@ class ClientAccess {
 
  private:
   AccessOptions options_;
-  std::size_t unix_ = 0, tcp_ = 0, unix_readers_ = 0;
+  std::size_t unix_ = 0, tcp_ = 0, unix_readers_ = 0, tcp_readers_ = 0;
   std::map<std::string, std::size_t> per_peer_;
   struct Failures {
     unsigned count = 0;

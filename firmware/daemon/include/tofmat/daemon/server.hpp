@@ -114,7 +114,7 @@ class Server {
   // Counters.
   std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, auth_throttled_{0},
       not_permitted_{0}, idle_closed_{0}, dropped_events_{0}, inbox_dropped_{0};
-  std::atomic<std::size_t> clients_{0}, unix_clients_{0}, unix_readers_{0}, tcp_clients_{0};
+  std::atomic<std::size_t> clients_{0}, unix_clients_{0}, unix_readers_{0}, tcp_clients_{0}, tcp_readers_{0};
   ClientAccess access_;                    // server thread only (after the constructor)
   LogLimiter log_limiter_;                 // server thread only
   RateBucket unix_accepts_, tcp_accepts_;  // connections accepted, all peers (server thread only)

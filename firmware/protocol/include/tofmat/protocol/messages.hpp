@@ -29,6 +29,8 @@ inline constexpr const char* kUnknownCommand = "unknown_command";
 inline constexpr const char* kInvalidArgument = "invalid_argument";
 inline constexpr const char* kFailed = "failed";          // a valid command that did not work (bad table file)
 inline constexpr const char* kPermission = "permission";  // a control command from a client that may only read
+inline constexpr const char* kFull =
+    "full";  // hello: the reading slots are taken (minor 11; the rest kept for control)
 }  // namespace codes
 
 struct Hello {
