@@ -227,7 +227,7 @@ class SortDecision:
     """The sorting line's decision for one item (stream "sort"): once when its outlet is chosen
     (``state == "decided"``, ``fire_ns`` planned) and once when the pusher was driven
     (``state == "fired"``). ``reason`` is "sorted" or why it went to reject: too_close, camera_busy,
-    camera_lost, no_target, mixed, unknown, not_confident, no_outlet, late, full."""
+    camera_lost, no_target, out_of_range, mixed, unknown, not_confident, no_outlet, late, full."""
 
     state: str
     item: int

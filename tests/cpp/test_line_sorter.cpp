@@ -205,8 +205,14 @@ TEST(Sorter, UnconfidentUnknownAndUnsortedMaterialsGoToReject) {
   BurstLabel unknown{105, "wood", true, 12.5, "wood"};
   unknown.unknown = true;
   l.sorter.label(unknown, l.now);
-  l.run_to(7000 * kMs);
-  EXPECT_EQ(l.bursts.size(), 5u);
+  l.item_at(4500 * kMs);
+  l.run_to(5000 * kMs);
+  // A burst that saw the item only outside the table's bins (issue 33): no material, its own reason.
+  BurstLabel out{106, "", false, 0.0, std::nullopt};
+  out.out_of_range = true;
+  l.sorter.label(out, l.now);
+  l.run_to(8000 * kMs);
+  EXPECT_EQ(l.bursts.size(), 6u);
   EXPECT_EQ(l.of(1, "decided").at(0).reason, Reason::kNotConfident);
   EXPECT_EQ(l.of(2, "decided").at(0).reason, Reason::kNoOutlet);
   EXPECT_EQ(l.of(3, "decided").at(0).reason, Reason::kNoTarget);
@@ -214,8 +220,10 @@ TEST(Sorter, UnconfidentUnknownAndUnsortedMaterialsGoToReject) {
   EXPECT_STREQ(reason_name(Reason::kMixed), "mixed");
   EXPECT_EQ(l.of(5, "decided").at(0).reason, Reason::kUnknown);
   EXPECT_STREQ(reason_name(Reason::kUnknown), "unknown");
-  for (std::uint64_t i = 1; i <= 5; ++i) EXPECT_EQ(l.of(i, "fired").at(0).outlet, "reject") << i;
-  EXPECT_EQ(l.sorter.counts().rejected, 5u);
+  EXPECT_EQ(l.of(6, "decided").at(0).reason, Reason::kOutOfRange);
+  EXPECT_STREQ(reason_name(Reason::kOutOfRange), "out_of_range");
+  for (std::uint64_t i = 1; i <= 6; ++i) EXPECT_EQ(l.of(i, "fired").at(0).outlet, "reject") << i;
+  EXPECT_EQ(l.sorter.counts().rejected, 6u);
   EXPECT_TRUE(l.alarms.empty()) << "no fault of the line";
   EXPECT_TRUE(l.faults.empty());
 }

@@ -159,6 +159,7 @@ void SortingLine::label(const protocol::LabelEvent& e) {
   line::BurstLabel l;
   l.trigger = *e.trigger;
   l.unknown = e.state == "unknown";
+  l.out_of_range = e.state == "out_of_range";
   // An unknown burst has no material; its nearest is the ranking's first.
   l.material = e.state == "final" || e.state == "mixed" ? e.material
                : l.unknown && !e.ranking.empty()        ? e.ranking.front().material

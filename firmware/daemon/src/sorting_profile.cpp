@@ -107,7 +107,7 @@ class SortingProfile : public Profile {
     }
     const bool out_of_range = e.state == "no_target" && out_of_range_frames_ > 0;
     if (out_of_range) {
-      // The item was there, at a depth the table's bins miss: say so (the line rejects it as no_target).
+      // The item was there, at a depth the table's bins miss: say so (the line rejects it: out_of_range).
       e.state = "out_of_range";
       if (!was_out_of_range_)  // (once until a burst is labelled again: not a line per item)
         logger(LogCategory::kProfile).warn("sorting: trigger {}: {}", trigger_, out_of_range_why_);

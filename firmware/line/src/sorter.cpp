@@ -22,6 +22,7 @@ const char* reason_name(Reason r) {
     case Reason::kNoOutlet: return "no_outlet";
     case Reason::kLate: return "late";
     case Reason::kFull: return "full";
+    case Reason::kOutOfRange: return "out_of_range";
   }
   return "?";
 }
@@ -150,7 +151,8 @@ void Sorter::label(const BurstLabel& l, std::uint64_t now_ns) {
   const auto it = std::find_if(items_.begin(), items_.end(),
                                [&](const Item& i) { return i.stage == Stage::kMeasuring && i.burst == l.trigger; });
   if (it == items_.end()) return;  // (its item was decided without it: late, or the camera was lost)
-  if (l.material.empty()) return decide(*it, config_.reject, Reason::kNoTarget, &l, now_ns);
+  if (l.material.empty())
+    return decide(*it, config_.reject, l.out_of_range ? Reason::kOutOfRange : Reason::kNoTarget, &l, now_ns);
   if (l.mixed) return decide(*it, config_.reject, Reason::kMixed, &l, now_ns);
   if (l.unknown) return decide(*it, config_.reject, Reason::kUnknown, &l, now_ns);
   if (!l.confident) return decide(*it, config_.reject, Reason::kNotConfident, &l, now_ns);

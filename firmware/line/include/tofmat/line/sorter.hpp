@@ -61,7 +61,8 @@ enum class Reason {
   kNotConfident,
   kNoOutlet,
   kLate,
-  kFull
+  kFull,
+  kOutOfRange  // the item was seen only at depths the table's bins miss (protocol minor 11)
 };
 const char* reason_name(Reason r);
 
@@ -74,6 +75,7 @@ struct BurstLabel {
   std::optional<std::string> truth;  // a simulated item's real material (passed on, never used)
   bool mixed = false;                // the burst's frames disagreed (another item in the ROI): never sorted
   bool unknown = false;              // no material of the table explains it (open set): never sorted
+  bool out_of_range = false;         // seen only at depths the table's bins miss (material ""): never sorted
 };
 
 struct SortEvent {
