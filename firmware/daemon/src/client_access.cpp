@@ -90,7 +90,12 @@ bool user_in_group(uid_t uid, gid_t primary, gid_t group) {
   return std::find(groups.begin(), groups.end(), group) != groups.end();
 }
 
-std::size_t ClientAccess::control_reserve() const { return std::min<std::size_t>(4, options_.max_unix / 2); }
+namespace {
+// The slots of `max` that only control may take: 4, or half of them if that is fewer.
+std::size_t reserve_for_control(std::size_t max) { return std::min<std::size_t>(4, max / 2); }
+}  // namespace
+
+std::size_t ClientAccess::control_reserve() const { return reserve_for_control(options_.max_unix); }
 
 std::string ClientAccess::admit(const Peer& peer, Role role) {
   std::size_t& kind = peer.tcp ? tcp_ : unix_;
