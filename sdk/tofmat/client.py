@@ -45,7 +45,7 @@ DEFAULT_SOCKET = "/run/tofmat/tofmatd.sock"
 # What a Client keeps of the events that come while it waits for another (label_map(), depth()),
 # for next_event() to hand out later: the oldest are dropped past either bound (Client.dropped_events),
 # so nothing a daemon sends can grow a client without end. The C++ connection keeps the events that
-# come while a command waits for its reply under bounds of its own (docs/protocol.md, Bounds).
+# come while a command waits for its reply under bounds of its own (docs/protocol.md, What a client keeps).
 MAX_PENDING_EVENTS = 1024
 MAX_PENDING_BYTES = 64 << 20
 

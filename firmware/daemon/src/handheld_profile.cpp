@@ -46,12 +46,9 @@ class HandheldProfile : public Profile {
     // fills the ROI outside the range cannot be labelled: that is said (status's
     // target at once; a label event out_of_range and the log when it stays),
     // never left silent.
-    const bool filled = static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels);
-    const bool present = filled && in_table_range(d.median_mm, bins);
-    const bool out_of_range = filled && !present;
-    view_.state = !filled ? "none" : present ? "in_range" : "out_of_range";
-    view_.depth_mm = filled ? d.median_mm : 0.0;
-    view_.reason = out_of_range ? out_of_range_reason(d.median_mm, bins) : "";
+    view_ = view_target(d.valid, d.pixels, d.median_mm, config_.min_valid_fraction, bins);
+    const bool present = view_.state == "in_range";
+    const bool out_of_range = view_.state == "out_of_range";
     if (!present) {
       if (tracking_) {
         matcher_.learn_sweep();  // the target left: its sweep is finished

@@ -75,15 +75,21 @@ std::unique_ptr<Profile> make_profile(const ProfileConfig& config, std::shared_p
   return make_sorting(config, table);
 }
 
-std::string out_of_range_reason(double depth_mm, const BinSpec& bins) {
-  return fmt::format(
+TargetView view_target(std::size_t valid, std::size_t pixels, double median_mm, double min_valid_fraction,
+                       const BinSpec& bins) {
+  TargetView v;
+  if (static_cast<double>(valid) < min_valid_fraction * static_cast<double>(pixels)) return v;  // none
+  v.depth_mm = median_mm;
+  if (median_mm >= bins.start_mm - 50.0 && median_mm <= bins.end_mm() + 50.0) {
+    v.state = "in_range";
+    return v;
+  }
+  v.state = "out_of_range";
+  v.reason = fmt::format(
       "the target at {:.0f} mm lies outside the table's bins ({:.0f} to {:.0f} mm): no label until it moves into "
       "them, or a table recorded at its depth is loaded",
-      depth_mm, bins.start_mm, bins.end_mm());
-}
-
-bool in_table_range(double depth_mm, const BinSpec& bins) {
-  return depth_mm >= bins.start_mm - 50.0 && depth_mm <= bins.end_mm() + 50.0;
+      median_mm, bins.start_mm, bins.end_mm());
+  return v;
 }
 
 }  // namespace tofmat::daemon

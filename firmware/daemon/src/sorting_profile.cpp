@@ -46,10 +46,8 @@ class SortingProfile : public Profile {
     auto d = matcher_.decode(frame, config_.roi);
     RegionMatcher::emit_depths(d, frame, emit);
     std::optional<Classification> c;
-    const bool filled = static_cast<double>(d.valid) >= config_.min_valid_fraction * static_cast<double>(d.pixels);
-    view_.state = !filled ? "none" : in_table_range(d.median_mm, table_->bins()) ? "in_range" : "out_of_range";
-    view_.depth_mm = filled ? d.median_mm : 0.0;
-    view_.reason = view_.state == "out_of_range" ? out_of_range_reason(d.median_mm, table_->bins()) : "";
+    view_ = view_target(d.valid, d.pixels, d.median_mm, config_.min_valid_fraction, table_->bins());
+    const bool filled = view_.state != "none";
     if (view_.state == "out_of_range") {
       ++out_of_range_frames_;
       out_of_range_why_ = view_.reason;

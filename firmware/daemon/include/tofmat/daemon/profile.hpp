@@ -100,11 +100,13 @@ struct TargetView {
   double depth_mm = 0.0;       // the region's median depth (in_range, out_of_range)
   std::string reason;          // out_of_range: why no label comes
 };
-// The reason of an out_of_range view: the depth and the table's range.
-std::string out_of_range_reason(double depth_mm, const BinSpec& bins);
-// A target is in the table's range when its median depth lies within the
-// bins or 50 mm beyond either end (a partial sweep that still reaches them).
-bool in_table_range(double depth_mm, const BinSpec& bins);
+// What a region of `pixels` with `valid` decoded ones at median depth
+// `median_mm` shows: a target fills it when at least min_valid_fraction of
+// its pixels decode, and is in the table's range when its median lies within
+// the bins or 50 mm beyond either end (a partial sweep that still reaches
+// them); out of range, the reason names the depth and the table's range.
+TargetView view_target(std::size_t valid, std::size_t pixels, double median_mm, double min_valid_fraction,
+                       const BinSpec& bins);
 
 class Profile {
  public:
