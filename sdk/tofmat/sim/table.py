@@ -53,11 +53,14 @@ def roi_observation(
 ) -> tuple[float, np.ndarray] | None:
     """(combined depth, the two rows) averaged over the ROI's surface as tofmatd takes it (the valid
     pixels near their median depth, on its side of every frequency's wrap: ``surface_mean``); None
-    if no pixel is valid."""
+    if no pixel is valid, or none lies near the median (valid pixels in two clusters farther apart
+    than the surface's band, the median between them: tofmatd bins nothing from such a frame)."""
     _, d, ok = _roi_frame(renderer, p0, material, depth_mm, yaw_deg, seed)
     if not ok.any():
         return None
     depth, sums, pixels = surface_mean(d, float(np.median(np.asarray(d.combined_mm)[ok])))
+    if pixels == 0:
+        return None
     return depth, sums / pixels
 
 
