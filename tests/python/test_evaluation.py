@@ -233,6 +233,28 @@ def test_the_command_on_the_real_curves(real_tmx: Path, tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--sessions" in r.output
 
 
+def test_the_scales_table_names_the_labels_that_were_confidently_wrong() -> None:
+    # Which materials a matcher confuses with certainty says why (the simulator's vague candidate
+    # at twice the spread): each row counts its "truth -> label" pairs wrong with confidence >= 0.9, and
+    # the Markdown sums them per matcher under the table.
+    from tofmat.evaluation.scales import _row, format_markdown
+
+    names = ["cork", "paper", "alumi"]
+    label = np.array([2, 2, 1, 0, 2])
+    truth = np.array([0, 1, 1, 0, 0])
+    conf = np.array([0.95, 0.99, 0.99, 0.5, 0.6])  # two confidently wrong; one wrong but unsure
+    lengths = np.array([3, 100, 100, 3, 100])
+    a = _row(2.0, "session", label, truth, conf, lengths, 10.0, names)
+    assert a.confident_errors == {"cork -> alumi": 1, "paper -> alumi": 1}
+    assert a.confidently_wrong == pytest.approx({3: 50.0, 100: 100.0 / 3})
+    b = _row(2.0, "session", label, truth, conf, lengths, 30.0, names)
+    c = _row(2.0, "eq12", label, truth, np.full(5, 0.5), lengths, 10.0, names)
+    assert c.confident_errors == {}
+    text = format_markdown([a, b, c])
+    assert "Confidently wrong, session (4 labels; truth -> label): cork -> alumi 2, paper -> alumi 2." in text
+    assert "Confidently wrong, eq12" not in text
+
+
 def test_the_session_spread_as_a_variable(real_tmx: Path, tmp_path: Path) -> None:
     # The shipped matchers at 0 and 2 times the calibration's session spreads: with no session change
     # Eq. (12) is near perfect at long sweeps, and every matcher loses as sessions move more.

@@ -40,6 +40,8 @@ class ScaleRow:
     ece: float = 0.0  # over all lengths together (0..1)
     reliability: list[tuple[float, float, int]] = field(default_factory=list)  # (confidence, accuracy, labels)
     yaw_deg: float | None = None  # the simulator's target angle (None: the real curves, no angle)
+    # The labels wrong with confidence >= 0.9: "truth -> label" and how many, most first.
+    confident_errors: dict[str, int] = field(default_factory=dict)
 
 
 def by_length(
@@ -90,27 +92,41 @@ def _rows(
     learned: LearnedClassifier | None = None,
 ) -> list[ScaleRow]:
     out = []
+    names = list(table.materials)
     for method in ("eq12", "session"):
         results = Classifier(table, method=method).classify_batch(q.queries)
-        right = np.array([r.index == t for r, t in zip(results, q.truth, strict=True)])
+        label = np.array([r.index for r in results], dtype=np.int64)
         conf = np.array([r.confidence for r in results])
-        out.append(_row(scale, method, right, conf, q.lengths, yaw_deg))
+        out.append(_row(scale, method, label, q.truth, conf, q.lengths, yaw_deg, names))
     if learned is not None:
-        right, conf = learned_labels(learned, q.queries, q.truth)
-        out.append(_row(scale, "onnx", right, conf, q.lengths, yaw_deg))
+        label, conf = learned_labels(learned, q.queries)
+        out.append(_row(scale, "onnx", label, q.truth, conf, q.lengths, yaw_deg, names))
     return out
 
 
 def _row(
-    scale: float, method: str, right: np.ndarray, conf: np.ndarray, lengths: np.ndarray, yaw_deg: float | None
+    scale: float,
+    method: str,
+    label: np.ndarray,
+    truth: np.ndarray,
+    conf: np.ndarray,
+    lengths: np.ndarray,
+    yaw_deg: float | None,
+    names: list[str],
 ) -> ScaleRow:
+    right = label == truth
     ece, diagram = reliability_of(conf, right)
-    return ScaleRow(scale, method, *by_length(right, conf >= CONFIDENT, lengths), ece, diagram, yaw_deg)
+    errors: dict[str, int] = {}
+    for i in np.flatnonzero(~right & (conf >= CONFIDENT)):
+        key = f"{names[truth[i]]} -> {names[label[i]]}"
+        errors[key] = errors.get(key, 0) + 1
+    errors = dict(sorted(errors.items(), key=lambda kv: (-kv[1], kv[0])))
+    return ScaleRow(scale, method, *by_length(right, conf >= CONFIDENT, lengths), ece, diagram, yaw_deg, errors)
 
 
-def learned_labels(model: LearnedClassifier, queries: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def learned_labels(model: LearnedClassifier, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A learned model's labels as it ships (LearnedClassifier.classify over every material, with the
-    temperatures its metadata carries): whether each is right, and its confidence."""
+    temperatures its metadata carries): each label's table index, and its confidence."""
     from ..learn.model import SMALLEST_SHARE
     from .confidence import probabilities
 
@@ -122,7 +138,7 @@ def learned_labels(model: LearnedClassifier, queries: np.ndarray, truth: np.ndar
     for i, q in enumerate(queries):
         t = model.calibration.temperature(float(np.isfinite(q).sum()) / rows)
         conf[i] = probabilities(distance[i : i + 1], t)[0].max()
-    return np.argmin(distance, axis=1) == truth, conf
+    return np.argmin(distance, axis=1), conf
 
 
 def evaluate_scales(
@@ -191,4 +207,28 @@ def format_markdown(rows: list[ScaleRow]) -> str:
             f"| {r.scale:g} | {where}{r.method} | {cells} | {r.confidently_wrong[worst]:.1f} % ({worst} bins) | "
             f"{overall(r.confidently_right, r.queries):.1f} % |"
         )
+    lines.extend(confident_errors(rows))
     return "\n".join(lines)
+
+
+def confident_errors(rows: list[ScaleRow], most: int = 8) -> list[str]:
+    """Under the table: each matcher's labels wrong with confidence >= 0.9 over all its rows, as
+    "truth -> label" and their count, most first (the first ``most``); nothing if there are none."""
+    out: list[str] = []
+    for method in dict.fromkeys(r.method for r in rows):
+        total: dict[str, int] = {}
+        for r in rows:
+            if r.method == method:
+                for k, v in r.confident_errors.items():
+                    total[k] = total.get(k, 0) + v
+        if not total:
+            continue
+        pairs = sorted(total.items(), key=lambda kv: (-kv[1], kv[0]))
+        shown = ", ".join(f"{k} {v}" for k, v in pairs[:most])
+        rest = len(pairs) - most
+        more = f", and {rest} other pair{'s' if rest > 1 else ''}" if rest > 0 else ""
+        n = sum(total.values())
+        if not out:
+            out.append("")
+        out.append(f"Confidently wrong, {method} ({n} label{'s' if n > 1 else ''}; truth -> label): {shown}{more}.")
+    return out
