@@ -68,10 +68,13 @@ def test_a_subscriber_keeps_its_labels_while_the_attack_runs(bench: dict[str, di
     assert not row["changed"], f"{attack} changed the daemon's settings: {row['changed']}"
     # A label for every frame the camera gave (none missed, none dropped by the daemon), and no
     # stall (the flood stalled every subscriber for its whole 10 s before the fixes). The simulated
-    # camera renders inside tofmatd on the same two cores as the attacker: its own rate may sag when
-    # an attacker spins, so the rate bound is loose; docs/benchmarks.md has the measured figures.
+    # camera renders inside tofmatd on the same two cores as the attacker (and, under pytest -n 2,
+    # beside another test): its own rate may sag, so the labels are held to the camera's rate over
+    # the same window, and the camera to the quiet test's floor of 10 frames/s (a daemon the attack
+    # starved would fall under it); docs/benchmarks.md has the measured figures.
     assert s["missed_frames"] == 0 and row["frames_dropped"] == 0, (attack, s, row["frames_dropped"])
-    assert s["rate"] >= 0.6 * quiet["stats"]["rate"], (attack, s)
+    assert s["camera_fps"] >= 10.0, (attack, s)
+    assert s["rate"] >= 0.85 * s["camera_fps"] * 30 / 36 - 1.0, (attack, s)
     assert s["gap_ms"] < 250.0 and s["max_ms"] < 250.0, (attack, s)
     # Memory and log bounded: 240,976 warning lines in 15 s before the fixes.
     assert row["peak_rss_mb"] < quiet["peak_rss_mb"] + 32.0, (attack, row["peak_rss_mb"])
