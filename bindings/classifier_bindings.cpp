@@ -38,8 +38,9 @@ struct Result {
   bool unknown = false;
 };
 
-Result to_result(const ExemplarTable& table, const Classification& c, const Calibration& calibration) {
-  const Verdict v = judge(c, table.n_rows(), calibration);
+Result to_result(const ExemplarTable& table, const Classification& c, const Calibration& calibration,
+                 const std::vector<double>& vagueness) {
+  const Verdict v = judge(c, table.n_rows(), calibration, vagueness);
   Result r;
   r.unknown = v.unknown;
   r.ranking.reserve(c.ranking.size());
@@ -145,7 +146,7 @@ class Classifier {
       pyb::gil_scoped_release nogil;
       c = core_classify(q.data(), static_cast<std::size_t>(q.size()));
     }
-    return to_result(*table_, c, calibration_);
+    return to_result(*table_, c, calibration_, vagueness());
   }
 
   // A finished sweep's whole query moves the learned session (learning=True only).
@@ -188,7 +189,8 @@ class Classifier {
     }
     std::vector<Result> out;
     out.reserve(n);
-    for (const auto& c : cs) out.push_back(to_result(*table_, c, calibration_));
+    const auto& vague = vagueness();
+    for (const auto& c : cs) out.push_back(to_result(*table_, c, calibration_, vague));
     return out;
   }
 
@@ -220,6 +222,20 @@ class Classifier {
   }
   std::shared_ptr<ExemplarTable> table() const { return table_; }
   const Calibration& calibration() const { return calibration_; }
+  // The session matcher's candidate_vagueness() per table material (empty for eq12); a learner's
+  // scorers share its noise model.
+  const std::vector<double>& vagueness() const {
+    static const std::vector<double> none;
+    const auto* s = session_reference();
+    return s ? s->vagueness() : none;
+  }
+  std::optional<pyb::array_t<double>> vagueness_array() const {
+    if (!session_reference()) return std::nullopt;
+    const auto& v = vagueness();
+    pyb::array_t<double> a(static_cast<pyb::ssize_t>(v.size()));
+    std::copy(v.begin(), v.end(), a.mutable_data());
+    return a;
+  }
 
  private:
   std::vector<pyb::ssize_t> shape() const {
@@ -402,6 +418,10 @@ void register_classifier(pyb::module_& m) {
       .def_property_readonly("prior", &Classifier::prior, "The session matcher's settings (None for eq12).")
       .def_property_readonly("noise_mm", &Classifier::noise_mm,
                              "The session matcher's noise per material and row, mm (None for eq12).")
+      .def_property_readonly("vagueness", &Classifier::vagueness_array,
+                             "Per table material, how much noisier than the table's typical candidate its "
+                             "noise model is (>= 1; tofmat::candidate_vagueness): a best match's fit is judged "
+                             "at the typical noise by this factor before it tempers the confidence (None for eq12).")
       .def_property_readonly("calibration", &Classifier::calibration,
                              "Confidence and open-set settings in effect (default: Calibration.tuned(method), its "
                              "thresholds only with open_set=True).")

@@ -69,6 +69,27 @@ TEST(Calibration, ABestMatchThatFitsWorseThanItsNoiseFlattensTheProbabilities) {
   EXPECT_DOUBLE_EQ(fit_tempering(Match{0, 0.0, 9, std::numeric_limits<double>::infinity()}), 1e6);
 }
 
+TEST(Calibration, ABestMatchThatFitsOnlyByItsWideNoiseIsNoConfidentLabel) {
+  // A candidate 10 x noisier than the table's typical one whose fit is half what its own noise allows
+  // (Q/n = 0.5) explains the query five times worse than the typical noise does: T x 5.
+  Calibration c;
+  c.temperatures = {{1.0, 2.0}};
+  const double a = 2.0 / 81.0;
+  const double z_half = (std::cbrt(0.5) - 1.0 + a) / std::sqrt(a);
+  const Match vague{1, 0.0, 9, z_half};
+  EXPECT_NEAR(fit_tempering(vague), 1.0, 1e-12);  // at its own noise: no tempering
+  EXPECT_NEAR(fit_tempering(vague, 10.0), 5.0, 1e-9);
+  // A vagueness under 1 (a candidate quieter than the typical) or NaN never sharpens the confidence.
+  EXPECT_NEAR(fit_tempering(vague, 0.1), 1.0, 1e-12);
+  EXPECT_NEAR(fit_tempering(vague, std::numeric_limits<double>::quiet_NaN()), 1.0, 1e-12);
+  // judge() takes the best match's vagueness by its table index: the same ranking, other tables.
+  const Classification cl = ranking({{1, 0.0, 9, z_half}, {0, 10.0 * std::log(2.0), 9, 40.0}});
+  EXPECT_NEAR(judge(cl, 1, c).probability[0], 1.0 / (1.0 + std::pow(2.0, -5.0)), 1e-9);  // T = 2
+  EXPECT_NEAR(judge(cl, 1, c, {1.0, 10.0}).probability[0], 2.0 / 3.0, 1e-9);             // T = 10
+  EXPECT_NEAR(judge(cl, 1, c, {10.0, 1.0}).probability[0], 1.0 / (1.0 + std::pow(2.0, -5.0)), 1e-9);
+  EXPECT_NEAR(judge(cl, 1, c, {1.0}).probability[0], 1.0 / (1.0 + std::pow(2.0, -5.0)), 1e-9);  // (short: 1)
+}
+
 TEST(Calibration, TheSweepsLengthChoosesTheThreshold) {
   Calibration c;
   c.temperatures = {{1.0, 1.0}};

@@ -24,6 +24,8 @@
 #include "daemon_frames.hpp"
 #include "test_util.hpp"
 #include "tofmat/core/compact_table.hpp"
+#include "tofmat/core/confidence.hpp"
+#include "tofmat/core/session_classifier.hpp"
 #include "tofmat/daemon/region_matcher.hpp"
 
 namespace {
@@ -158,6 +160,29 @@ TEST_P(RegionMatcherBackends, TheSessionClassifierForgivesASessionsOffset) {
   EXPECT_FALSE(session.unknown(*b));
   const LabelEvent f = eq12.label_event(*a, 3);
   EXPECT_TRUE(f.confidence && !f.fit);
+}
+
+TEST_P(RegionMatcherBackends, AVagueBestMatchGivesAFlatterConfidence) {
+  // fakeleather's curve is the real table's roughest (its vagueness 3.5: its element variance over
+  // the table's typical one). A noisy sweep of it is labelled fakeleather with the confidence
+  // judge() gives with the session matcher's vagueness (the fit judged at the table's typical
+  // noise): 0.70 against 0.998 at fakeleather's own noise.
+  const auto table = real_table();
+  const std::uint32_t fake = material_index(*table, "fakeleather");
+  const auto vagueness = tofmat::SessionClassifier(table, tofmat::SessionPrior::tuned(*table)).vagueness();
+  ASSERT_GT(vagueness[fake], 3.0);
+  RegionMatcher session(table, {}, GetParam(), tofmat::daemon::Method::kSession);
+  sweep(session, "fakeleather", 40, 30, 3, 100.0);  // (100 counts of sample noise: its fit about 4)
+  const auto c = session.classify();
+  ASSERT_TRUE(c);
+  ASSERT_EQ(c->best().index, fake);
+  const auto calibration = tofmat::Calibration::tuned("session", *table);
+  const double with = judge(*c, table->n_rows(), calibration, vagueness).confidence();
+  const double without = judge(*c, table->n_rows(), calibration).confidence();
+  const LabelEvent e = session.label_event(*c, 3);
+  ASSERT_TRUE(e.confidence);
+  EXPECT_DOUBLE_EQ(*e.confidence, with);
+  EXPECT_LT(with, without);
 }
 
 TEST_P(RegionMatcherBackends, ASweepNoMaterialExplainsIsUnknown) {

@@ -165,6 +165,31 @@ TEST(SessionClassifier, AFitIsTheChiSquaresDeviate) {
   EXPECT_NEAR(clf.classify(q.data(), q.size()).best().fit, chi_square_deviate(want_q, n), 1e-9);
 }
 
+TEST(SessionClassifier, AMaterialNoisierThanTheTablesTypicalOneIsVague) {
+  // Element variance (noise_scale sigma)^2 + floor^2 over the row's median, averaged over the rows.
+  SessionPrior p;
+  p.offset_sd_mm = {1.0, 1.0};
+  p.noise_scale = 2.0;
+  p.floor_mm = 0.0;
+  // Rows of sigma 0.1, 0.1, 1.0 (variances 0.04, 0.04, 4: median 0.04) and 0.2, 0.1, 0.1 (0.16, 0.04, 0.04).
+  const std::vector<double> noise = {0.1, 0.2, 0.1, 0.1, 1.0, 0.1};
+  const auto v = candidate_vagueness(noise, 2, p);
+  ASSERT_EQ(v.size(), 3u);
+  EXPECT_NEAR(v[0], (1.0 + 4.0) / 2.0, 1e-12);
+  EXPECT_NEAR(v[1], 1.0, 1e-12);
+  EXPECT_NEAR(v[2], (100.0 + 1.0) / 2.0, 1e-12);
+  // The floor is everyone's: with one of 2 mm no material is much noisier than another.
+  p.floor_mm = 2.0;
+  for (double x : candidate_vagueness(noise, 2, p)) EXPECT_LT(x, 1.6);
+  EXPECT_THROW(candidate_vagueness(noise, 4, p), std::invalid_argument);  // 6 values are not 4 rows
+  // The classifier's own, from its noise and prior.
+  std::vector<float> values(3 * 2 * 8);
+  for (std::size_t i = 0; i < values.size(); ++i) values[i] = static_cast<float>(i % 5);
+  p.floor_mm = 0.0;
+  const SessionClassifier clf(table_of(values, 3, 2, 8), p, noise);
+  EXPECT_EQ(clf.vagueness(), candidate_vagueness(noise, 2, p));
+}
+
 TEST(SessionClassifier, BadSettingsAndQueriesAreClearErrors) {
   auto t = table_of(std::vector<float>(2 * 4, 0.0f), 1, 2, 4);
   SessionPrior p = SessionPrior::tuned(*t);

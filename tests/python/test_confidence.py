@@ -16,7 +16,7 @@ import tofmat
 from tofmat.evaluation.confidence import fit_temperatures, fit_tempering, probabilities, tail_safe
 from tofmat.evaluation.matchers import CompiledSessionMatcher, Eq12Matcher, SessionParams
 from tofmat.evaluation.open_set import choose_thresholds, open_set_curves
-from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, calibrated_json, scored
+from tofmat.evaluation.run import LENGTHS, SPLIT_SEEDS, TAIL_SCALES, TAIL_SESSIONS_FACTOR, calibrated_json, scored
 from tofmat.evaluation.sessions import CurveSessions, calibrated_model, draw_queries, scaled_model
 
 
@@ -27,7 +27,10 @@ def tuning(real_table: tofmat.ExemplarTable):  # type: ignore[no-untyped-def]
     cs = CurveSessions(real_table, model, device, library)
     scaled = [
         draw_queries(
-            CurveSessions(real_table, scaled_model(model, x), device, library), list(LENGTHS), 10, SPLIT_SEEDS["tune"]
+            CurveSessions(real_table, scaled_model(model, x), device, library),
+            list(LENGTHS),
+            10 * TAIL_SESSIONS_FACTOR,
+            SPLIT_SEEDS["tune"],
         )
         for x in TAIL_SCALES
     ]
@@ -80,8 +83,10 @@ def test_a_best_match_that_fits_badly_flattens_the_confidence(real_table: tofmat
     good = clf.classify(q)
     q[0, 40:70] += np.tile(np.array([-3.0, 3.0], dtype=np.float32), 15)  # bin to bin: no session does that
     bad = clf.classify(q)
+    assert clf.vagueness is not None
+    vague = clf.vagueness[bad.ranking[0].index]
     assert fit_tempering([good.ranking[0].fit], [good.ranking[0].valid])[0] == 1.0
-    g = float(fit_tempering([bad.ranking[0].fit], [bad.ranking[0].valid])[0])
+    g = float(fit_tempering([bad.ranking[0].fit], [bad.ranking[0].valid], [vague])[0])
     assert g > 2.0
     # judge() in the C++ core: softmax(-d / (T g)), T the length's (elements over the table's rows).
     t = tofmat.Calibration.tuned("session").temperature(bad.ranking[0].valid / real_table.n_rows)
@@ -89,6 +94,44 @@ def test_a_best_match_that_fits_badly_flattens_the_confidence(real_table: tofmat
     expected = probabilities(d, t * g)[0]
     assert np.allclose([r.probability for r in bad.ranking], expected, rtol=1e-9, atol=1e-12)
     assert bad.confidence < probabilities(d, t)[0][0]
+
+
+def test_a_candidate_that_fits_only_by_its_wide_noise_gives_no_confident_label() -> None:
+    # Two quiet curves and one whose noise is 5 mm (the simulator's aluminium: a dark, specular
+    # material's frames scatter by millimetres). A query of "a" bent in a way no session explains is
+    # explained only by the vague candidate's noise: it wins, but judged at the table's typical noise
+    # it fits no better than the others, so the label is not a confident one.
+    bins = tofmat.BinSpec(600.0, 3.0, 60)
+    x = np.linspace(-1.0, 1.0, 60)
+    curves = np.stack(
+        [np.stack([10.0 + 4.0 * x, -2.0 + x]), np.stack([14.0 - 3.0 * x, 1.0 - x]), np.stack([12.0 + 0 * x, 0 * x])]
+    ).astype(np.float32)
+    table = tofmat.ExemplarTable(["a", "b", "vague"], curves, bins, [(16, 120), (80, 120)])
+    noise = np.array([[0.2, 0.1], [0.2, 0.1], [5.0, 2.0]])
+    clf = tofmat.Classifier(table, method="session", noise_mm=noise)
+    assert clf.vagueness is not None
+    assert clf.vagueness[0] == clf.vagueness[1] == 1.0 and clf.vagueness[2] > 30.0
+    q = curves[0].copy()
+    q[0] += 4.0 * np.sin(12.0 * x).astype(np.float32)  # 4 mm, bin to bin: no offset or drift
+    r = clf.classify(q)
+    assert r.material == "vague"
+    best = r.ranking[0]
+    t = clf.calibration.temperature(best.valid / table.n_rows)
+    d = np.array([[m.distance for m in r.ranking]])
+    at_own_noise = probabilities(d, t * float(fit_tempering([best.fit], [best.valid])[0]))[0][0]
+    assert at_own_noise > 0.99  # what the confidence was before the fit was judged at the typical noise
+    assert r.confidence < 0.9
+    g = float(fit_tempering([best.fit], [best.valid], [clf.vagueness[2]])[0])
+    assert np.allclose([m.probability for m in r.ranking], probabilities(d, t * g)[0], rtol=1e-9, atol=1e-12)
+    # A quiet candidate's label is judged at its own noise, as before: the same query without the bend.
+    clean = clf.classify(curves[0])
+    assert clean.material == "a"
+    best = clean.ranking[0]
+    d = np.array([[m.distance for m in clean.ranking]])
+    g = float(fit_tempering([best.fit], [best.valid])[0])
+    assert clean.confidence == pytest.approx(probabilities(d, t * g)[0][0], rel=1e-9)
+    # Eq. (12) has no noise model: no vagueness.
+    assert tofmat.Classifier(table, method="eq12").vagueness is None
 
 
 def test_a_query_unlike_any_material_is_unknown(real_table: tofmat.ExemplarTable) -> None:

@@ -40,16 +40,17 @@ void validate_lengths(const Knots& knots, const char* what) {
 Calibration Calibration::tuned(const std::string& method) {
   // From `tofmat evaluate --source curves --json`, the tuning split's
   // "temperature" of each method: the Brier score's T, raised until no label
-  // of a length is wrong at a confidence of 0.9 or more on the tuning split at
-  // 0, 0.25, 0.5, 1 and 2 x the calibration's session spreads
+  // of a length is wrong at a confidence of 0.9 or more on the tuning split
+  // (drawn 6 x larger for it) at 0, 0.25, 0.5, 1 and 2 x the calibration's
+  // session spreads, the fit tempered with the candidates' vagueness
   // (tests/python/test_confidence.py fits them again and checks these); and
   // the open-set threshold docs/evaluation.md chose from the tuning split's
   // false-reject curve.
   Calibration c;
   if (method == "eq12") {
-    c.temperatures = {{1, 824.68}, {3, 323.63}, {10, 1071.8}, {30, 518.68}, {100, 363.56}};
+    c.temperatures = {{1, 824.68}, {3, 1726.0}, {10, 1071.8}, {30, 518.68}, {100, 363.56}};
   } else if (method == "session") {
-    c.temperatures = {{1, 2.1412}, {3, 2.7596}, {10, 3.3229}, {30, 7.7083}, {100, 24.602}};
+    c.temperatures = {{1, 2.9874}, {3, 3.4878}, {10, 5.269}, {30, 9.5121}, {100, 15.916}};
     c.unknown_fits = {{1, 1.1329}, {3, 1.8806}, {10, 4.4808}, {30, 7.5325}, {100, 27.353}};
   } else {
     throw std::invalid_argument("calibration: unknown method '" + method + "': 'eq12' or 'session'");
@@ -126,23 +127,28 @@ double sweep_bins(const Classification& c, std::uint32_t n_rows) {
 
 }  // namespace
 
-double fit_tempering(const Match& best) {
+double fit_tempering(const Match& best, double vagueness) {
   if (best.valid == 0 || std::isnan(best.fit)) return 1.0;
   if (std::isinf(best.fit)) return best.fit > 0.0 ? 1e6 : 1.0;  // +inf: fits nothing at all
   // The inverse of chi_square_deviate: Q/n = (1 - a + z sqrt(a))^3, a = 2 / (9n).
   const double a = 2.0 / (9.0 * static_cast<double>(best.valid));
   const double c = std::max(1.0 - a + best.fit * std::sqrt(a), 0.0);
-  return std::clamp(c * c * c, 1.0, 1e6);
+  // At the typical noise the residuals weigh `vagueness` times what they weigh at the candidate's own.
+  const double k = vagueness > 1.0 ? std::min(vagueness, 1e6) : 1.0;  // (NaN: 1)
+  return std::clamp(c * c * c * k, 1.0, 1e6);
 }
 
 bool rejected(const Classification& c, std::uint32_t n_rows, const Calibration& calibration) {
   return !c.ranking.empty() && c.best().fit > calibration.unknown_fit(sweep_bins(c, n_rows));  // false for NaN
 }
 
-Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration) {
+Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration,
+              const std::vector<double>& vagueness) {
   Verdict v;
   if (c.ranking.empty()) return v;
-  const double t = calibration.temperature(sweep_bins(c, n_rows)) * fit_tempering(c.best());
+  const std::uint32_t best_index = c.best().index;
+  const double vague = best_index < vagueness.size() ? vagueness[best_index] : 1.0;
+  const double t = calibration.temperature(sweep_bins(c, n_rows)) * fit_tempering(c.best(), vague);
   // softmax(-d / T), shifted by the best (lowest) score so that no term overflows.
   const double best = c.best().distance;
   double sum = 0.0;

@@ -94,6 +94,32 @@ double chi_square_deviate(double q, double n) {
   return (std::cbrt(std::max(q, 0.0) / n) - (1.0 - a)) / std::sqrt(a);
 }
 
+std::vector<double> candidate_vagueness(const std::vector<double>& noise_mm, std::uint32_t n_rows,
+                                        const SessionPrior& prior) {
+  if (n_rows == 0 || noise_mm.size() % n_rows != 0) {
+    throw std::invalid_argument("candidate_vagueness: the noise is not materials x rows");
+  }
+  const std::size_t materials = noise_mm.size() / n_rows;
+  const auto variance = [&](std::size_t m, std::uint32_t r) {
+    const double s = prior.noise_scale * noise_mm[m * n_rows + r];
+    return s * s + prior.floor_mm * prior.floor_mm;
+  };
+  std::vector<double> typical(n_rows);
+  for (std::uint32_t r = 0; r < n_rows; ++r) {
+    std::vector<double> v(materials);
+    for (std::size_t m = 0; m < materials; ++m) v[m] = variance(m, r);
+    typical[r] = materials ? median(std::move(v)) : 1.0;
+  }
+  std::vector<double> out(materials, 1.0);
+  for (std::size_t m = 0; m < materials; ++m) {
+    double ratio = 0.0;
+    for (std::uint32_t r = 0; r < n_rows; ++r) ratio += variance(m, r) / typical[r];
+    ratio /= n_rows;
+    out[m] = std::isfinite(ratio) ? std::max(1.0, ratio) : 1.0;
+  }
+  return out;
+}
+
 SessionClassifier::SessionClassifier(std::shared_ptr<const ExemplarTable> table, SessionPrior prior,
                                      std::vector<double> noise_mm, std::vector<std::uint32_t> candidates)
     : table_(std::move(table)), prior_(std::move(prior)), noise_(std::move(noise_mm)) {
@@ -124,6 +150,7 @@ SessionClassifier::SessionClassifier(std::shared_ptr<const ExemplarTable> table,
     if (!(s > 0.0 && std::isfinite(s))) s = fill;
   }
   const std::uint32_t rows = table_->n_rows();
+  vagueness_ = candidate_vagueness(noise_, rows, prior_);
   const double drift[2] = {prior_.drift1_sd_mm, prior_.drift2_sd_mm};
   if (std::all_of(prior_.offset_sd_mm.begin(), prior_.offset_sd_mm.end(), [](double s) { return s > 0.0; }))
     degree_[terms_++] = 0;

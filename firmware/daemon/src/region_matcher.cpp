@@ -51,6 +51,12 @@ RegionMatcher::RegionMatcher(std::shared_ptr<const ExemplarTable> table, std::ve
     fixed_ = std::make_shared<const FixedClassifier>(table_, std::move(candidates));
   else
     float_ = std::make_shared<const FloatClassifier>(table_, std::move(candidates));
+  if (session_)
+    vagueness_ = session_->vagueness();
+  else if (fixed_session_)
+    vagueness_ = fixed_session_->reference().vagueness();
+  else if (learner_)  // (its scorers share the tuned prior's noise model: scaling moves only offsets and drift)
+    vagueness_ = SessionClassifier(table_, SessionPrior::tuned(*table_)).vagueness();
 }
 
 RegionMatcher RegionMatcher::twin() const {
@@ -143,7 +149,7 @@ bool RegionMatcher::unknown(const Classification& c) const { return rejected(c, 
 protocol::LabelEvent RegionMatcher::label_event(const Classification& c, int top_k) const {
   protocol::LabelEvent e;
   const auto& names = table_->materials();
-  const Verdict v = judge(c, table_->n_rows(), calibration_);
+  const Verdict v = judge(c, table_->n_rows(), calibration_, vagueness_);
   e.material = v.unknown ? "" : names[c.best().index];
   e.index = v.unknown ? -1 : static_cast<std::int32_t>(c.best().index);
   e.confidence = v.confidence();

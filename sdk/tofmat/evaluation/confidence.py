@@ -9,7 +9,8 @@ how often it is right, averaged over confidence bins by their share of queries.
 
 A matcher with a noise model (the session matcher) divides each query's scores by its best match's
 fit tempering (:func:`fit_tempering`, the C++ core's ``tofmat::fit_tempering``) before the softmax:
-a query the best candidate explains worse than its noise allows gets a flatter confidence."""
+a query the best candidate explains worse than the table's typical noise allows gets a flatter
+confidence (a candidate whose own noise is wide, the simulator's aluminium, explains anything)."""
 
 from __future__ import annotations
 
@@ -31,16 +32,20 @@ TAIL_SHARE = 0.0
 TAIL_FACTORS = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0, 16.0, 24.0, 32.0, 48.0, 64.0, 128.0)
 
 
-def fit_tempering(fit: npt.ArrayLike, valid: npt.ArrayLike) -> F64:
+def fit_tempering(fit: npt.ArrayLike, valid: npt.ArrayLike, vagueness: npt.ArrayLike = 1.0) -> F64:
     """Per query, the factor on the temperature from its best match's fit (the Wilson-Hilferty
-    deviate of Q with ``valid`` degrees of freedom): the reduced chi-square Q/n where it exceeds 1,
-    else 1; 1 where the fit is NaN (no noise model) or nothing was compared; at most 1e6."""
+    deviate of Q with ``valid`` degrees of freedom): the reduced chi-square Q/n judged at the table's
+    typical noise (times ``vagueness``, the best match's ``Classifier.vagueness``; below 1 or NaN
+    counts as 1) where that exceeds 1, else 1; 1 where the fit is NaN (no noise model) or nothing
+    was compared; at most 1e6."""
     z = np.asarray(fit, dtype=np.float64)
     n = np.asarray(valid, dtype=np.float64)
+    k = np.asarray(vagueness, dtype=np.float64)
+    k = np.where(k > 1.0, np.minimum(k, 1e6), 1.0)  # (NaN: 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         a = 2.0 / (9.0 * n)
         c = np.maximum(1.0 - a + z * np.sqrt(a), 0.0)
-        g = np.clip(c**3, 1.0, 1e6)
+        g = np.clip(c**3 * k, 1.0, 1e6)
     g = np.where(np.isposinf(z), 1e6, g)
     return np.asarray(np.where(np.isnan(z) | (n <= 0), 1.0, g), dtype=np.float64)
 

@@ -62,12 +62,16 @@ class _ClassifierMatcher:
         a query no candidate shares an element with."""
         out = np.full((queries.shape[0], self.n), np.inf)
         fit, valid = np.full(queries.shape[0], math.nan), np.zeros(queries.shape[0])
+        vague = np.ones(queries.shape[0])
+        by_material = self.classifier.vagueness
         for i, res in enumerate(self.classifier.classify_batch(queries)):
             for r in res.ranking:
                 out[i, r.index] = r.distance
             if res.ranking:
                 fit[i], valid[i] = res.ranking[0].fit, res.ranking[0].valid
-        return out, fit_tempering(fit, valid)
+                if by_material is not None:
+                    vague[i] = by_material[res.ranking[0].index]
+        return out, fit_tempering(fit, valid, vague)
 
 
 class Eq12Matcher(_ClassifierMatcher):

@@ -5,9 +5,9 @@
 // its scale grows with the sweep, and T depends on the sweep's length in bins
 // (fitted on the evaluation's tuning split by the Brier score, then raised
 // until no label is wrong at 0.9 at any session size tried), times the
-// best match's reduced chi-square when it exceeds 1 (fit_tempering: a query
-// the best candidate explains worse than its noise model allows is one the
-// scores' differences say less about). A best match
+// best match's reduced chi-square at the table's typical noise when it
+// exceeds 1 (fit_tempering: a query the best candidate explains worse than
+// the noise allows is one the scores' differences say less about). A best match
 // whose fit (Match::fit, the session matcher's chi-square deviate) exceeds a
 // threshold explains the query worse than the noise model allows: the label
 // is "unknown", not the nearest material.
@@ -62,14 +62,19 @@ struct Verdict {
 
 // The factor judge() multiplies the temperature by: the best match's reduced
 // chi-square Q/n, recovered from Match::fit (the Wilson-Hilferty deviate of Q
-// with n = Match::valid degrees of freedom), when it exceeds 1, else 1; 1 for
-// a fit of NaN (Eq. (12): no noise model). At most 1e6.
-double fit_tempering(const Match& best);
+// with n = Match::valid degrees of freedom), judged at the table's typical
+// noise (times `vagueness`, candidate_vagueness() of the best match: a
+// candidate that fits only because its own noise is wide does not make a
+// confident label), when that exceeds 1, else 1; 1 for a fit of NaN (Eq.
+// (12): no noise model). At most 1e6. A vagueness below 1 or NaN counts as 1.
+double fit_tempering(const Match& best, double vagueness = 1.0);
 
 // The probabilities of a classification's ranking and whether it is unknown;
 // the sweep's length is the best match's compared elements over the table's
-// rows. A fit of NaN (Eq. (12)) is never unknown.
-Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration);
+// rows. A fit of NaN (Eq. (12)) is never unknown. vagueness: per table
+// material (SessionClassifier::vagueness()), or empty (1 for all).
+Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& calibration,
+              const std::vector<double>& vagueness = {});
 // judge()'s unknown alone, without the probabilities.
 bool rejected(const Classification& c, std::uint32_t n_rows, const Calibration& calibration);
 

@@ -76,6 +76,17 @@ std::vector<double> curve_roughness(const ExemplarTable& table);
 // The Wilson-Hilferty normal deviate of a chi-square value q with n degrees of freedom (n >= 1).
 double chi_square_deviate(double q, double n);
 
+// How vague each material is as a candidate (n_materials values, each >= 1):
+// the mean over rows of its element variance, (noise_scale sigma_m,r)^2 +
+// floor^2, over the median of every material's in that row; 1 where that is
+// less. A candidate k times noisier than the table's typical one explains any
+// query k times more easily (a dark or specular material's curve, whose
+// frames scatter by millimetres); fit_tempering judges a best match's fit at
+// the typical noise with it (confidence.hpp). noise_mm: n_materials x n_rows,
+// every value finite and > 0 (SessionClassifier::noise_mm()).
+std::vector<double> candidate_vagueness(const std::vector<double>& noise_mm, std::uint32_t n_rows,
+                                        const SessionPrior& prior);
+
 class SessionClassifier {
  public:
   // noise_mm: n_materials x n_rows bin noise (empty: the table's noise_mm()
@@ -94,6 +105,8 @@ class SessionClassifier {
   const SessionPrior& prior() const { return prior_; }
   const std::vector<double>& noise_mm() const { return noise_; }
   const std::vector<std::uint32_t>& candidates() const { return candidates_; }
+  // candidate_vagueness() of this matcher's noise and prior, per table material.
+  const std::vector<double>& vagueness() const { return vagueness_; }
   // The nuisance terms with a prior, as derived from the prior (the
   // fixed-point path shares them): how many, each one's Legendre degree, per
   // row their prior variances (mm^2) and the log of their product.
@@ -109,6 +122,7 @@ class SessionClassifier {
   SessionPrior prior_;
   std::vector<double> noise_;  // n_materials x n_rows
   std::vector<std::uint32_t> candidates_;
+  std::vector<double> vagueness_;
   // The nuisance terms with a prior (a zero prior leaves its term out): their
   // Legendre degrees, per row their prior variances, and per row the log of
   // their product (log det S).

@@ -74,6 +74,7 @@ class RegionMatcher {
   std::shared_ptr<const ExemplarTable> table_;
   Backend backend_;
   tofmat::Calibration calibration_;  // (the confidence's, not the camera's)
+  std::vector<double> vagueness_;    // the session matcher's candidate_vagueness() (empty: none)
   // The method's classifier (one of them; immutable, so a twin shares it).
   std::shared_ptr<const FixedClassifier> fixed_;
   std::shared_ptr<const FloatClassifier> float_;
