@@ -130,6 +130,14 @@ def test_a_candidate_that_fits_only_by_its_wide_noise_gives_no_confident_label()
     d = np.array([[m.distance for m in clean.ranking]])
     g = float(fit_tempering([best.fit], [best.valid])[0])
     assert clean.confidence == pytest.approx(probabilities(d, t * g)[0][0], rel=1e-9)
+    # The learner (tofmatd --session-learning) and the fixed-point backend judge it so too.
+    for other in (
+        tofmat.Classifier(table, method="session", noise_mm=noise, learning=True),
+        tofmat.Classifier(table, method="session", noise_mm=noise, backend="fixed"),
+    ):
+        assert other.vagueness is not None and np.allclose(other.vagueness, clf.vagueness)
+        r2 = other.classify(q)
+        assert r2.material == "vague" and r2.confidence < 0.9
     # Eq. (12) has no noise model: no vagueness.
     assert tofmat.Classifier(table, method="eq12").vagueness is None
 
