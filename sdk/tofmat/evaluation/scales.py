@@ -10,6 +10,7 @@ accuracy by sweep length, and the share of labels wrong with a confidence of 0.9
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
@@ -116,12 +117,15 @@ def _row(
 ) -> ScaleRow:
     right = label == truth
     ece, diagram = reliability_of(conf, right)
-    errors: dict[str, int] = {}
-    for i in np.flatnonzero(~right & (conf >= CONFIDENT)):
-        key = f"{names[truth[i]]} -> {names[label[i]]}"
-        errors[key] = errors.get(key, 0) + 1
-    errors = dict(sorted(errors.items(), key=lambda kv: (-kv[1], kv[0])))
-    return ScaleRow(scale, method, *by_length(right, conf >= CONFIDENT, lengths), ece, diagram, yaw_deg, errors)
+    errors = Counter(f"{names[truth[i]]} -> {names[label[i]]}" for i in np.flatnonzero(~right & (conf >= CONFIDENT)))
+    return ScaleRow(
+        scale, method, *by_length(right, conf >= CONFIDENT, lengths), ece, diagram, yaw_deg, _most_first(errors)
+    )
+
+
+def _most_first(counts: Counter[str]) -> dict[str, int]:
+    """The pairs by count, most first (ties by name)."""
+    return dict(sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
 
 
 def learned_labels(model: LearnedClassifier, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -216,14 +220,10 @@ def confident_errors(rows: list[ScaleRow], most: int = 8) -> list[str]:
     "truth -> label" and their count, most first (the first ``most``); nothing if there are none."""
     out: list[str] = []
     for method in dict.fromkeys(r.method for r in rows):
-        total: dict[str, int] = {}
-        for r in rows:
-            if r.method == method:
-                for k, v in r.confident_errors.items():
-                    total[k] = total.get(k, 0) + v
+        total = sum((Counter(r.confident_errors) for r in rows if r.method == method), Counter[str]())
         if not total:
             continue
-        pairs = sorted(total.items(), key=lambda kv: (-kv[1], kv[0]))
+        pairs = list(_most_first(total).items())
         shown = ", ".join(f"{k} {v}" for k, v in pairs[:most])
         rest = len(pairs) - most
         more = f", and {rest} other pair{'s' if rest > 1 else ''}" if rest > 0 else ""
