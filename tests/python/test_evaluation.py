@@ -348,9 +348,22 @@ def test_thickness_among_the_acrylics_with_confusions(real_tmx: Path) -> None:
     assert r.exit_code == 2 and "--sim-materials" in r.output
 
 
-def test_a_small_simulator_run() -> None:
+def test_a_small_simulator_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    from tofmat.evaluation import sim_sessions
+
+    angles: list[float | None] = []
+    draw = sim_sessions.SimSessions.draw
+
+    def spy(self: sim_sessions.SimSessions, *args: object, **kwargs: object) -> object:
+        angles.append(kwargs.get("yaw_deg"))  # type: ignore[arg-type]
+        return draw(self, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(sim_sessions.SimSessions, "draw", spy)
     res = run.evaluate_sim(["wood", "copper", "fakeleather"], 1, lengths=[3, 30])
     assert res.source == "sim" and res.materials == 3
+    # The splits at random angles; the confidence's tail check at each scale at 0 and at 30 degrees.
+    assert angles == [None, None, *[y for _ in run.TAIL_SCALES for y in sim_sessions.TAIL_YAWS_DEG]]
+    assert sim_sessions.TAIL_YAWS_DEG == (0.0, 30.0)
     test = [r for r in res.rows if r.split == "test"]
     assert {r.method for r in test} == {"eq12", "session"}
     assert all(sorted(r.accuracy) == [3, 30] and all(0 <= a <= 100 for a in r.accuracy.values()) for r in test)

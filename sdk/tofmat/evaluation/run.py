@@ -264,14 +264,18 @@ def evaluate_sim(
     """Simulator captures in new sessions against a table the simulated camera recorded
     (:mod:`.sim_sessions`): ``table`` (e.g. ``tofmat sim table``'s), or one recorded here.
     ``learned``: also a learned model trained for that table."""
-    from .sim_sessions import SimSessions, sim_session_model
+    from .sim_sessions import TAIL_YAWS_DEG, SimSessions, sim_session_model
 
     model = sim_session_model(calibrated_json()[0])
     ss = SimSessions(materials, model, progress=progress, table=table)
 
     def draw_scaled(scale: float, seed: int) -> Queries:
         scaled = SimSessions(None, scaled_model(model, scale), table=ss.table)
-        return scaled.draw(list(lengths), sessions_per_material, seed, progress)
+        drawn = [
+            scaled.draw(list(lengths), sessions_per_material, seed + k, progress, yaw_deg=y)
+            for k, y in enumerate(TAIL_YAWS_DEG)
+        ]
+        return Queries(*(np.concatenate([getattr(q, f) for q in drawn]) for f in ("truth", "lengths", "queries")))
 
     return evaluate_source(
         "sim",

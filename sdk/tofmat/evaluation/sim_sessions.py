@@ -23,6 +23,10 @@ from ..tools.sweeps import window_starts
 from .sessions import Queries, SessionModel
 
 YAW_RANGE_DEG = (0.0, 20.0)  # the queries' target orientation (the table's is 10 degrees)
+# The orientations the confidence's tail check renders (run.evaluate_sim), each its own draw: the
+# extremes of the angles docs/evaluation.md measures a table at 10 degrees with (0 to 30), where
+# a label is likeliest to be confidently wrong (a uniform draw puts few sweeps there).
+TAIL_YAWS_DEG = (0.0, 30.0)
 
 
 def sim_session_model(library: dict[str, Any]) -> SessionModel:
