@@ -200,8 +200,9 @@ $(TABLE): check-db
 	$(TOFMAT) table import $(DB) -o $(TABLE)
 
 # tofmatd on the simulated camera (hand-held sweeps of five materials), watched
-# through the Python client; records the simulated camera's table once (and again when the
-# file there is an older tofmat's, without a depth distortion: --keep-current keeps a current one).
+# through the Python client; records the simulated camera's table once and calibrates it for itself
+# (again when the file there is an older tofmat's, without a depth distortion: --keep-current keeps a
+# current one, and calibrates it if it has no calibration yet).
 SIM_TABLE := build/sim_table.tmx
 .PHONY: $(SIM_TABLE)
 $(SIM_TABLE):

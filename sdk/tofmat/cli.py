@@ -62,7 +62,8 @@ _sim_table_option = click.option(
     "--table",
     "table_path",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Table for the daemon (default: the simulated camera's own, recorded once into build/).",
+    help="Table for the daemon (default: the simulated camera's own, recorded and calibrated once into build/, "
+    "about 10 minutes).",
 )
 
 
@@ -166,7 +167,7 @@ def table_info(path: Path, as_json: bool) -> None:
                f"{g.count} samples every {g.width_mm:g} mm of measured depth from {g.start_mm + g.width_mm / 2:g} mm"))  # fmt: skip
     c = t.calibration
     click.echo("calibration: " + ("built-in (tuned on the real database's curves)" if c is None else
-               "its own (tofmat table calibrate): session row offsets "
+               "its own (tofmat table calibrate, tofmat sim table): session row offsets "
                + ", ".join(f"{v:.2f}" for v in c["offset_sd_mm"]) + " mm; " + ", ".join(sorted(c["methods"]))))  # fmt: skip
     for i, (name, n) in enumerate(zip(t.materials, t.valid_counts, strict=True)):
         sd = "" if noise is None else "  noise " + " ".join("-" if np.isnan(v) else f"{v:.3f}" for v in noise[i])
@@ -553,11 +554,12 @@ def _slab_library(material: str) -> MaterialLibrary:
 
 
 def _sim_table() -> Path:
-    """The simulated camera's own table, recorded once into build/ (a minute or so the first time)."""
-    from .tools.live_demo import ensure_sim_table
+    """The simulated camera's own table, recorded and calibrated once into build/ (about 7 minutes the
+    first time)."""
+    from .sim.own_table import ensure_sim_table
 
     path = Path("build/sim_table.tmx")
-    with progress_bar(f"recording the simulated camera's table into {path} (once)") as progress:
+    with progress_bar(f"recording and calibrating the simulated camera's table into {path} (once)") as progress:
         return ensure_sim_table(path, progress)
 
 

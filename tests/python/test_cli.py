@@ -323,3 +323,61 @@ def test_table_calibrate_stores_the_tables_own_calibration(real_table, tmp_path:
     before = one.read_bytes()
     assert_clean_error(run("table", "calibrate", one, ok=False), "one material")
     assert one.read_bytes() == before
+
+
+def test_sim_table_calibrates_the_table_it_records(tmp_path: Path) -> None:
+    # Two materials, one rendered session a material and split: a short calibration.
+    small = ["--materials", "cork,paper", "--bins", "20"]
+    cal = tmp_path / "cal.tmx"
+    p = run("sim", "table", *small, "--calibration-sessions", "1", "-o", cal)
+    assert "calibrated on 1 sessions" in p.stdout, p.stdout
+    c = tofmat.ExemplarTable.load(cal).calibration
+    assert c is not None and set(c["methods"]) == {"eq12", "session"}
+    assert [k[0] for k in c["methods"]["session"]["temperatures"]][:3] == [1.0, 3.0, 10.0]  # (20 bins: no 100)
+    # 0: recorded only; --keep-current then calibrates that table in place, its recording kept.
+    bare = tmp_path / "bare.tmx"
+    assert "not calibrated" in run("sim", "table", *small, "--calibration-sessions", "0", "-o", bare).stdout
+    recorded = tofmat.ExemplarTable.load(bare)
+    assert recorded.calibration is None
+    p = run("sim", "table", "--keep-current", "--calibration-sessions", "1", "-o", bare)
+    assert "current, not calibrated; calibrated" in p.stdout, p.stdout
+    kept = tofmat.ExemplarTable.load(bare)
+    assert kept.calibration is not None and kept.materials == ["cork", "paper"]
+    assert np.array_equal(kept.features, recorded.features, equal_nan=True)
+    # A calibrated current table is kept as it is.
+    before = bare.read_bytes()
+    assert "kept" in run("sim", "table", "--keep-current", "-o", bare).stdout
+    assert bare.read_bytes() == before
+    # The calibration renders with the default simulator: another device with a calibration asked
+    # for is a clear error, nothing written; by default such a table is recorded uncalibrated.
+    from tofmat.sim import DEFAULT_DEVICE, data_dir
+
+    device = tmp_path / "my_kinect.json"
+    shutil.copy(data_dir() / "devices" / f"{DEFAULT_DEVICE}.json", device)
+    other = tmp_path / "other.tmx"
+    err = assert_clean_error(
+        run("sim", "table", *small, "--device", device, "--calibration-sessions", "2", "-o", other, ok=False),
+        "--calibration-sessions",
+    )
+    assert "default device" in err and not other.exists()
+    assert "not calibrated" in run("sim", "table", *small, "--device", device, "-o", other).stdout
+    assert tofmat.ExemplarTable.load(other).calibration is None
+    # One material has nothing to calibrate a choice on.
+    assert_clean_error(run("sim", "table", "--materials", "cork", "-o", other, ok=False), "one material")
+
+
+def test_the_commands_own_sim_table_is_calibrated_once(tmp_path: Path) -> None:
+    # What `tofmat demo` and the other commands without --table use (build/sim_table.tmx).
+    from tofmat.sim.own_table import ensure_sim_table
+
+    path = tmp_path / "sim_table.tmx"
+    run("sim", "table", "--materials", "cork,paper", "--bins", "20", "--calibration-sessions", "0", "-o", path)
+    recorded, first = tofmat.ExemplarTable.load(path), path.read_bytes()
+    assert ensure_sim_table(path, sessions=0) == path and path.read_bytes() == first  # 0: not calibrated, kept
+    ensure_sim_table(path, sessions=1)  # current, not calibrated: calibrated, its recording kept
+    kept = tofmat.ExemplarTable.load(path)
+    assert kept.calibration is not None and kept.materials == ["cork", "paper"]
+    assert np.array_equal(kept.features, recorded.features, equal_nan=True)
+    before = path.read_bytes()
+    ensure_sim_table(path, sessions=1)  # current and calibrated: kept as it is
+    assert path.read_bytes() == before

@@ -152,7 +152,8 @@ def _run_on_a_terminal(args: list[str]) -> tuple[int, str]:
 
 
 def test_long_jobs_show_a_progress_bar_on_a_terminal_and_none_with_q(tmp_path: Path) -> None:
-    args = ["sim", "table", "--materials", "cork,paper,wood", "--bins", "20", "-o", str(tmp_path / "t.tmx")]
+    args = ["sim", "table", "--materials", "cork,paper,wood", "--bins", "20", "--calibration-sessions", "0"]
+    args += ["-o", str(tmp_path / "t.tmx")]
     rc, err = _run_on_a_terminal(args)
     assert rc == 0, err
     assert "recording materials" in err and "3/3" in err, err  # what it does, and how far it is

@@ -82,7 +82,7 @@ def test_sim_table_records_the_range_asked_and_keeps_a_current_table(real_table:
 
     def sim_table(*extra: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "tofmat", "sim", "table", "--materials", "cork,paper", "--bins",
-                               "41", "--range", "1200,1600", "-o", str(out), *extra], capture_output=True, text=True,
+                               "41", "--range", "1200,1600", "--calibration-sessions", "0", "-o", str(out), *extra], capture_output=True, text=True,
                               timeout=300)  # fmt: skip
 
     p = sim_table()

@@ -8,7 +8,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import click
 import numpy as np
@@ -25,6 +25,10 @@ from . import (
     load_device,
     load_library,
 )
+from .own_table import CALIBRATION_SESSIONS
+
+if TYPE_CHECKING:
+    from .. import ExemplarTable
 
 
 @click.group("sim", cls=TofmatGroup)
@@ -309,35 +313,83 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
     "--keep-current",
     is_flag=True,
     help="Leave OUTPUT as it is if it already holds a table with a depth distortion (a table of an older "
-    "tofmat, without one, is recorded again).",
+    "tofmat, without one, is recorded again; a current one without a calibration is calibrated).",
+)
+@click.option(
+    "--calibration-sessions",
+    type=click.IntRange(0, 1000),
+    help="Calibrate the recorded table for itself (tofmat table calibrate --source sim) on this many rendered "
+    "sessions a material and split; 0: leave it uncalibrated (tofmatd then uses the built-in calibration, "
+    f"tuned on the real curves). Default: {CALIBRATION_SESSIONS} with the default device and library, 0 with "
+    "others (the calibration renders its sessions with the default simulator).",
 )
 @click.option(
     "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx)."
 )
 def table_cmd(device: str, library: str, materials: str | None, n_bins: int, depth_range: list[float], yaw: float,
-              keep_current: bool, output: Path) -> None:  # fmt: skip
-    """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against)."""
+              keep_current: bool, calibration_sessions: int | None, output: Path) -> None:  # fmt: skip
+    """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against),
+    and calibrate it for itself: the sessions the calibration renders take about 8 s a material at the
+    default 6 (about 4 minutes for the whole library)."""
     from .. import ExemplarTable
     from .table import database_bins, simulated_table
 
     if len(depth_range) != 2 or not depth_range[0] < depth_range[1]:
         raise click.BadParameter("give START,END with START < END", param_hint="--range")
+    default_sim = device == DEFAULT_DEVICE and library == DEFAULT_LIBRARY
+    if calibration_sessions is None:
+        calibration_sessions = CALIBRATION_SESSIONS if default_sim else 0
+    elif calibration_sessions > 0 and not default_sim:
+        raise click.BadParameter(
+            "the calibration renders its sessions with the default device and library; give 0 with others",
+            param_hint="--calibration-sessions",
+        )
     if keep_current and output.is_file():
         try:
-            if ExemplarTable.load(str(output)).distortion_mm is not None:
-                click.echo(f"{output}: current (it has a depth distortion); kept")
-                return
+            current = ExemplarTable.load(str(output))
         except (OSError, ValueError) as e:  # (FormatError is a ValueError)
             click.echo(f"{output}: not a table this tofmat reads ({e}); recording it again", err=True)
+        else:
+            if current.distortion_mm is not None:
+                if current.calibration is None and calibration_sessions > 0:
+                    _calibrate_sim_table(current, calibration_sessions, output, "current, not calibrated")
+                    return
+                click.echo(f"{output}: current (it has a depth distortion); kept")
+                return
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
+    if calibration_sessions > 0 and len(set(names)) < 2:
+        raise click.BadParameter(
+            "a table of one material has nothing to calibrate a choice on: give --calibration-sessions 0",
+            param_hint="--materials",
+        )
     t0 = time.perf_counter()
     bins = database_bins(n_bins, depth_range[0], depth_range[1])
     with progress_bar("recording materials") as progress:
         table = simulated_table(r, names, bins, yaw_deg=yaw, progress=progress)
     output.parent.mkdir(parents=True, exist_ok=True)
-    table.save(str(output))
-    click.echo(
-        f"{output}: {len(names)} materials x 2 rows x {n_bins} bins of {bins.width_mm:.3f} mm from "
+    recorded = (
+        f"{len(names)} materials x 2 rows x {n_bins} bins of {bins.width_mm:.3f} mm from "
         f"{bins.start_mm:g} mm, recorded in {time.perf_counter() - t0:.1f} s"
     )
+    if calibration_sessions == 0:
+        table.save(str(output))
+        click.echo(f"{output}: {recorded}; not calibrated")
+        return
+    _calibrate_sim_table(table, calibration_sessions, output, recorded)
+
+
+def _calibrate_sim_table(table: ExemplarTable, sessions: int, output: Path, what: str) -> None:
+    """Calibrate a table the simulated camera recorded (own_table.calibrated) and write it to
+    ``output`` (ExemplarTable.save replaces it atomically): nothing is written if the calibration fails."""
+    from .own_table import calibrated
+
+    t0 = time.perf_counter()
+    try:
+        with progress_bar("calibrating") as progress:
+            done = calibrated(table, sessions, progress)
+    except (ValueError, RuntimeError) as e:
+        raise click.ClickException(f"calibrating {output}: {e}") from e
+    done.save(str(output))
+    click.echo(f"{output}: {what}; calibrated on {sessions} sessions a material and split in "
+               f"{time.perf_counter() - t0:.1f} s")  # fmt: skip

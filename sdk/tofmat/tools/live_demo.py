@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .._progress import Progress
 from ..client import Client, DaemonUnavailableError, Label, daemon_binary, sim_data_dir
 
 
@@ -152,22 +151,4 @@ def run_live_demo(
     return result
 
 
-def ensure_sim_table(path: Path, progress: Progress | None = None) -> Path:
-    """The simulated camera's own table (tofmat sim table), recorded once into ``path`` (again when
-    the file there predates tables with a depth distortion)."""
-    if path.is_file():
-        from .. import ExemplarTable
-
-        if ExemplarTable.load(str(path)).distortion_mm is not None:
-            return path
-    from ..sim import Renderer, load_device, load_library
-    from ..sim.table import database_bins, simulated_table
-
-    r = Renderer(load_device(), load_library())
-    table = simulated_table(r, list(r.library.names), database_bins(), progress=progress)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    table.save(str(path))
-    return path
-
-
-__all__ = ["DemoResult", "connect", "ensure_sim_table", "run_live_demo", "start_daemon", "stop_daemon"]
+__all__ = ["DemoResult", "connect", "run_live_demo", "start_daemon", "stop_daemon"]

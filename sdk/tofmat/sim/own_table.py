@@ -1,0 +1,55 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""The simulated camera's own table, recorded and calibrated for itself, as a box does with its camera.
+
+A table carries its own calibration (the session prior, the confidence temperatures and the open-set
+thresholds of ``tofmat table calibrate``); without one, tofmatd falls back on the built-in one, which
+was tuned on the real database's curves and is too sharp for rendered sweeps at angles away from the
+table's (docs/evaluation.md). So the simulated camera's table is calibrated on sessions the simulator
+renders as soon as it is recorded.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .. import ExemplarTable
+from .._progress import Progress
+
+# Rendered sessions a material and split the calibration draws (as docs/evaluation.md's simulator
+# figures are drawn): about 6 minutes for the whole library on one core.
+CALIBRATION_SESSIONS = 6
+
+
+def calibrated(
+    table: ExemplarTable, sessions: int = CALIBRATION_SESSIONS, progress: Progress | None = None
+) -> ExemplarTable:
+    """``table`` (recorded by the default simulated camera) with the calibration its own rendered
+    sessions give. Raises ValueError for a table of one material."""
+    from ..evaluation.table_calibration import calibrate_table
+
+    if len(table.materials) < 2:
+        raise ValueError("a table of one material has nothing to calibrate a choice on")
+    return calibrate_table(table, "sim", sessions, progress)[0]
+
+
+def ensure_sim_table(path: Path, progress: Progress | None = None, sessions: int = CALIBRATION_SESSIONS) -> Path:
+    """The default simulated camera's table of the whole library at ``path``: kept if the file there is
+    current and calibrated; calibrated if it is current without a calibration (and ``sessions`` > 0);
+    recorded (and calibrated) again if it is missing or an older tofmat's, without a depth distortion.
+    The file is replaced atomically, so an interrupted run leaves the one before."""
+    from . import Renderer, load_device, load_library
+    from .table import database_bins, simulated_table
+
+    table = ExemplarTable.load(str(path)) if path.is_file() else None
+    if table is not None and table.distortion_mm is None:
+        table = None
+    if table is not None and (table.calibration is not None or sessions == 0):
+        return path
+    if table is None:
+        r = Renderer(load_device(), load_library())
+        table = simulated_table(r, list(r.library.names), database_bins(), progress=progress)
+    if sessions > 0:
+        table = calibrated(table, sessions, progress)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    table.save(str(path))
+    return path
