@@ -329,8 +329,8 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
 def table_cmd(device: str, library: str, materials: str | None, n_bins: int, depth_range: list[float], yaw: float,
               keep_current: bool, calibration_sessions: int | None, output: Path) -> None:  # fmt: skip
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against),
-    and calibrate it for itself: the sessions the calibration renders take about 8 s a material at the
-    default 6 (about 4 minutes for the whole library)."""
+    and calibrate it for itself: the sessions the calibration renders take about 18 s a material at the
+    default 6 (about 9 minutes for the whole library on one core)."""
     from .. import ExemplarTable
     from .table import database_bins, simulated_table
 
