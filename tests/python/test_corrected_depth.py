@@ -82,8 +82,8 @@ def test_sim_table_records_the_range_asked_and_keeps_a_current_table(real_table:
 
     def sim_table(*extra: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run([sys.executable, "-m", "tofmat", "sim", "table", "--materials", "cork,paper", "--bins",
-                               "41", "--range", "1200,1600", "--calibration-sessions", "0", "-o", str(out), *extra], capture_output=True, text=True,
-                              timeout=300)  # fmt: skip
+                               "41", "--range", "1200,1600", "--calibration-sessions", "0", "-o", str(out), *extra],
+                              capture_output=True, text=True, timeout=300)  # fmt: skip
 
     p = sim_table()
     assert p.returncode == 0, p.stderr
@@ -98,7 +98,12 @@ def test_sim_table_records_the_range_asked_and_keeps_a_current_table(real_table:
     # A table of an older tofmat (no depth distortion) is recorded again.
     _small(real_table, ["cork"]).save(str(out))
     p = sim_table("--keep-current")
-    assert p.returncode == 0 and "kept" not in p.stdout
+    assert p.returncode == 0 and "kept" not in p.stdout and "without a depth distortion" in p.stderr
+    assert tofmat.ExemplarTable.load(str(out)).distortion_mm is not None
+    # So is a file that is no table at all, saying why.
+    out.write_bytes(b"not a table")
+    p = sim_table("--keep-current")
+    assert p.returncode == 0 and "not a table this tofmat reads" in p.stderr, p.stderr
     assert tofmat.ExemplarTable.load(str(out)).distortion_mm is not None
 
 

@@ -51,7 +51,10 @@ def calibrate_table(
     table: ExemplarTable, source: str, sessions: int, progress: Progress | None = None
 ) -> tuple[ExemplarTable, SourceResult]:
     """``table`` carrying the calibration its evaluation gives (``source``: "curves" for a table of
-    the real database's curves, "sim" for one the simulated camera recorded), and the evaluation."""
+    the real database's curves, "sim" for one the simulated camera recorded), and the evaluation.
+    Raises ValueError for a table of one material (nothing to calibrate a choice on)."""
+    if len(table.materials) < 2:
+        raise ValueError("a table of one material has nothing to calibrate a choice on")
     if source == "curves":
         result = evaluate_curves(table, sessions, progress=progress)
     elif source == "sim":

@@ -25,7 +25,7 @@ from . import (
     load_device,
     load_library,
 )
-from .own_table import CALIBRATION_SESSIONS
+from .own_table import CALIBRATION_SESSIONS, current_table
 
 if TYPE_CHECKING:
     from .. import ExemplarTable
@@ -331,7 +331,6 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, dep
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against),
     and calibrate it for itself: the sessions the calibration renders take about 18 s a material at the
     default 6 (about 9 minutes for the whole library on one core)."""
-    from .. import ExemplarTable
     from .table import database_bins, simulated_table
 
     if len(depth_range) != 2 or not depth_range[0] < depth_range[1]:
@@ -345,17 +344,15 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, dep
             param_hint="--calibration-sessions",
         )
     if keep_current and output.is_file():
-        try:
-            current = ExemplarTable.load(str(output))
-        except (OSError, ValueError) as e:  # (FormatError is a ValueError)
-            click.echo(f"{output}: not a table this tofmat reads ({e}); recording it again", err=True)
+        current, why = current_table(output)
+        if current is None:
+            click.echo(f"{output}: {why}; recording it again", err=True)
+        elif current.calibration is None and calibration_sessions > 0:
+            _calibrate_sim_table(current, calibration_sessions, output, "current, not calibrated")
+            return
         else:
-            if current.distortion_mm is not None:
-                if current.calibration is None and calibration_sessions > 0:
-                    _calibrate_sim_table(current, calibration_sessions, output, "current, not calibrated")
-                    return
-                click.echo(f"{output}: current (it has a depth distortion); kept")
-                return
+            click.echo(f"{output}: current (it has a depth distortion); kept")
+            return
     r = _renderer(device, library)
     names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
     if calibration_sessions > 0 and len(set(names)) < 2:

@@ -20,29 +20,35 @@ from .._progress import Progress
 CALIBRATION_SESSIONS = 6
 
 
-def calibrated(
-    table: ExemplarTable, sessions: int = CALIBRATION_SESSIONS, progress: Progress | None = None
-) -> ExemplarTable:
+def current_table(path: Path) -> tuple[ExemplarTable | None, str]:
+    """The table at ``path`` and "" if it is current (this tofmat reads it and it has a depth
+    distortion); else None and why it must be recorded again."""
+    try:
+        table = ExemplarTable.load(str(path))
+    except (OSError, ValueError) as e:  # (FormatError is a ValueError)
+        return None, f"not a table this tofmat reads ({e})"
+    if table.distortion_mm is None:
+        return None, "an older tofmat's table, without a depth distortion"
+    return table, ""
+
+
+def calibrated(table: ExemplarTable, sessions: int, progress: Progress | None = None) -> ExemplarTable:
     """``table`` (recorded by the default simulated camera) with the calibration its own rendered
-    sessions give. Raises ValueError for a table of one material."""
+    sessions give (table_calibration.calibrate_table). Raises ValueError for a table of one material."""
     from ..evaluation.table_calibration import calibrate_table
 
-    if len(table.materials) < 2:
-        raise ValueError("a table of one material has nothing to calibrate a choice on")
     return calibrate_table(table, "sim", sessions, progress)[0]
 
 
 def ensure_sim_table(path: Path, progress: Progress | None = None, sessions: int = CALIBRATION_SESSIONS) -> Path:
     """The default simulated camera's table of the whole library at ``path``: kept if the file there is
     current and calibrated; calibrated if it is current without a calibration (and ``sessions`` > 0);
-    recorded (and calibrated) again if it is missing or an older tofmat's, without a depth distortion.
+    recorded (and calibrated) again if it is missing, unreadable or an older tofmat's (current_table).
     The file is replaced atomically, so an interrupted run leaves the one before."""
     from . import Renderer, load_device, load_library
     from .table import database_bins, simulated_table
 
-    table = ExemplarTable.load(str(path)) if path.is_file() else None
-    if table is not None and table.distortion_mm is None:
-        table = None
+    table = current_table(path)[0] if path.is_file() else None
     if table is not None and (table.calibration is not None or sessions == 0):
         return path
     if table is None:
