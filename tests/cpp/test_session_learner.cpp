@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <random>
 #include <stdexcept>
@@ -36,6 +37,7 @@ SessionLearning two_scales(double forget = 1.0, double cap = 10.0) {
   s.scales = {0.0, 1.0};
   s.forget = forget;
   s.evidence_cap = cap;
+  s.prior_weights = {};  // equal
   return s;
 }
 
@@ -43,7 +45,7 @@ const float kQuery[1] = {0.0f};
 
 TEST(SessionLearner, TheMixturesScoreIsMinusTheLogOfTheWeightedLikelihoods) {
   // Scale 0 prefers candidate 0 strongly, scale 1 candidate 1 mildly.
-  SessionLearner l(two_scales(), {fixed_scores({1.0, 5.0}), fixed_scores({3.0, 2.0})});
+  SessionLearner l(two_scales(), {fixed_scores({1.0, 5.0}), fixed_scores({3.0, 2.0})}, 1);
   const auto s = l.classify(kQuery, 1);
   ASSERT_EQ(s.mixture.ranking.size(), 2u);
   const double d0 = -std::log(0.5 * std::exp(-1.0) + 0.5 * std::exp(-3.0));
@@ -59,7 +61,7 @@ TEST(SessionLearner, TheMixturesScoreIsMinusTheLogOfTheWeightedLikelihoods) {
 
 TEST(SessionLearner, EvidenceMovesTheWeightsCappedForgottenAndResetBySession) {
   // Scale 1 explains every sweep e^2 better than scale 0 does.
-  SessionLearner l(two_scales(0.5, 10.0), {fixed_scores({4.0, 9.0}), fixed_scores({2.0, 7.0})});
+  SessionLearner l(two_scales(0.5, 10.0), {fixed_scores({4.0, 9.0}), fixed_scores({2.0, 7.0})}, 1);
   EXPECT_DOUBLE_EQ(l.state().weights[0], 0.5);
   const auto sweep = l.classify(kQuery, 1, true);
   const double e = sweep.evidence[1] - sweep.evidence[0];  // 2 nats
@@ -79,7 +81,7 @@ TEST(SessionLearner, EvidenceMovesTheWeightsCappedForgottenAndResetBySession) {
   EXPECT_DOUBLE_EQ(st.weights[0], 0.5);
 
   // One sweep moves a weight by at most the cap.
-  SessionLearner capped(two_scales(1.0, 3.0), {fixed_scores({50.0, 90.0}), fixed_scores({2.0, 7.0})});
+  SessionLearner capped(two_scales(1.0, 3.0), {fixed_scores({50.0, 90.0}), fixed_scores({2.0, 7.0})}, 1);
   capped.learn(capped.classify(kQuery, 1, true));
   st = capped.state();
   EXPECT_NEAR(std::log(st.weights[1] / st.weights[0]), 3.0, 1e-9);
@@ -87,7 +89,7 @@ TEST(SessionLearner, EvidenceMovesTheWeightsCappedForgottenAndResetBySession) {
 
 TEST(SessionLearner, ANegligibleScaleIsNotScoredUnlessEveryScaleIsAskedFor) {
   int calls0 = 0, calls1 = 0;
-  SessionLearner l(two_scales(1.0, 40.0), {fixed_scores({60.0, 70.0}, &calls0), fixed_scores({2.0, 7.0}, &calls1)});
+  SessionLearner l(two_scales(1.0, 40.0), {fixed_scores({60.0, 70.0}, &calls0), fixed_scores({2.0, 7.0}, &calls1)}, 1);
   l.learn(l.classify(kQuery, 1, true));  // scale 0 now ~58 nats down (under the 30 of kNegligibleNats)
   calls0 = calls1 = 0;
   const auto s = l.classify(kQuery, 1);
@@ -116,13 +118,72 @@ TEST(SessionLearner, BadSettingsAreRefusedByName) {
   s.evidence_cap = std::nan("");
   EXPECT_THROW(s.validate(), std::invalid_argument);
   s.evidence_cap = 10.0;
+  EXPECT_THROW(s.validate(), std::invalid_argument);  // the default's six prior weights, two scales
+  s.prior_weights = {1.0, 0.0};
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.prior_weights = {1.0, 3.0};
+  s.long_sweep_scale = 0.5;  // not one of the scales
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.long_sweep_bins = 0;  // no long sweeps: the scale is not used
   EXPECT_NO_THROW(s.validate());
-  EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0})}), std::invalid_argument);  // 1 scorer, 2 scales
-  SessionLearner l(s, {fixed_scores({1.0}), fixed_scores({1.0})});
+  s.long_sweep_bins = 20;
+  s.long_sweep_scale = 1.0;
+  EXPECT_NO_THROW(s.validate());
+  EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0})}, 1), std::invalid_argument);  // 1 scorer, 2 scales
+  EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 0), std::invalid_argument);
+  SessionLearner two_rows(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 2);
+  const float three[3] = {0.0f, 0.0f, 0.0f};
+  EXPECT_THROW(two_rows.classify(three, 3), std::invalid_argument);  // 3 elements are not 2 rows
+  SessionLearner l(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 1);
   SessionLearner::Scored wrong;
   wrong.evidence = {0.0, 0.0, 0.0};
   EXPECT_THROW(l.learn(wrong), std::invalid_argument);
   EXPECT_THROW(scaled(SessionPrior{}, -1.0), std::invalid_argument);
+}
+
+TEST(SessionLearner, ASessionStartsAndRestartsFromThePriorWeights) {
+  SessionLearning s = two_scales();
+  s.prior_weights = {1.0, 3.0};
+  SessionLearner l(s, {fixed_scores({1.0, 5.0}), fixed_scores({3.0, 2.0})}, 1);
+  const auto fresh = l.state();
+  EXPECT_NEAR(fresh.weights[0], 0.25, 1e-12);
+  EXPECT_NEAR(fresh.weights[1], 0.75, 1e-12);
+  const auto sc = l.classify(kQuery, 1, true);
+  EXPECT_NEAR(sc.mixture.ranking[0].distance, -std::log(0.25 * std::exp(-1.0) + 0.75 * std::exp(-3.0)), 1e-12);
+  l.learn(sc);
+  EXPECT_GT(l.state().weights[0], 0.25);  // scale 0 explains the sweep better (evidence -0.98 against -1.69)
+  l.reset();
+  EXPECT_NEAR(l.state().weights[0], 0.25, 1e-12);
+  EXPECT_EQ(l.state().sweeps, 0u);
+}
+
+TEST(SessionLearner, ALongSweepScoresTheWideScalesAsTheLongSweepScale) {
+  SessionLearning s;
+  s.scales = {0.0, 1.0, 2.0};
+  s.prior_weights = {};
+  s.long_sweep_bins = 3;
+  s.long_sweep_scale = 1.0;
+  int calls2 = 0;
+  // Scale 2 alone prefers candidate 1.
+  SessionLearner l(s, {fixed_scores({4.0, 6.0}), fixed_scores({2.0, 3.0}), fixed_scores({5.0, 1.0}, &calls2)}, 1);
+  const float nan = std::nanf("");
+  const float short_sweep[4] = {0.0f, 0.0f, nan, nan};  // 2 bins
+  const float long_sweep[4] = {0.0f, nan, 0.0f, 0.0f};  // 3 bins
+  const auto by_own = l.classify(short_sweep, 4);
+  EXPECT_EQ(calls2, 1);
+  EXPECT_EQ(by_own.mixture.best().index, 1u);
+  EXPECT_NEAR(by_own.mixture.best().distance, -std::log((std::exp(-6.0) + std::exp(-3.0) + std::exp(-1.0)) / 3.0),
+              1e-12);
+  const auto as_one = l.classify(long_sweep, 4);
+  EXPECT_EQ(calls2, 1);  // scale 2 enters as scale 1 and is not scored
+  EXPECT_EQ(as_one.mixture.best().index, 0u);
+  EXPECT_NEAR(as_one.mixture.best().distance, -std::log((std::exp(-4.0) + 2.0 * std::exp(-2.0)) / 3.0), 1e-12);
+  EXPECT_EQ(as_one.evidence[2], -std::numeric_limits<double>::infinity());
+  // Learning still weighs scale 2 by its own evidence.
+  const auto every = l.classify(long_sweep, 4, true);
+  EXPECT_EQ(calls2, 2);
+  EXPECT_NEAR(every.evidence[2], std::log(std::exp(-5.0) + std::exp(-1.0)), 1e-12);
+  EXPECT_EQ(every.mixture.best().index, 0u);
 }
 
 // Two materials 1.2 mm apart on row 0 (equal on row 1), 40 bins, noise 0.2 mm.

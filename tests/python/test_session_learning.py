@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-"""The matcher that learns its session (``Classifier(..., learning=True)``, tofmatd's default;
+"""The matcher that learns its session (``Classifier(..., learning=True)``, tofmatd --session-learning;
 firmware/core/include/tofmat/core/session_learner.hpp): its score is the mixture of the session
 matcher under scaled priors, its weights follow the sweeps it learns from, and on sessions of many
 sweeps of the real curves it does what docs/evaluation.md says."""
@@ -15,9 +15,11 @@ from click.testing import CliRunner
 
 import tofmat
 from tofmat.cli import main
-from tofmat.evaluation.sequences import MATCHERS, evaluate_sequences, margins
+from tofmat.evaluation.sequences import MATCHERS, UNLEARNED, evaluate_sequences, margins
 
 SCALES = [0.0, 0.25, 0.5, 1.0, 2.0, 4.0]
+# The weights a session starts from (SessionLearning::prior_weights): the calibration's scale and twice it.
+PRIOR_WEIGHTS = [0.02, 0.02, 0.02, 0.70, 0.20, 0.04]
 
 
 def scaled(prior: tofmat.SessionPrior, s: float) -> tofmat.SessionPrior:
@@ -45,7 +47,8 @@ def test_the_score_is_the_mixture_of_the_scaled_session_matchers(real_table: tof
     learning = tofmat.Classifier(real_table, learning=True)
     prior = tofmat.SessionPrior.tuned(real_table)
     by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
-    # Before any sweep the weights are equal; after three they are what the sweeps' evidence made them.
+    # Before any sweep the weights are the prior's; after three they are what the sweeps' evidence made them.
+    assert learning.session["weights"] == pytest.approx(PRIOR_WEIGHTS)
     for k in range(4):
         q = sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 12, rng)
         got = {r.material: r.distance for r in learning.classify(q).ranking}
@@ -61,7 +64,25 @@ def test_the_score_is_the_mixture_of_the_scaled_session_matchers(real_table: tof
     # Sweeps read straight off the table: a session that did not move.
     assert s["weights"][0] > 0.9 and s["scale"] < 0.1
     learning.reset_session()
-    assert learning.session["sweeps"] == 0 and learning.session["weights"] == pytest.approx([1 / 6] * 6)
+    assert learning.session["sweeps"] == 0 and learning.session["weights"] == pytest.approx(PRIOR_WEIGHTS)
+
+
+def test_a_long_sweep_is_scored_no_wider_than_the_calibrations_scale(real_table: tofmat.ExemplarTable) -> None:
+    # From 20 bins on, the scales above 1 enter the mixture with scale 1's scores; at 19 with their own.
+    rng = np.random.default_rng(4)
+    prior = tofmat.SessionPrior.tuned(real_table)
+    by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
+    for n, held in ((19, False), (20, True)):
+        learning = tofmat.Classifier(real_table, learning=True)
+        q = sweep(real_table, "wood", 50, n, rng, offset=(1.5, 0.5))
+        per = [{r.material: r.distance for r in c.classify(q).ranking} for c in by_scale]
+        for r in learning.classify(q).ranking:
+            terms = [
+                math.log(w) - per[SCALES.index(1.0) if held and s > 1.0 else k][r.material]
+                for k, (s, w) in enumerate(zip(SCALES, PRIOR_WEIGHTS, strict=True))
+            ]
+            want = -float(np.logaddexp.reduce(terms))
+            assert r.distance == pytest.approx(want, abs=1e-6 * max(1.0, abs(want))), (n, r.material)
 
 
 def test_a_moved_session_is_learned_on_either_backend(real_table: tofmat.ExemplarTable) -> None:
@@ -104,9 +125,14 @@ def test_on_sessions_of_many_sweeps_the_learner_keeps_up_with_the_better_matcher
     # the calibration's spread, sweeps of 10 and 30 bins.
     rows = evaluate_sequences(real_table, scales=(0.0, 1.0), n_sessions=40, sweeps_per_session=6, lengths=(10, 30))
     assert {r.matcher for r in rows} == set(MATCHERS)
-    assert {r.stage for r in rows} == {"1st", "2nd-4th", "5th on"}
-    gap = margins(rows)
     by = {(r.scale, r.matcher, r.stage): r for r in rows}
+    assert {r.stage for r in rows} == {"1st", "2nd-4th", "5th on", UNLEARNED}
+    # Every sweep of the split, the learner with its prior weights only: it labels each as a first sweep.
+    assert all(sum(by[(s, m, UNLEARNED)].sweeps.values()) == 40 * 6 for s in (0.0, 1.0) for m in MATCHERS)
+    gap = margins(rows)
+    # With its prior weights it is near the better of the two at either spread (docs: within 5 points on
+    # 5,800 sweeps a scale; 120 a cell here).
+    assert all(gap[(s, UNLEARNED)][n] > -8.0 for s in (0.0, 1.0) for n in (10, 30)), gap
     # Unmoved: Eq. (12) beats the session matcher at 10 bins; from the fifth sweep on the learner
     # is within a few points of it (40 sessions: 80 sweeps a cell), and far above the session matcher.
     assert by[(0.0, "eq12", "5th on")].accuracy[10] > by[(0.0, "session", "5th on")].accuracy[10]

@@ -27,6 +27,21 @@ double log_sum_exp(const std::vector<double>& v) {
   return top + std::log(s);
 }
 
+// How many bins of a query of n_rows rows have a value in any row.
+std::uint32_t bins_covered(const float* query, std::size_t n, std::uint32_t n_rows) {
+  const std::size_t bins = n / n_rows;
+  std::uint32_t covered = 0;
+  for (std::size_t b = 0; b < bins; ++b) {
+    for (std::size_t r = 0; r < n_rows; ++r) {
+      if (std::isfinite(query[r * bins + b])) {
+        ++covered;
+        break;
+      }
+    }
+  }
+  return covered;
+}
+
 }  // namespace
 
 void SessionLearning::validate() const {
@@ -40,6 +55,18 @@ void SessionLearning::validate() const {
   if (!(forget > 0.0 && forget <= 1.0)) throw std::invalid_argument("session learning: forget must be in (0, 1]");
   if (!(evidence_cap > 0.0) || std::isinf(evidence_cap))
     throw std::invalid_argument("session learning: evidence_cap must be finite and > 0");
+  if (!prior_weights.empty()) {
+    if (prior_weights.size() != scales.size()) {
+      throw std::invalid_argument("session learning: " + std::to_string(prior_weights.size()) + " prior weights for " +
+                                  std::to_string(scales.size()) + " scales");
+    }
+    for (double w : prior_weights) {
+      if (!(w > 0.0) || std::isinf(w))
+        throw std::invalid_argument("session learning: a prior weight must be finite and > 0");
+    }
+  }
+  if (long_sweep_bins > 0 && std::find(scales.begin(), scales.end(), long_sweep_scale) == scales.end())
+    throw std::invalid_argument("session learning: long_sweep_scale must be one of the scales");
 }
 
 SessionPrior scaled(const SessionPrior& prior, double scale) {
@@ -52,14 +79,21 @@ SessionPrior scaled(const SessionPrior& prior, double scale) {
   return p;
 }
 
-SessionLearner::SessionLearner(SessionLearning settings, std::vector<Scorer> scorers)
-    : settings_(std::move(settings)), scorers_(std::move(scorers)) {
+SessionLearner::SessionLearner(SessionLearning settings, std::vector<Scorer> scorers, std::uint32_t n_rows)
+    : settings_(std::move(settings)), scorers_(std::move(scorers)), n_rows_(n_rows) {
   settings_.validate();
   if (scorers_.size() != settings_.scales.size()) {
     throw std::invalid_argument("session learning: " + std::to_string(scorers_.size()) + " scorers for " +
                                 std::to_string(settings_.scales.size()) + " scales");
   }
-  log_weight_.assign(settings_.scales.size(), 0.0);
+  if (n_rows_ == 0) throw std::invalid_argument("session learning: a query has at least one row");
+  if (settings_.long_sweep_bins > 0) {
+    const auto at = std::find(settings_.scales.begin(), settings_.scales.end(), settings_.long_sweep_scale);
+    long_scale_ = static_cast<std::size_t>(at - settings_.scales.begin());
+  }
+  log_prior_.assign(settings_.scales.size(), 0.0);
+  for (std::size_t k = 0; k < settings_.prior_weights.size(); ++k) log_prior_[k] = std::log(settings_.prior_weights[k]);
+  log_weight_ = log_prior_;
 }
 
 std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const ExemplarTable>& table,
@@ -78,11 +112,19 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
       scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
     }
   }
-  return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers));
+  return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers), table->n_rows());
 }
 
 SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t n, bool every_scale) const {
   const std::size_t k_count = scorers_.size();
+  if (n % n_rows_ != 0) {
+    throw std::invalid_argument("session learning: a query of " + std::to_string(n) + " elements is not " +
+                                std::to_string(n_rows_) + " rows");
+  }
+  // (scored_as[k]: whose scores scale k enters the mixture with; itself but in a long sweep)
+  std::vector<std::size_t> scored_as(k_count);
+  const bool long_sweep = settings_.long_sweep_bins > 0 && bins_covered(query, n, n_rows_) >= settings_.long_sweep_bins;
+  for (std::size_t k = 0; k < k_count; ++k) scored_as[k] = long_sweep && k > long_scale_ ? long_scale_ : k;
   std::vector<double> log_w;
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -92,8 +134,13 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   for (double& w : log_w) w -= norm;
   double heaviest = -kInf;
   for (double w : log_w) heaviest = std::max(heaviest, w);
-  std::vector<bool> scored(k_count);
-  for (std::size_t k = 0; k < k_count; ++k) scored[k] = every_scale || log_w[k] >= heaviest - kNegligibleNats;
+  std::vector<bool> weighed(k_count);  // enters the mixture
+  std::vector<bool> scored(k_count);   // its scorer runs
+  for (std::size_t k = 0; k < k_count; ++k) {
+    weighed[k] = log_w[k] >= heaviest - kNegligibleNats;
+    if (weighed[k]) scored[scored_as[k]] = true;
+  }
+  if (every_scale) std::fill(scored.begin(), scored.end(), true);
 
   std::vector<Classification> by_scale(k_count);
   std::size_t first = k_count;  // the first scored scale: its ranking gives the candidates' order
@@ -127,9 +174,13 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   std::vector<double> terms(k_count);
   for (std::size_t i = 0; i < m_count; ++i) {
     std::size_t likeliest = first;
+    double top = -kInf;
     for (std::size_t k = 0; k < k_count; ++k) {
-      terms[k] = scored[k] ? log_w[k] + neg_score[k][i] : -kInf;
-      if (terms[k] > terms[likeliest]) likeliest = k;
+      terms[k] = weighed[k] ? log_w[k] + neg_score[scored_as[k]][i] : -kInf;
+      if (terms[k] > top) {
+        top = terms[k];
+        likeliest = scored_as[k];
+      }
     }
     Match m = *std::find_if(by_scale[likeliest].ranking.begin(), by_scale[likeliest].ranking.end(),
                             [&](const Match& x) { return x.index == order[i]; });
@@ -168,7 +219,7 @@ void SessionLearner::learn(const Scored& sweep) {
 
 void SessionLearner::reset() {
   std::lock_guard<std::mutex> lock(mutex_);
-  std::fill(log_weight_.begin(), log_weight_.end(), 0.0);
+  log_weight_ = log_prior_;
   sweeps_ = 0;
 }
 

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
 """Sessions of many sweeps: how the matcher that learns its session (``Classifier(...,
-learning=True)``, what tofmatd runs by default) does from a session's first sweep on.
+learning=True)``, tofmatd --session-learning) does from a session's first sweep on.
 
 A box labels many sweeps in one capture session, and what the session does to the curves (row
 offsets, the waveform's state) is common to all of them. Each session here is drawn once with the
@@ -26,6 +26,9 @@ from .sessions import CurveSessions
 MATCHERS = ("eq12", "session", "learning")
 # A sweep's place in its session, as reported: the first, the second to fourth, the fifth on.
 STAGES = ((0, 1, "1st"), (1, 4, "2nd-4th"), (4, None, "5th on"))
+# Every sweep of the split with the learner's prior weights (nothing learned): how it labels a
+# session's first sweep, measured on ten times as many sweeps as the first sweeps themselves.
+UNLEARNED = "every, unlearned"
 
 
 @dataclass(frozen=True)
@@ -103,6 +106,12 @@ def _label(sweeps: list[_Sweep], table: ExemplarTable) -> dict[str, tuple[np.nda
         sure.append(r.confidence >= CONFIDENT)
         learning.learn(s.query)
     out["learning"] = (np.array(right), np.array(sure))
+    learning.reset_session()
+    results = learning.classify_batch(np.stack([s.query for s in sweeps]))  # (classify does not learn)
+    out[UNLEARNED] = (
+        np.array([r.index == s.truth for r, s in zip(results, sweeps, strict=True)]),
+        np.array([r.confidence >= CONFIDENT for r in results]),
+    )
     return out
 
 
@@ -131,6 +140,9 @@ def evaluate_sequences(
                 in_stage = (position >= lo) & (position < (hi if hi is not None else sweeps_per_session))
                 if in_stage.any():
                     rows.append(SequenceRow(scale, name, stage, *by_length(right, sure, length, in_stage)))
+            if sweeps_per_session > 1:  # (with one sweep a session, "1st" is every sweep already)
+                right, sure = labelled[UNLEARNED if name == "learning" else name]
+                rows.append(SequenceRow(scale, name, UNLEARNED, *by_length(right, sure, length)))
     return rows
 
 
