@@ -3,7 +3,8 @@
 // (issue 5). A benchmark, not a test: it prints figures and never fails on
 // timing (it exits non-zero only on bad options or a missing database).
 //
-//   tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|frame|unpack|unpack_roi|unpack_region]
+//   tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|session|learning|frame|unpack|unpack_roi|
+//                            unpack_region]
 //                      [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]
 //
 // --op all (the default) measures everything on this host and prints markdown
@@ -30,6 +31,9 @@
 //   roi     20x20 region decode                     unit: a region
 //   nn      one query, quantised and searched       unit: a query
 //   dist    the distance kernel only (queries quantised in set-up)   unit: a query
+//   session the session matcher, tuned settings                       unit: a query
+//   learning the session learner as a session starts (all six scales
+//            weighed; best: fixed point, float: double)               unit: a query
 //   frame   fixed decode + per-pixel classification                   unit: a frame
 //   unpack      11-bit unpack of a whole depth packet (9 sub-images)   unit: a packet
 //   unpack_roi  the same for output rows 188..236 only (48 rows: the
@@ -69,6 +73,7 @@
 #include "tofmat/core/pixel_classifier.hpp"
 #include "tofmat/core/raw_lut.hpp"
 #include "tofmat/core/session_classifier.hpp"
+#include "tofmat/core/session_learner.hpp"
 #include "tofmat/kinect/constants.hpp"
 #include "tofmat/kinect/raw_unpack.hpp"
 
@@ -289,8 +294,8 @@ struct Options {
 [[noreturn]] void usage(const char* why) {
   std::fprintf(
       stderr,
-      "error: %s\nusage: tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|session|frame|unpack|unpack_roi|\n"
-      "                          unpack_region]\n"
+      "error: %s\nusage: tofmat_bench_fixed [--op all|stiff|decode|roi|nn|dist|session|learning|frame|unpack|\n"
+      "                          unpack_roi|unpack_region]\n"
       "                          [--kernel best|scalar|float|reference] [--reps N] [--db DIR] [--window BINS]\n",
       why);
   std::exit(2);
@@ -318,15 +323,15 @@ Options parse(int argc, char** argv) {
       usage(("unknown option " + a).c_str());
     }
   }
-  const std::vector<std::string> ops{"all",     "stiff", "decode", "roi",        "nn",           "dist",
-                                     "session", "frame", "unpack", "unpack_roi", "unpack_region"};
+  const std::vector<std::string> ops{"all",   "stiff",  "decode",     "roi",           "nn",      "dist", "session",
+                                     "frame", "unpack", "unpack_roi", "unpack_region", "learning"};
   if (std::find(ops.begin(), ops.end(), o.op) == ops.end()) usage("unknown --op");
   if (o.kernel != "best" && o.kernel != "scalar" && o.kernel != "float" && o.kernel != "reference") {
     usage("unknown --kernel");
   }
   const bool unpack = o.op == "unpack" || o.op == "unpack_roi" || o.op == "unpack_region";
   if (o.kernel == "float" && (o.op == "dist" || o.op == "frame" || unpack))
-    usage("--kernel float is for decode, roi, nn and session");
+    usage("--kernel float is for decode, roi, nn, session and learning");
   if (o.kernel == "reference" && o.op != "unpack" && o.op != "unpack_roi") {
     usage("--kernel reference is for unpack and unpack_roi");
   }
@@ -413,6 +418,18 @@ int run_single(const Options& o) {
       for (long r = 0; r < reps; ++r) {
         for (const auto& q : qs) g_sink = g_sink + fs.classify(q.v.data(), q.v.size()).best().index;
       }
+    }
+  } else if (o.op == "learning") {  // the session learner as a session starts: every scale weighed, a whole query
+    const auto table = load_table(o.db);
+    std::vector<Query> qs = make_queries(*table);
+    if (o.window != 0) {
+      qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != o.window; }), qs.end());
+    }
+    units = qs.size();
+    if (o.kernel == "scalar") usage("--op learning runs the fixed path's best kernel or the float one");
+    const auto learner = SessionLearner::make(table, SessionPrior::tuned(*table), o.kernel != "float");
+    for (long r = 0; r < reps; ++r) {
+      for (const auto& q : qs) g_sink = g_sink + learner->classify(q.v.data(), q.v.size()).mixture.best().index;
     }
   } else if (o.op == "frame") {
     const auto table = load_table(o.db);
