@@ -283,6 +283,15 @@ std::vector<Query> make_queries(const ExemplarTable& t) {
   return out;
 }
 
+// make_queries(t), only those of `window` bins (0: all five lengths): the --window of the single ops.
+std::vector<Query> queries_of_window(const ExemplarTable& t, std::uint32_t window) {
+  std::vector<Query> qs = make_queries(t);
+  if (window != 0) {
+    qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != window; }), qs.end());
+  }
+  return qs;
+}
+
 // ---------------------------------------------------------------- options
 
 struct Options {
@@ -332,6 +341,7 @@ Options parse(int argc, char** argv) {
   const bool unpack = o.op == "unpack" || o.op == "unpack_roi" || o.op == "unpack_region";
   if (o.kernel == "float" && (o.op == "dist" || o.op == "frame" || unpack))
     usage("--kernel float is for decode, roi, nn, session and learning");
+  if (o.kernel == "scalar" && o.op == "learning") usage("--op learning runs the best kernel or float");
   if (o.kernel == "reference" && o.op != "unpack" && o.op != "unpack_roi") {
     usage("--kernel reference is for unpack and unpack_roi");
   }
@@ -372,10 +382,7 @@ int run_single(const Options& o) {
     }
   } else if (o.op == "nn" || o.op == "dist") {
     const auto table = load_table(o.db);
-    std::vector<Query> qs = make_queries(*table);
-    if (o.window != 0) {
-      qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != o.window; }), qs.end());
-    }
+    const std::vector<Query> qs = queries_of_window(*table, o.window);
     units = qs.size();
     if (o.kernel == "float") {
       const FloatClassifier fl(table);
@@ -402,10 +409,7 @@ int run_single(const Options& o) {
     }
   } else if (o.op == "session") {  // the session-robust matcher, tuned settings, a whole query
     const auto table = load_table(o.db);
-    std::vector<Query> qs = make_queries(*table);
-    if (o.window != 0) {
-      qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != o.window; }), qs.end());
-    }
+    const std::vector<Query> qs = queries_of_window(*table, o.window);
     units = qs.size();
     const SessionPrior prior = SessionPrior::tuned(*table);
     if (o.kernel == "float") {
@@ -421,12 +425,8 @@ int run_single(const Options& o) {
     }
   } else if (o.op == "learning") {  // the session learner as a session starts: every scale weighed, a whole query
     const auto table = load_table(o.db);
-    std::vector<Query> qs = make_queries(*table);
-    if (o.window != 0) {
-      qs.erase(std::remove_if(qs.begin(), qs.end(), [&](const Query& q) { return q.window != o.window; }), qs.end());
-    }
+    const std::vector<Query> qs = queries_of_window(*table, o.window);
     units = qs.size();
-    if (o.kernel == "scalar") usage("--op learning runs the fixed path's best kernel or the float one");
     const auto learner = SessionLearner::make(table, SessionPrior::tuned(*table), o.kernel != "float");
     for (long r = 0; r < reps; ++r) {
       for (const auto& q : qs) g_sink = g_sink + learner->classify(q.v.data(), q.v.size()).mixture.best().index;
