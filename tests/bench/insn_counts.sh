@@ -99,3 +99,17 @@ for window in 1 10 100 0; do
     'BEGIN { printf "| %s | %d | %d | %d | %d | %.2f |\n", l, e, f, x, n, f / n }'
 done
 window=0
+
+# The session learner (tofmatd's default, session_learner.hpp) as a session
+# starts: a query scored under all six scaled priors (four in a sweep of 20
+# bins or more) on the fixed path with NEON, against the session matcher alone.
+echo
+echo "| session learner: query of | session fixed (NEON) | learner fixed (NEON), every scale | learner / session |"
+echo "|---|---:|---:|---:|"
+for window in 1 10 100 0; do
+  n=$(per_unit session best)
+  l=$(per_unit learning best)
+  label=$([ "$window" = 0 ] && echo "all five lengths" || echo "$window bin$([ "$window" = 1 ] || echo s)")
+  awk -v lb="$label" -v n="$n" -v l="$l" 'BEGIN { printf "| %s | %d | %d | %.2f |\n", lb, n, l, l / n }'
+done
+window=0

@@ -14,6 +14,8 @@
 #include <limits>
 #include <random>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "test_util.hpp"
 
@@ -173,6 +175,79 @@ TEST(FixedSessionClassifier, StiffCases) {
   const auto c = fixed.classify(ex.data(), ex.size());
   expect_close(c, ref.classify(ex.data(), ex.size()), "the curve itself");
   EXPECT_EQ(table->materials()[c.best().index], "cork");
+}
+
+// The session learner's scales in one call: each scale's scores those of a
+// matcher of its own scaled prior to the bit (the same order, distances, fits
+// and counts), over settings, lengths, a candidate subset, the table's holes
+// and both kernels; a scale not asked for is left empty.
+TEST(FixedSessionClassifier, ScoresUnderEveryScaleAsEachScaledMatcherDoesToTheBit) {
+  ASSERT_DB_PRESENT();
+  const auto table = real_table();
+  const std::vector<double> scales{0.0, 0.25, 1.0, 2.0, 4.0};
+  std::mt19937 rng(23);
+  int queries = 0;
+  for (const auto& s : settings(*table)) {
+    for (const FixedKernel kernel : {FixedKernel::kBest, FixedKernel::kScalar}) {
+      for (const std::vector<std::uint32_t>& candidates : {std::vector<std::uint32_t>{}, {2, 5, 11, 17, 23}}) {
+        const FixedSessionClassifier all(table, s.prior, {}, candidates, kernel, scales);
+        EXPECT_EQ(all.scales(), scales);
+        std::vector<FixedSessionClassifier> each;
+        for (const double x : scales)
+          each.emplace_back(table, scaled(s.prior, x), std::vector<double>{}, candidates, kernel);
+        for (std::uint32_t length : {1u, 3u, 10u, 30u, 100u, 200u}) {
+          for (std::size_t m = 0; m < table->n_materials(); m += 7) {
+            const auto q = session_sweep(*table, m, length, rng);
+            if (std::none_of(q.begin(), q.end(), [](float x) { return !std::isnan(x); })) continue;
+            std::vector<bool> wanted(scales.size(), true);
+            wanted[1] = length % 2 == 0;  // (some calls leave a scale out)
+            std::vector<Classification> got;
+            try {
+              got = all.classify_scaled(q.data(), q.size(), wanted);
+            } catch (const std::invalid_argument&) {  // no candidate shares an element: each says so too
+              EXPECT_THROW(each[0].classify(q.data(), q.size()), std::invalid_argument);
+              continue;
+            }
+            ASSERT_EQ(got.size(), scales.size());
+            for (std::size_t j = 0; j < scales.size(); ++j) {
+              const std::string what = std::string(s.name) + ", scale " + std::to_string(scales[j]) + ", " +
+                                       std::to_string(length) + " bins";
+              if (!wanted[j]) {
+                EXPECT_TRUE(got[j].ranking.empty()) << what;
+                continue;
+              }
+              const auto want = each[j].classify(q.data(), q.size());
+              ASSERT_EQ(got[j].ranking.size(), want.ranking.size()) << what;
+              for (std::size_t i = 0; i < want.ranking.size(); ++i) {
+                EXPECT_EQ(got[j].ranking[i].index, want.ranking[i].index) << what;
+                EXPECT_EQ(got[j].ranking[i].distance, want.ranking[i].distance) << what;
+                EXPECT_EQ(got[j].ranking[i].fit, want.ranking[i].fit) << what;
+                EXPECT_EQ(got[j].ranking[i].valid, want.ranking[i].valid) << what;
+              }
+            }
+            ++queries;
+          }
+        }
+        // The prior's own matcher is unchanged by the scales it holds.
+        const auto q = session_sweep(*table, 3, 30, rng);
+        const auto a = all.classify(q.data(), q.size());
+        const auto b = FixedSessionClassifier(table, s.prior, {}, candidates, kernel).classify(q.data(), q.size());
+        ASSERT_EQ(a.ranking.size(), b.ranking.size());
+        for (std::size_t i = 0; i < a.ranking.size(); ++i) EXPECT_EQ(a.ranking[i].distance, b.ranking[i].distance);
+      }
+    }
+  }
+  EXPECT_GT(queries, 100);
+  const FixedSessionClassifier two(table, SessionPrior::tuned(*table), {}, {}, FixedKernel::kBest, {0.0, 1.0});
+  std::vector<float> q(table->elements_per_material(), std::nanf(""));
+  q[40] = 1.0f;
+  EXPECT_THROW(two.classify_scaled(q.data(), q.size(), {true}), std::invalid_argument);  // a flag per scale
+  EXPECT_TRUE(FixedSessionClassifier(table, SessionPrior::tuned(*table)).scales().empty());
+  EXPECT_THROW(FixedSessionClassifier(table, SessionPrior::tuned(*table), {}, {}, FixedKernel::kBest, {1.0, -1.0}),
+               std::invalid_argument);
+  EXPECT_THROW(FixedSessionClassifier(table, SessionPrior::tuned(*table), {}, {}, FixedKernel::kBest,
+                                      {std::numeric_limits<double>::infinity()}),
+               std::invalid_argument);
 }
 
 TEST(FixedSessionClassifier, TheFloatReferencesErrors) {

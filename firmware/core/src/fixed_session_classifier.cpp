@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <stdexcept>
+#include <string>
 
 #include "fixed_session_kernel.hpp"
 #include "session_solve.hpp"
@@ -60,10 +62,11 @@ struct QueryRow {
 
 FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const ExemplarTable>& table, SessionPrior prior,
                                                std::vector<double> noise_mm, std::vector<std::uint32_t> candidates,
-                                               FixedKernel kernel)
+                                               FixedKernel kernel, const std::vector<double>& scales)
     : reference_(table, std::move(prior), std::move(noise_mm), std::move(candidates)),
       eq12_(table, reference_.candidates(), FixedKernel::kScalar),
-      kernel_(kernel) {
+      kernel_(kernel),
+      scales_(scales) {
   const std::uint32_t bins = table->n_bins(), rows = table->n_rows();
   const int k = reference_.terms();
   for (int t = 0; t < k; ++t) {
@@ -97,24 +100,65 @@ FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const Exemp
       noise_.push_back(n);
     }
   }
-  for (std::uint32_t r = 0; r < rows; ++r) {
-    std::array<double, kMaxTerms> pv{};
-    for (int t = 0; t < k; ++t)
-      pv[static_cast<std::size_t>(t)] = reference_.prior_var(r)[static_cast<std::size_t>(t)] / step2;
-    prior_var_steps_.push_back(pv);
-    log_det_prior_steps_.push_back(reference_.log_det_prior(r) - k * std::log(step2));
+  prior_ = prior_steps(reference_);
+  for (const double scale : scales_) {
+    // (the scaled prior's terms, variances and their logs as its own matcher derives them: the
+    // scores are then that matcher's to the bit; a scale > 0 keeps the prior's terms, 0 has none)
+    const SessionClassifier r(table, scaled(p, scale), reference_.noise_mm(), reference_.candidates());
+    scaled_.push_back(prior_steps(r));
   }
 }
 
+FixedSessionClassifier::PriorSteps FixedSessionClassifier::prior_steps(const SessionClassifier& reference) const {
+  const double step = eq12_.compact().step_mm(), step2 = step * step;
+  const int k = reference.terms();
+  if (k != 0 && k != reference_.terms())  // (never: scaling keeps every term or none)
+    throw std::logic_error("fixed session matcher: a scaled prior with other nuisance terms");
+  PriorSteps out;
+  out.terms = k;
+  for (std::uint32_t r = 0; r < reference.table().n_rows(); ++r) {
+    std::array<double, kMaxTerms> pv{};
+    for (int t = 0; t < k; ++t)
+      pv[static_cast<std::size_t>(t)] = reference.prior_var(r)[static_cast<std::size_t>(t)] / step2;
+    out.var.push_back(pv);
+    out.log_det.push_back(reference.log_det_prior(r) - k * std::log(step2));
+  }
+  return out;
+}
+
 Classification FixedSessionClassifier::classify(const float* query, std::size_t n) const {
+  std::vector<Classification> out(1);
+  score(query, n, {&prior_}, out);
+  return std::move(out[0]);
+}
+
+std::vector<Classification> FixedSessionClassifier::classify_scaled(const float* query, std::size_t n,
+                                                                    const std::vector<bool>& wanted) const {
+  if (wanted.size() != scales_.size()) {
+    throw std::invalid_argument("fixed session matcher: " + std::to_string(wanted.size()) + " flags for " +
+                                std::to_string(scales_.size()) + " scales");
+  }
+  std::vector<const PriorSteps*> priors(scales_.size(), nullptr);
+  for (std::size_t j = 0; j < scales_.size(); ++j)
+    if (wanted[j]) priors[j] = &scaled_[j];
+  std::vector<Classification> out(scales_.size());
+  score(query, n, priors, out);
+  return out;
+}
+
+void FixedSessionClassifier::score(const float* query, std::size_t n, const std::vector<const PriorSteps*>& priors,
+                                   std::vector<Classification>& out) const {
   const FixedClassifier::Prepared p = eq12_.prepare(query, n);  // validated, quantised
   const CompactTable& ct = eq12_.compact();
   const ExemplarTable& table = reference_.table();
-  const SessionPrior& prior = reference_.prior();
+  const SessionPrior& prior = reference_.prior();  // (its noise model and reweighting: every scale's)
   const std::uint32_t rows = ct.n_rows();
   const std::size_t pb = ct.padded_bins();
-  const int k = reference_.terms();
+  const int k = reference_.terms();  // the basis's terms: a prior has them all or none
   const auto K = static_cast<std::size_t>(k);
+  const std::size_t n_priors = priors.size();
+  bool moments_wanted = false;  // some prior fits terms
+  for (const PriorSteps* ps : priors) moments_wanted = moments_wanted || (ps != nullptr && ps->terms > 0);
   const bool huber = std::isfinite(prior.huber_k);
   const double hk = prior.huber_k;
   const auto has = [](const std::uint8_t* bits, std::size_t i) { return ((bits[i / 8] >> (i % 8)) & 1u) != 0; };
@@ -150,13 +194,17 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
   std::vector<std::int32_t> e;  // query - candidate, steps: |e| <= 65534
   // The bases of the compared bins when some are missing.
   std::array<std::vector<std::int32_t>, kMaxTerms> a_held, f_held;
-  Classification out;
-  out.ranking.reserve(ct.n_candidates());
+  for (std::size_t j = 0; j < n_priors; ++j) {
+    out[j].ranking.clear();
+    if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
+  }
+  std::vector<double> total(n_priors), energy(n_priors);  // per prior, over the candidate's rows
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
     const std::uint32_t index = ct.candidates()[c];
     const std::int16_t* values = ct.values(c);
     const std::uint8_t* valid = ct.validity(c);
-    double total = 0.0, energy = 0.0;
+    std::fill(total.begin(), total.end(), 0.0);
+    std::fill(energy.begin(), energy.end(), 0.0);
     std::uint32_t compared = 0;
     for (std::uint32_t r = 0; r < rows; ++r) {
       const QueryRow& qr = qrows[r];
@@ -214,68 +262,78 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
       x.e = e.data();
       const std::size_t nr = x.n;
       compared += static_cast<std::uint32_t>(nr);
-      SessionPassSums sums;
-      double penalty = 0.0, logdet = 0.0;
-      if (k > 0) {
-        // The first pass weighs every element 1 (2^15): its sums are the
-        // Gram matrix's and sum e a (|e a| <= 2^30 over 2^16 elements: within 2^46).
-        session_detail::NormalSums all;
+      // The first pass weighs every element 1 (2^15): its sums are the Gram
+      // matrix's and sum e a (|e a| <= 2^30 over 2^16 elements: within 2^46),
+      // whatever the prior.
+      session_detail::NormalSums all;
+      if (moments_wanted) {
         moments_(x, k, all.h);
         for (std::size_t s = 0; s < K; ++s) {
           all.h[s] *= std::int64_t{1} << kWeightBits;
           for (std::size_t t = 0; t <= s; ++t) all.G[s][t] = gram[s][t] * (std::int64_t{1} << kWeightBits);
         }
-        session_detail::NormalSums normal = all;
-        const auto& pv = prior_var_steps_[r];
-        std::array<double, kMaxTerms> beta{}, diagonal{};
-        std::array<std::int32_t, kMaxTerms> B{};
-        for (int it = 0; it < prior.iterations; ++it) {
-          std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
-          std::array<double, kMaxTerms> rhs{};
-          for (std::size_t s = 0; s < K; ++s) {
-            rhs[s] = static_cast<double>(normal.h[s]) * kWeightBasisUnit / v;
-            for (std::size_t t = 0; t <= s; ++t) {
-              const double g = static_cast<double>(normal.G[s][t]) * kWeightBasisUnit2 / v;
-              P[s][t] = g;
-              P[t][s] = g;
-            }
-            P[s][s] += 1.0 / pv[s];
-          }
-          session_detail::cholesky_factor_solve(P, k, rhs, beta, diagonal);
-          for (std::size_t s = 0; s < K; ++s)
-            B[s] = static_cast<std::int32_t>(clamp_round(beta[s] * kFitScale, kMaxCoefficient));
-          // The residuals of this fit give the data term and the next pass's weights.
-          const bool last = !huber || it + 1 == prior.iterations;
-          sums = pass_(x, k, B.data(), noise.threshold, !last);
-          if (last) break;
-          session_detail::NormalSums next = all;
-          for (std::size_t s = 0; s < K; ++s) {
-            next.h[s] -= sums.shortfall.h[s];
-            for (std::size_t t = 0; t <= s; ++t) next.G[s][t] -= sums.shortfall.G[s][t];
-          }
-          if (next == normal) break;  // the same system again would give the same fit
-          normal = next;
-        }
-        logdet = session_detail::cholesky_log_det(diagonal, k) + log_det_prior_steps_[r];
-        for (std::size_t s = 0; s < K; ++s) penalty += 0.5 * beta[s] * beta[s] / pv[s];
-      } else {
-        const std::int32_t none[kMaxTerms] = {};
-        sums = pass_(x, 0, none, noise.threshold, false);
       }
-      // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
-      double data = static_cast<double>(sums.squares) * (kSquareUnit / 2.0) / v;
-      if (huber)
-        data += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
-                0.5 * hk * hk * static_cast<double>(sums.n_beyond);
-      energy += data + penalty;
-      total += data + static_cast<double>(nr) * noise.log_norm + penalty + 0.5 * logdet +
-               static_cast<double>(asked - nr) * (0.5 + noise.log_norm);
+      for (std::size_t j = 0; j < n_priors; ++j) {
+        if (priors[j] == nullptr) continue;
+        const PriorSteps& ps = *priors[j];
+        SessionPassSums sums;
+        double penalty = 0.0, logdet = 0.0;
+        if (ps.terms > 0) {
+          session_detail::NormalSums normal = all;
+          const auto& pv = ps.var[r];
+          std::array<double, kMaxTerms> beta{}, diagonal{};
+          std::array<std::int32_t, kMaxTerms> B{};
+          for (int it = 0; it < prior.iterations; ++it) {
+            std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
+            std::array<double, kMaxTerms> rhs{};
+            for (std::size_t s = 0; s < K; ++s) {
+              rhs[s] = static_cast<double>(normal.h[s]) * kWeightBasisUnit / v;
+              for (std::size_t t = 0; t <= s; ++t) {
+                const double g = static_cast<double>(normal.G[s][t]) * kWeightBasisUnit2 / v;
+                P[s][t] = g;
+                P[t][s] = g;
+              }
+              P[s][s] += 1.0 / pv[s];
+            }
+            session_detail::cholesky_factor_solve(P, k, rhs, beta, diagonal);
+            for (std::size_t s = 0; s < K; ++s)
+              B[s] = static_cast<std::int32_t>(clamp_round(beta[s] * kFitScale, kMaxCoefficient));
+            // The residuals of this fit give the data term and the next pass's weights.
+            const bool last = !huber || it + 1 == prior.iterations;
+            sums = pass_(x, k, B.data(), noise.threshold, !last);
+            if (last) break;
+            session_detail::NormalSums next = all;
+            for (std::size_t s = 0; s < K; ++s) {
+              next.h[s] -= sums.shortfall.h[s];
+              for (std::size_t t = 0; t <= s; ++t) next.G[s][t] -= sums.shortfall.G[s][t];
+            }
+            if (next == normal) break;  // the same system again would give the same fit
+            normal = next;
+          }
+          logdet = session_detail::cholesky_log_det(diagonal, k) + ps.log_det[r];
+          for (std::size_t s = 0; s < K; ++s) penalty += 0.5 * beta[s] * beta[s] / pv[s];
+        } else {
+          const std::int32_t none[kMaxTerms] = {};
+          sums = pass_(x, 0, none, noise.threshold, false);
+        }
+        // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
+        double data = static_cast<double>(sums.squares) * (kSquareUnit / 2.0) / v;
+        if (huber)
+          data += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
+                  0.5 * hk * hk * static_cast<double>(sums.n_beyond);
+        energy[j] += data + penalty;
+        total[j] += data + static_cast<double>(nr) * noise.log_norm + penalty + 0.5 * logdet +
+                    static_cast<double>(asked - nr) * (0.5 + noise.log_norm);
+      }
     }
     if (compared == 0) continue;
-    out.ranking.push_back(Match{index, total, compared, chi_square_deviate(2.0 * energy, compared)});
+    for (std::size_t j = 0; j < n_priors; ++j) {
+      if (priors[j] != nullptr)
+        out[j].ranking.push_back(Match{index, total[j], compared, chi_square_deviate(2.0 * energy[j], compared)});
+    }
   }
-  rank(out);
-  return out;
+  for (std::size_t j = 0; j < n_priors; ++j)
+    if (priors[j] != nullptr) rank(out[j]);
 }
 
 }  // namespace tofmat

@@ -68,6 +68,16 @@ void SessionPrior::validate(std::uint32_t n_rows) const {
   if (iterations < 1) throw std::invalid_argument("session prior: iterations must be at least 1");
 }
 
+SessionPrior scaled(const SessionPrior& prior, double scale) {
+  if (!(scale >= 0.0) || std::isinf(scale))
+    throw std::invalid_argument("session prior: a scale must be finite and >= 0");
+  SessionPrior p = prior;
+  for (double& s : p.offset_sd_mm) s *= scale;
+  p.drift1_sd_mm *= scale;
+  p.drift2_sd_mm *= scale;
+  return p;
+}
+
 std::vector<double> curve_roughness(const ExemplarTable& table) {
   const std::uint32_t rows = table.n_rows(), bins = table.n_bins();
   std::vector<double> out(table.n_materials() * rows, std::nan(""));

@@ -69,23 +69,31 @@ void SessionLearning::validate() const {
     throw std::invalid_argument("session learning: long_sweep_scale must be one of the scales");
 }
 
-SessionPrior scaled(const SessionPrior& prior, double scale) {
-  if (!(scale >= 0.0) || std::isinf(scale))
-    throw std::invalid_argument("session prior: a scale must be finite and >= 0");
-  SessionPrior p = prior;
-  for (double& s : p.offset_sd_mm) s *= scale;
-  p.drift1_sd_mm *= scale;
-  p.drift2_sd_mm *= scale;
-  return p;
+namespace {
+
+// Per-scale scorers as one ScaledScorer (validated by count first).
+SessionLearner::ScaledScorer each_scale(const SessionLearning& settings, std::vector<SessionLearner::Scorer> scorers) {
+  if (scorers.size() != settings.scales.size()) {
+    throw std::invalid_argument("session learning: " + std::to_string(scorers.size()) + " scorers for " +
+                                std::to_string(settings.scales.size()) + " scales");
+  }
+  return [scorers = std::move(scorers)](const float* q, std::size_t n, const std::vector<bool>& wanted) {
+    std::vector<Classification> out(scorers.size());
+    for (std::size_t k = 0; k < scorers.size(); ++k)
+      if (wanted[k]) out[k] = scorers[k](q, n);
+    return out;
+  };
 }
 
+}  // namespace
+
 SessionLearner::SessionLearner(SessionLearning settings, std::vector<Scorer> scorers, std::uint32_t n_rows)
-    : settings_(std::move(settings)), scorers_(std::move(scorers)), n_rows_(n_rows) {
+    : SessionLearner(settings, each_scale(settings, std::move(scorers)), n_rows) {}
+
+SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows)
+    : settings_(std::move(settings)), scorer_(std::move(scorer)), n_rows_(n_rows) {
   settings_.validate();
-  if (scorers_.size() != settings_.scales.size()) {
-    throw std::invalid_argument("session learning: " + std::to_string(scorers_.size()) + " scorers for " +
-                                std::to_string(settings_.scales.size()) + " scales");
-  }
+  if (!scorer_) throw std::invalid_argument("session learning: no scorer");
   if (n_rows_ == 0) throw std::invalid_argument("session learning: a query has at least one row");
   if (settings_.long_sweep_bins > 0) {
     const auto at = std::find(settings_.scales.begin(), settings_.scales.end(), settings_.long_sweep_scale);
@@ -102,21 +110,24 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
                                                      const std::vector<std::uint32_t>& candidates,
                                                      SessionLearning settings) {
   settings.validate();
+  if (fixed_point) {
+    auto c = std::make_shared<const FixedSessionClassifier>(table, prior, noise_mm, candidates, FixedKernel::kBest,
+                                                            settings.scales);
+    ScaledScorer scorer = [c](const float* q, std::size_t n, const std::vector<bool>& wanted) {
+      return c->classify_scaled(q, n, wanted);
+    };
+    return std::make_shared<SessionLearner>(std::move(settings), std::move(scorer), table->n_rows());
+  }
   std::vector<Scorer> scorers;
   for (double s : settings.scales) {
-    if (fixed_point) {
-      auto c = std::make_shared<const FixedSessionClassifier>(table, scaled(prior, s), noise_mm, candidates);
-      scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
-    } else {
-      auto c = std::make_shared<const SessionClassifier>(table, scaled(prior, s), noise_mm, candidates);
-      scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
-    }
+    auto c = std::make_shared<const SessionClassifier>(table, scaled(prior, s), noise_mm, candidates);
+    scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
   }
   return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers), table->n_rows());
 }
 
 SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t n, bool every_scale) const {
-  const std::size_t k_count = scorers_.size();
+  const std::size_t k_count = settings_.scales.size();
   if (n % n_rows_ != 0) {
     throw std::invalid_argument("session learning: a query of " + std::to_string(n) + " elements is not " +
                                 std::to_string(n_rows_) + " rows");
@@ -142,13 +153,11 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   }
   if (every_scale) std::fill(scored.begin(), scored.end(), true);
 
-  std::vector<Classification> by_scale(k_count);
+  std::vector<Classification> by_scale = scorer_(query, n, scored);
+  if (by_scale.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
   std::size_t first = k_count;  // the first scored scale: its ranking gives the candidates' order
-  for (std::size_t k = 0; k < k_count; ++k) {
-    if (!scored[k]) continue;
-    by_scale[k] = scorers_[k](query, n);
-    if (first == k_count) first = k;
-  }
+  for (std::size_t k = 0; k < k_count && first == k_count; ++k)
+    if (scored[k]) first = k;
 
   // Per candidate (as the first scale ranks them), its score under every scale.
   const std::size_t m_count = by_scale[first].ranking.size();
@@ -157,16 +166,30 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   std::vector<std::vector<double>> neg_score(k_count);  // -D_k(m), in the first scale's order
   std::vector<std::uint32_t> order;
   order.reserve(m_count);
-  for (const Match& m : by_scale[first].ranking) order.push_back(m.index);
+  std::uint32_t top_index = 0;
+  for (const Match& m : by_scale[first].ranking) {
+    order.push_back(m.index);
+    top_index = std::max(top_index, m.index);
+  }
+  // Each candidate's place in that order (kNone: not a candidate), and per scale where it sits in that scale's ranking.
+  constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+  std::vector<std::size_t> place(std::size_t{top_index} + 1, kNone);
+  for (std::size_t i = 0; i < m_count; ++i) place[order[i]] = i;
+  std::vector<std::vector<std::size_t>> in_ranking(k_count);
+  const auto mismatch = [] {
+    return std::logic_error("session learning: the scales' scorers rank different candidates");
+  };
   for (std::size_t k = 0; k < k_count; ++k) {
     neg_score[k].assign(m_count, -kInf);
     if (!scored[k]) continue;
-    if (by_scale[k].ranking.size() != m_count)
-      throw std::logic_error("session learning: the scales' scorers rank different candidates");
-    for (const Match& m : by_scale[k].ranking) {
-      const auto at = std::find(order.begin(), order.end(), m.index);
-      if (at == order.end()) throw std::logic_error("session learning: the scales' scorers rank different candidates");
-      neg_score[k][static_cast<std::size_t>(at - order.begin())] = -m.distance;
+    if (by_scale[k].ranking.size() != m_count) throw mismatch();
+    in_ranking[k].assign(m_count, kNone);
+    for (std::size_t j = 0; j < m_count; ++j) {
+      const Match& m = by_scale[k].ranking[j];
+      const std::size_t at = m.index <= top_index ? place[m.index] : kNone;
+      if (at == kNone || in_ranking[k][at] != kNone) throw mismatch();
+      neg_score[k][at] = -m.distance;
+      in_ranking[k][at] = j;
     }
     out.evidence[k] = log_sum_exp(neg_score[k]);
   }
@@ -182,8 +205,7 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
         likeliest = scored_as[k];
       }
     }
-    Match m = *std::find_if(by_scale[likeliest].ranking.begin(), by_scale[likeliest].ranking.end(),
-                            [&](const Match& x) { return x.index == order[i]; });
+    Match m = by_scale[likeliest].ranking[in_ranking[likeliest][i]];
     m.distance = -log_sum_exp(terms);
     out.mixture.ranking.push_back(m);
   }

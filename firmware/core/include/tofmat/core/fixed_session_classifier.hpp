@@ -16,6 +16,14 @@
 // them, and a pass subtracts its outliers). Each reweighting pass is one
 // loop over the compared elements, which also sums the data term; the logs
 // are taken of the last pass's factor only.
+//
+// The session learner (session_learner.hpp) scores a query under the prior
+// with its offsets and drift scaled by each of several scales. Only the
+// nuisance fit depends on the scale: the query's quantisation, each
+// candidate's differences from it and their first moments are shared, so
+// classify_scaled costs one matcher's shared work and each scale's passes
+// (the scales' scores are those of a FixedSessionClassifier of each scaled
+// prior, to the bit).
 #pragma once
 
 #include <array>
@@ -36,13 +44,23 @@ class FixedSessionClassifier {
  public:
   // As SessionClassifier's constructor (the same errors). kernel: the
   // reweighting passes' (NEON on aarch64 with kBest; the same scores to the bit).
+  // scales: those classify_scaled scores under (each finite and >= 0; none:
+  // classify only); std::invalid_argument for another.
   FixedSessionClassifier(const std::shared_ptr<const ExemplarTable>& table, SessionPrior prior,
                          std::vector<double> noise_mm = {}, std::vector<std::uint32_t> candidates = {},
-                         FixedKernel kernel = FixedKernel::kBest);
+                         FixedKernel kernel = FixedKernel::kBest, const std::vector<double>& scales = {});
 
   // As SessionClassifier::classify, with FixedClassifier's query rules (a
   // value beyond +-32767 steps saturates there). Same errors.
   Classification classify(const float* query, std::size_t n) const;
+
+  // The query under the prior scaled (scaled(), session_classifier.hpp) by
+  // each of scales() whose `wanted` is set (one flag per scale): what a
+  // FixedSessionClassifier of that scaled prior's classify gives, to the
+  // bit; an empty ranking for a scale not wanted. The same errors as
+  // classify, and std::invalid_argument for another count of flags.
+  std::vector<Classification> classify_scaled(const float* query, std::size_t n, const std::vector<bool>& wanted) const;
+  const std::vector<double>& scales() const { return scales_; }
 
   // The float reference it shares its prior, noise and nuisance terms with.
   const SessionClassifier& reference() const { return reference_; }
@@ -64,9 +82,22 @@ class FixedSessionClassifier {
     std::int32_t threshold = 0;
   };
   std::vector<RowNoise> noise_;
-  // Per row: the terms' prior variances (steps^2) and the log of their product.
-  std::vector<std::array<double, kSessionMaxTerms>> prior_var_steps_;
-  std::vector<double> log_det_prior_steps_;
+  // A prior's nuisance terms in steps: how many (the prior's, or none for a
+  // prior of zero spreads), per row their prior variances (steps^2) and the
+  // log of their product.
+  struct PriorSteps {
+    int terms = 0;
+    std::vector<std::array<double, kSessionMaxTerms>> var;
+    std::vector<double> log_det;
+  };
+  PriorSteps prior_steps(const SessionClassifier& reference) const;
+  // Scores the query under each prior of `priors` (null: not scored) into `out`, one Classification each.
+  void score(const float* query, std::size_t n, const std::vector<const PriorSteps*>& priors,
+             std::vector<Classification>& out) const;
+
+  PriorSteps prior_;                // the prior's own
+  std::vector<double> scales_;      // classify_scaled's
+  std::vector<PriorSteps> scaled_;  // one per scale
 };
 
 }  // namespace tofmat

@@ -67,6 +67,11 @@ struct SessionPrior {
   void validate(std::uint32_t n_rows) const;
 };
 
+// The prior with its offsets and drift spreads times `scale` (finite, >= 0;
+// std::invalid_argument otherwise); the noise model unchanged: how far a
+// session moves, as the session learner weighs it (session_learner.hpp).
+SessionPrior scaled(const SessionPrior& prior, double scale);
+
 // Each material's bin noise per row (n_materials x n_rows, mm): 1.4826 x the
 // median absolute deviation of its observed elements' second differences,
 // over sqrt(6) (white noise of sd s has second differences of sd s sqrt(6);

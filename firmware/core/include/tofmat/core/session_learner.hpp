@@ -70,24 +70,28 @@ struct SessionLearning {
   void validate() const;
 };
 
-// The prior with its offsets and drift spreads times `scale` (>= 0); the noise model unchanged.
-SessionPrior scaled(const SessionPrior& prior, double scale);
-
 class SessionLearner {
  public:
   // Scores a query under one scale's prior (SessionClassifier::classify or
   // FixedSessionClassifier::classify): every scorer must rank the same
   // candidates.
   using Scorer = std::function<Classification(const float*, std::size_t)>;
+  // Scores a query under every scale whose flag is set (one flag per scale),
+  // an empty Classification for the others: FixedSessionClassifier::
+  // classify_scaled, which shares the work the scales have in common.
+  using ScaledScorer = std::function<std::vector<Classification>(const float*, std::size_t, const std::vector<bool>&)>;
 
   // One scorer per scale of `settings`, for queries of n_rows rows (a
   // query's n elements are n_rows rows of n / n_rows bins, as the table's).
   // Throws std::invalid_argument on bad settings, a count that is not the
   // scales', or n_rows 0.
   SessionLearner(SessionLearning settings, std::vector<Scorer> scorers, std::uint32_t n_rows);
+  // One scorer for every scale of `settings`; the same errors but the count.
+  SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows);
 
   // Session classifiers of the table under prior x each scale, on the float
-  // or the fixed-point path, with noise_mm and candidates as
+  // path (one SessionClassifier a scale) or the fixed-point one (one
+  // FixedSessionClassifier for every scale), with noise_mm and candidates as
   // SessionClassifier's (the same errors as their constructors).
   static std::shared_ptr<SessionLearner> make(const std::shared_ptr<const ExemplarTable>& table,
                                               const SessionPrior& prior, bool fixed_point,
@@ -128,7 +132,7 @@ class SessionLearner {
 
  private:
   SessionLearning settings_;
-  std::vector<Scorer> scorers_;
+  ScaledScorer scorer_;
   std::uint32_t n_rows_;
   std::size_t long_scale_ = 0;      // the index of settings_.long_sweep_scale in the scales
   std::vector<double> log_prior_;   // log prior_weights (0 each for equal weights)
