@@ -1,8 +1,8 @@
 # SPDX-License-Identifier: LicenseRef-tofmat-proprietary
-"""The matcher that learns its session (``Classifier(..., learning=True)``, tofmatd --session-learning;
+"""The matcher that learns its session (``Classifier(..., learning=True)``, tofmatd's session learning;
 firmware/core/include/tofmat/core/session_learner.hpp): its score is the mixture of the session
 matcher under scaled priors, its weights follow the sweeps it learns from, and on sessions of many
-sweeps of the real curves it does what docs/evaluation.md says."""
+sweeps of the real curves and of the simulated camera it does what docs/evaluation.md says."""
 
 from __future__ import annotations
 
@@ -15,7 +15,14 @@ from click.testing import CliRunner
 
 import tofmat
 from tofmat.cli import main
-from tofmat.evaluation.sequences import MATCHERS, UNLEARNED, evaluate_sequences, margins
+from tofmat.evaluation.sequences import (
+    MATCHERS,
+    UNLEARNED,
+    evaluate_sequences,
+    evaluate_sim_sequences,
+    format_markdown,
+    margins,
+)
 
 SCALES = [0.0, 0.25, 0.5, 1.0, 2.0, 4.0]
 # The weights a session starts from (SessionLearning::prior_weights): the calibration's scale and twice it.
@@ -132,14 +139,14 @@ def test_on_sessions_of_many_sweeps_the_learner_keeps_up_with_the_better_matcher
     gap = margins(rows)
     # With its prior weights it is near the better of the two at either spread (docs: within 5 points on
     # 5,800 sweeps a scale; 120 a cell here).
-    assert all(gap[(s, UNLEARNED)][n] > -8.0 for s in (0.0, 1.0) for n in (10, 30)), gap
+    assert all(gap[(s, None, UNLEARNED)][n] > -8.0 for s in (0.0, 1.0) for n in (10, 30)), gap
     # Unmoved: Eq. (12) beats the session matcher at 10 bins; from the fifth sweep on the learner
     # is within a few points of it (40 sessions: 80 sweeps a cell), and far above the session matcher.
     assert by[(0.0, "eq12", "5th on")].accuracy[10] > by[(0.0, "session", "5th on")].accuracy[10]
-    assert gap[(0.0, "5th on")][10] > -5.0
+    assert gap[(0.0, None, "5th on")][10] > -5.0
     # Moved by the calibration's spread: Eq. (12) fails, the learner is with the session matcher.
     assert by[(1.0, "eq12", "5th on")].accuracy[30] < 60.0
-    assert gap[(1.0, "5th on")][30] > -5.0
+    assert gap[(1.0, None, "5th on")][30] > -5.0
     for r in rows:
         assert sum(r.sweeps.values()) > 0 and all(0.0 <= a <= 100.0 for a in r.accuracy.values())
 
@@ -165,3 +172,55 @@ def test_the_command_runs_sessions_of_sweeps(db_dir: Path) -> None:
     assert "| 0.5 | learning | 1st |" in r.output and "| 0.5 | eq12 | 2nd-4th |" in r.output
     bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--sweeps-per-session", "3"])
     assert bad.exit_code == 2 and "--session-scales" in bad.output
+
+
+def test_sessions_of_rendered_sweeps_hold_their_angle_and_spread(sim_table: Path) -> None:
+    # The simulator's sessions of sweeps (docs/evaluation.md): every target of a session at the cell's
+    # angle, its rows moved by the session's offsets; the rows of each cell carry their angle.
+    from tofmat.evaluation.sessions import SessionModel
+    from tofmat.evaluation.sim_sessions import SimSessions
+
+    table = tofmat.ExemplarTable.load(str(sim_table))
+    still = SessionModel((0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+    sim = SimSessions(None, still, table=table)
+    cork = table.index_of("cork")
+
+    def rendered(yaw: float, seed: int = 5) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        return sim.sweep(sim.session(rng, yaw), cork, 60, 20, rng)
+
+    face_on, tilted = rendered(0.0), rendered(30.0)
+    assert face_on.dtype == np.float32 and np.isfinite(face_on).any()
+    np.testing.assert_array_equal(face_on, rendered(0.0))  # (seeded)
+    both = np.isfinite(face_on) & np.isfinite(tilted)
+    assert both.any() and np.abs(face_on - tilted)[both].max() > 0.05  # the angle reaches the renderer
+    moved = SimSessions(None, SessionModel((3.0, 1.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0), table=table)
+    rng = np.random.default_rng(5)
+    session = moved.session(rng, 0.0)
+    assert session.yaw_deg == 0.0 and np.abs(session.offsets_mm).max() > 0.0
+    with pytest.raises(ValueError, match=r"0\.\.60 degrees"):
+        sim.session(np.random.default_rng(1), 75.0)
+
+    rows = evaluate_sim_sequences(table, scales=(0.0,), yaws=(0.0, 20.0), n_sessions=4, sweeps_per_session=5,
+                                  lengths=(3, 10))  # fmt: skip
+    assert {r.yaw_deg for r in rows} == {0.0, 20.0} and {r.matcher for r in rows} == set(MATCHERS)
+    assert all(sum(r.sweeps.values()) == 4 * 5 for r in rows if r.stage == UNLEARNED)
+    gap = margins(rows)
+    assert set(gap) == {(0.0, y, s) for y in (0.0, 20.0) for s in ("1st", "2nd-4th", "5th on", UNLEARNED)}
+    assert "| 0 | 20 deg | learning | 5th on |" in format_markdown(rows)
+
+
+def test_the_command_runs_rendered_sessions_of_sweeps(sim_table: Path) -> None:
+    r = CliRunner().invoke(
+        main,
+        ["evaluate", "--source", "sim", "--sim-table", str(sim_table), "--session-scales", "1", "--yaws", "30",
+         "--sweeps-per-session", "2", "--sim-sessions", "1"],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert "| 1 | 30 deg | learning | 1st |" in r.output and "| 1 | 30 deg | eq12 | 2nd-4th |" in r.output
+    bad = CliRunner().invoke(
+        main,
+        ["evaluate", "--source", "sim", "--sim-table", str(sim_table), "--session-scales", "1", "--sweeps-per-session",
+         "2", "--plot", "x.png"],
+    )  # fmt: skip
+    assert bad.exit_code == 2 and "--sweeps-per-session" in bad.output

@@ -78,8 +78,8 @@ from ..report.cli import resolve_table, table_option
     "--sweeps-per-session",
     type=click.IntRange(1, 1000),
     help="With --session-scales: sessions of this many sweeps (materials and lengths at random), labelled in "
-    "turn by Eq. (12), the session matcher and the matcher that learns its session (tofmatd --session-learning); "
-    "--sessions x the table's materials sessions per scale.",
+    "turn by Eq. (12), the session matcher and the matcher that learns its session (tofmatd's session learning); "
+    "--sessions (--sim-sessions with --source sim) x the table's materials sessions per scale (and angle).",
 )
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of the Markdown table.")
 @click.option(
@@ -277,9 +277,12 @@ def _evaluate_sim_scales(
 ) -> None:
     from ..tools.tables import open_table
     from . import scales as single
+    from . import sequences
 
-    if sweeps_per_session is not None:
-        raise UserError("--sweeps-per-session runs on the real curves: give --source curves")
+    if plot is not None and sweeps_per_session is not None:
+        raise UserError(
+            "--plot with --session-scales draws the single sweeps' diagrams: leave out --sweeps-per-session"
+        )
     values = _numbers(scales, "--session-scales")
     angles = _numbers(yaws, "--yaws") if yaws is not None else (0.0, 10.0, 20.0, 30.0)
     with progress_bar("simulator session scales") as progress:
@@ -296,15 +299,27 @@ def _evaluate_sim_scales(
                 table = SimSessions(
                     names, SessionModel((0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0), progress=progress
                 ).table
-            learned = _scales_model(models, table, None)
-            rows = single.evaluate_sim_scales(table, values, angles, sim_sessions, progress=progress, learned=learned)
+            learned = _scales_model(models, table, sweeps_per_session)
+            if sweeps_per_session is None:
+                scale_rows = single.evaluate_sim_scales(
+                    table, values, angles, sim_sessions, progress=progress, learned=learned
+                )
+                rows: list[Any] = scale_rows
+                text = single.format_markdown(scale_rows)
+            else:
+                sequence_rows = sequences.evaluate_sim_sequences(
+                    table, values, angles, sim_sessions * len(table.materials), sweeps_per_session, progress=progress
+                )
+                rows = sequence_rows
+                text = sequences.format_markdown(sequence_rows)
         except ValueError as e:
             raise UserError(str(e)) from e
-    text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2) if as_json else single.format_markdown(rows)
+    if as_json:
+        text = json.dumps(strict_json([asdict(r) for r in rows]), indent=2)
     if plot is not None:
         from .plots import scale_reliability_diagram
 
-        scale_reliability_diagram(rows, plot)
+        scale_reliability_diagram(scale_rows, plot)
     _emit(text, out)
 
 

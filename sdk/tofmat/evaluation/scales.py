@@ -69,7 +69,7 @@ def overall(share: dict[int, float], count: dict[int, int]) -> float:
     return sum(share[n] * count[n] for n in share) / total if total else 0.0
 
 
-def _check(scales: tuple[float, ...]) -> None:
+def check_scales(scales: tuple[float, ...]) -> None:
     """Before any draw: ValueError for a scale that is negative or not finite."""
     if any(not (s >= 0.0 and np.isfinite(s)) for s in scales):
         raise ValueError(f"session scales must be finite and >= 0, got {scales}")
@@ -78,7 +78,7 @@ def _check(scales: tuple[float, ...]) -> None:
 def scaled_sessions(table: ExemplarTable, scales: tuple[float, ...]) -> Iterator[tuple[float, CurveSessions]]:
     """The real curves' sessions with the calibration's spreads (row offsets and waveform state)
     times each scale. Raises ValueError for a scale that is negative or not finite."""
-    _check(scales)
+    check_scales(scales)
     library, device = calibrated_json()
     base = calibrated_model(library, table)
     for s in scales:
@@ -180,7 +180,7 @@ def evaluate_sim_scales(
     5 s a session of 29 materials, per scale and angle."""
     from .sim_sessions import SimSessions, sim_session_model
 
-    _check(scales)
+    check_scales(scales)
     base = sim_session_model(calibrated_json()[0])
     out: list[ScaleRow] = []
     cells = [(s, y) for s in scales for y in yaws]

@@ -227,6 +227,11 @@ class CurveSessions:
         """Material m's curve (R, B) in a new session of its own."""
         return self.session_curve(m, self.session(rng))
 
+    def sweep(self, session: Session, m: int, start: int, length: int, rng: np.random.Generator) -> F32:
+        """Material m swept over bins [start, start + length) in ``session``: :meth:`measure` of its
+        session curve."""
+        return self.measure(m, self.session_curve(m, session), start, length, rng)
+
     def measure(self, m: int, session_curve: F64, start: int, length: int, rng: np.random.Generator) -> F32:
         """A sweep over bins [start, start + length) of a session's curve: the material's bin noise,
         dropped and outlier bins; NaN outside the window. (R, B) float32."""

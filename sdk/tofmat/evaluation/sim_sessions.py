@@ -11,6 +11,7 @@ combined depth (a bin no frame lands in is missing, as in a real sweep).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,11 @@ YAW_RANGE_DEG = (0.0, 20.0)  # the queries' target orientation (the table's is 1
 TAIL_YAWS_DEG = (0.0, 30.0)
 
 
+def _check_yaw(yaw_deg: float) -> None:
+    if not 0.0 <= yaw_deg <= 60.0:
+        raise ValueError(f"a target's angle must be 0..60 degrees, got {yaw_deg}")
+
+
 def sim_session_model(library: dict[str, Any]) -> SessionModel:
     """The simulator's sessions: the spreads the calibration measured (``library``: the calibrated
     material library's JSON, run.calibrated_json); the simulator's own noise is the bin noise, so
@@ -38,8 +44,19 @@ def sim_session_model(library: dict[str, Any]) -> SessionModel:
     return SessionModel(session_offset_spread(library), session_state_spread(library), 0.0, 0.0, 0.0)
 
 
+@dataclass(frozen=True)
+class SimSession:
+    """One rendered capture session: the simulated camera in its session state, the rows' offsets (mm),
+    and the targets' angle (degrees)."""
+
+    renderer: Renderer
+    offsets_mm: np.ndarray
+    yaw_deg: float
+
+
 class SimSessions:
-    """Records the table once; :meth:`draw` renders queries in new sessions."""
+    """Records the table once; :meth:`draw` renders queries in new sessions; :meth:`session` and
+    :meth:`sweep` render sessions of many sweeps (:mod:`.sequences`)."""
 
     def __init__(
         self,
@@ -83,6 +100,23 @@ class SimSessions:
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(counts > 0, sums / counts, np.nan)
 
+    def session(self, rng: np.random.Generator, yaw_deg: float = 10.0) -> SimSession:
+        """A new session, its state and row offsets drawn from the session model, every target in it at
+        ``yaw_deg`` degrees (a box's mount holds its angle)."""
+        _check_yaw(yaw_deg)
+        sd = self.model.state_sd
+        state = (float(rng.normal(0.0, sd[0])), float(rng.normal(0.0, sd[1])), float(rng.normal(0.0, sd[2])))
+        renderer = Renderer(self.device.in_session(state), self.library, 0)
+        offsets = np.array([rng.normal(0.0, s) for s in self.model.offsets_sd_mm])
+        return SimSession(renderer, offsets, yaw_deg)
+
+    def sweep(self, session: SimSession, m: int, start: int, length: int, rng: np.random.Generator) -> np.ndarray:
+        """Material m swept over bins [start, start + length) in ``session``, rendered frame by frame
+        (R, B) float32, NaN where no frame landed."""
+        q = self._sweep(session.renderer, m, start, length, session.yaw_deg, int(rng.integers(0, 2**31)))
+        out: np.ndarray = (q + session.offsets_mm[:, None]).astype(np.float32)
+        return out
+
     def draw(
         self,
         lengths: list[int],
@@ -93,8 +127,8 @@ class SimSessions:
     ) -> Queries:
         """As :func:`.sessions.draw_queries`, rendered: a session per material and draw; the target at
         ``yaw_deg`` degrees, or at random in YAW_RANGE_DEG (None)."""
-        if yaw_deg is not None and not 0.0 <= yaw_deg <= 60.0:
-            raise ValueError(f"a target's angle must be 0..60 degrees, got {yaw_deg}")
+        if yaw_deg is not None:
+            _check_yaw(yaw_deg)
         rng = np.random.default_rng(seed)
         truth: list[int] = []
         lens: list[int] = []
