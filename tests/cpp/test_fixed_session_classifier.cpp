@@ -193,6 +193,7 @@ TEST(FixedSessionClassifier, ScoresUnderEveryScaleAsEachScaledMatcherDoesToTheBi
         const FixedSessionClassifier all(table, s.prior, {}, candidates, kernel, scales);
         EXPECT_EQ(all.scales(), scales);
         std::vector<FixedSessionClassifier> each;
+        each.reserve(scales.size());
         for (const double x : scales)
           each.emplace_back(table, scaled(s.prior, x), std::vector<double>{}, candidates, kernel);
         for (std::uint32_t length : {1u, 3u, 10u, 30u, 100u, 200u}) {

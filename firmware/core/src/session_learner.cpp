@@ -87,7 +87,7 @@ SessionLearner::ScaledScorer each_scale(const SessionLearning& settings, std::ve
 
 }  // namespace
 
-SessionLearner::SessionLearner(SessionLearning settings, std::vector<Scorer> scorers, std::uint32_t n_rows)
+SessionLearner::SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows)
     : SessionLearner(settings, each_scale(settings, std::move(scorers)), n_rows) {}
 
 SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows)

@@ -85,7 +85,7 @@ class SessionLearner {
   // query's n elements are n_rows rows of n / n_rows bins, as the table's).
   // Throws std::invalid_argument on bad settings, a count that is not the
   // scales', or n_rows 0.
-  SessionLearner(SessionLearning settings, std::vector<Scorer> scorers, std::uint32_t n_rows);
+  SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows);
   // One scorer for every scale of `settings`; the same errors but the count.
   SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows);
 
