@@ -445,8 +445,9 @@ def bench_depth_cmd(table_path: Path | None, scenes: str | None, frames: int, no
               help="The targets' angles, degrees.")  # fmt: skip
 @click.option("--materials", help="Materials of the table to show, comma-separated (default: all).")
 @click.option("--no-sweeps", is_flag=True, help="Still targets only.")
-@click.option("--session-learning", is_flag=True,
-              help="The labelling daemon learns each scene's session (tofmatd --session-learning).")  # fmt: skip
+@click.option("--session-learning/--no-session-learning", default=True, show_default=True,
+              help="The labelling daemon learns each scene's session (tofmatd's default), or labels each sweep on "
+                   "its own (tofmatd --no-session-learning).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print every target's result as JSON.")
 def bench_targets_cmd(table_path: Path | None, depths: list[float], yaws: list[float], materials: str | None,
                       no_sweeps: bool, session_learning: bool, as_json: bool) -> None:  # fmt: skip
@@ -461,7 +462,7 @@ def bench_targets_cmd(table_path: Path | None, depths: list[float], yaws: list[f
     try:
         with progress_bar("scenes") as progress:
             results = bench_targets(table, depths, yaws, not no_sweeps, materials=csv_list(materials),
-                                    progress=progress, labeller_args=["--session-learning"] if session_learning else [])  # fmt: skip
+                                    progress=progress, labeller_args=[] if session_learning else ["--no-session-learning"])  # fmt: skip
     except (RuntimeError, ValueError) as e:
         raise click.ClickException(str(e)) from e
     if as_json:

@@ -7,7 +7,7 @@
 //   tofmat_bench_profiles [--profile all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|
 //                                    smooth-box|smooth-majority]
 //                         [--reps R] [--kernel best|scalar] [--smooth N] [--no-truth] [--no-region-vote]
-//                         [--accumulate N]
+//                         [--accumulate N] [--session-learning [--warm-session] | --no-session-learning]
 //                         [--table DIR|FILE.tmx] [--sim-data DIR] [--candidates a,b,c]
 //
 // The path measured, per frame, as tofmatd runs it (docs/daemon.md):
@@ -54,6 +54,17 @@
 // --kernel scalar selects the scalar unpack; the profiles choose their own
 // kernels (FixedKernel::kBest throughout) unless ProfileConfig has a `kernel`
 // member, which is then set too (the line says which applied).
+//
+// --session-learning (tofmatd's default) / --no-session-learning: the
+// handheld and sorting profiles with the session learner
+// (session_learner.hpp) or the session matcher alone. The learner is
+// measured as a session starts: every pass is a new session (its weights
+// reset), so that every frame is scored under each scale its weights still
+// give weight to (all six over a pass's four sweeps; the finished sweeps it
+// learns from included). --warm-session: one session over every pass
+// instead, so that the counted passes come after the warm-up pass's four
+// sweeps have been learned (the bench's scenes are a session that did not
+// move: its weights gather on scale 0 and the scales they leave are not scored).
 //
 // --profile all (the default) prints markdown tables on this host (one core):
 // per profile the median host ms per frame over R passes (default 7) with its
@@ -122,7 +133,9 @@ struct Options {
   bool region_vote = true;  // segmentation: --no-region-vote leaves it out
   int accumulate = 1;       // segmentation: --accumulate N (frames each pixel's features are averaged over)
   std::vector<std::string> candidates;
-  std::string classifier;  // empty: the daemon's default
+  std::string classifier;                                    // empty: the daemon's default
+  bool session_learning = ProfileConfig{}.session_learning;  // the daemon's default
+  bool warm_session = false;                                 // one session over every pass
 };
 
 const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting",    "sorting-idle",   "segmentation",
@@ -134,7 +147,7 @@ const std::vector<std::string> kProfiles{"all",         "handheld",    "sorting"
       "error: %s\nusage: tofmat_bench_profiles [--profile "
       "all|handheld|sorting|sorting-idle|segmentation|unpack-full|decode-full|smooth-box|smooth-majority]\n"
       "                             [--reps R] [--kernel best|scalar] [--smooth N] [--threads N] [--no-truth]\n"
-      "                             [--no-region-vote] [--accumulate N]\n"
+      "                             [--no-region-vote] [--accumulate N] [--[no-]session-learning] [--warm-session]\n"
       "                             [--table DIR|FILE] [--sim-data DIR] [--candidates a,b,c] [--classifier "
       "eq12|session]\n",
       why);
@@ -154,6 +167,7 @@ std::vector<std::string> split(const std::string& s) {
 
 Options parse(int argc, char** argv) {
   Options o;
+  std::optional<bool> learning;  // --session-learning / --no-session-learning
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--no-truth") {
@@ -162,6 +176,14 @@ Options parse(int argc, char** argv) {
     }
     if (a == "--no-region-vote") {
       o.region_vote = false;
+      continue;
+    }
+    if (a == "--warm-session") {
+      o.warm_session = true;
+      continue;
+    }
+    if (a == "--session-learning" || a == "--no-session-learning") {
+      learning = a == "--session-learning";
       continue;
     }
     if (i + 1 >= argc) usage(("missing value after " + a).c_str());
@@ -198,6 +220,10 @@ Options parse(int argc, char** argv) {
   }
   if (std::find(kProfiles.begin(), kProfiles.end(), o.profile) == kProfiles.end()) usage("unknown --profile");
   if (o.kernel != "best" && o.kernel != "scalar") usage("unknown --kernel (best, scalar)");
+  if (o.classifier == "eq12" && learning.value_or(false))
+    usage("--session-learning learns the session matcher's session: not with --classifier eq12");
+  o.session_learning = learning.value_or(o.session_learning) && o.classifier != "eq12";
+  if (o.warm_session && !o.session_learning) usage("--warm-session is the session learner's");
   return o;
 }
 
@@ -344,7 +370,8 @@ struct Run {
   std::unique_ptr<Profile> profile;
   FixedKernel unpack_kernel = FixedKernel::kBest;
   bool with_truth = true;
-  RawFrame frame;  // its raw buffer (9 x kPixels) is allocated once and reused
+  bool warm_session = false;  // --warm-session
+  RawFrame frame;             // its raw buffer (9 x kPixels) is allocated once and reused
   Emitter emit;
   std::vector<Event>* events = nullptr;                    // where the emitter records, if anywhere
   std::vector<std::vector<std::uint8_t>>* maps = nullptr;  // label maps, if kept
@@ -354,6 +381,10 @@ struct Run {
   std::uint64_t bytes = 0;  // encoded event bytes
 
   Run(std::shared_ptr<const ExemplarTable> t, ProfileConfig c) : table(std::move(t)), config(std::move(c)) {
+    if (config.method == Method::kSession && config.session_learning) {  // (as Pipeline::apply makes it)
+      config.learner = SessionLearner::make(table, SessionPrior::tuned(*table), config.backend == Backend::kFixed, {},
+                                            candidate_indices(*table, config.candidates));
+    }
     profile = make_profile(config, table);
     frame.raw.assign(9 * kPixels, 0);
     emit.label = [this](const protocol::LabelEvent& e) {
@@ -407,6 +438,7 @@ struct Run {
   // One pass over the packets (sorting: a trigger before each burst).
   void pass(const Packets& ps, const std::string& name) {
     profile->reset();
+    if (config.learner && !warm_session) config.learner->reset();  // (a new session each pass)
     std::size_t last_target = ps.packets.size() + 1;
     for (const Packet& p : ps.packets) {
       if (name == "sorting" && p.target != last_target) profile->trigger(kBurst);
@@ -472,6 +504,7 @@ ProfileConfig config_of(const Options& o, const std::string& profile, Backend ba
   c.region_vote = o.region_vote;
   c.accumulate = o.accumulate;
   c.threads = o.threads;
+  c.session_learning = o.session_learning && c.name != "segmentation";
   kernel_applied = set_profile_kernel(c, fixed_kernel(o.kernel));
   return c;
 }
@@ -523,6 +556,7 @@ int run_single(const Options& o) {
     Run run(load_table_file(o.table), c);
     run.unpack_kernel = k;
     run.with_truth = o.truth;
+    run.warm_session = o.warm_session;
     run.pass(ps, o.profile);  // warm-up
     for (long r = 0; r < reps; ++r) run.pass(ps, o.profile);
     g_sink = g_sink + run.bytes;

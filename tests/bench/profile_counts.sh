@@ -62,10 +62,11 @@ fi
 # classifier, best kernels; the rows above are tofmatd's default, with the
 # simulated frames' truth.
 echo
-echo "| profile, camera path (no truth), best kernels | --classifier session (default) | --classifier eq12 |"
-echo "|---|---:|---:|"
+echo "| profile, camera path (no truth), best kernels | --classifier session (default: learning, a session starting) | learning, a session learned (--warm-session) | --no-session-learning | --classifier eq12 |"
+echo "|---|---:|---:|---:|---:|"
 for p in handheld sorting; do
-  echo "| $p | $(per_frame "$p" best --no-truth --classifier session) | $(per_frame "$p" best --no-truth --classifier eq12) |"
+  echo "| $p | $(per_frame "$p" best --no-truth --classifier session) | $(per_frame "$p" best --no-truth --warm-session)" \
+    "| $(per_frame "$p" best --no-truth --no-session-learning) | $(per_frame "$p" best --no-truth --classifier eq12) |"
 done
 
 [ "$part" != profiles ] || exit 0

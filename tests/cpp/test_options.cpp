@@ -70,6 +70,7 @@ TEST(Options, TheDefaultsAreTheCameraAndTheServicesSocket) {
   EXPECT_EQ(o.profile.backend, tofmat::daemon::Backend::kFixed);
   EXPECT_EQ(o.profile.method, tofmat::daemon::Method::kSession);  // as the SDK's (ProfileConfig)
   EXPECT_FALSE(o.profile.open_set);                               // the open set asked for only
+  EXPECT_TRUE(o.profile.session_learning);                        // the session matcher learns its session
   EXPECT_EQ(o.queue_frames, 2u);
   EXPECT_EQ(p.cl->log_level, "info");
   // This test program is not installed: no simulator data beside it, and no
@@ -288,6 +289,24 @@ TEST(Options, BadInputIsAUsageErrorWithStatusTwo) {
     ASSERT_TRUE(p.cl.has_value());
     EXPECT_TRUE(p.cl->daemon.profile.open_set);
   }
+  // Learning the session is the session matcher's, on unless turned off; another classifier has none, and asking
+  // for it there is a usage error.
+  {
+    const auto off = parse({"--table", "t", "--no-session-learning"});
+    ASSERT_TRUE(off.cl.has_value());
+    EXPECT_FALSE(off.cl->daemon.profile.session_learning);
+    const auto eq12 = parse({"--table", "t", "--classifier", "eq12"});
+    ASSERT_TRUE(eq12.cl.has_value());
+    EXPECT_FALSE(eq12.cl->daemon.profile.session_learning);
+    const auto eq12_off = parse({"--table", "t", "--classifier", "eq12", "--no-session-learning"});
+    ASSERT_TRUE(eq12_off.cl.has_value());
+    const auto cfg = temp_file("learning.toml", "table = \"t\"\nsession-learning = false\n");
+    const auto from_file = parse({"--config", cfg.string()});
+    std::filesystem::remove(cfg);
+    ASSERT_TRUE(from_file.cl.has_value());
+    EXPECT_FALSE(from_file.cl->daemon.profile.session_learning);
+  }
+  expect_usage_error({"--table", "t", "--classifier", "eq12", "--session-learning"});
   // An Eq. (12) distance bound means nothing to the session classifier's score.
   expect_usage_error({"--table", "t", "--gpio", "sim", "--line-barrier", "sim:barrier", "--line-speed", "500",
                       "--classifier", "session", "--line-max-distance", "2"});

@@ -109,10 +109,10 @@ def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Call
 
 
 def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Callable[..., Daemon]) -> None:
-    # --session-learning, the simulated camera against its own table: a session that did not move. Each finished
+    # The default: the simulated camera against its own table, a session that did not move. Each finished
     # sweep (the target leaving) teaches the learner; status reports it (protocol 1.10), and a
     # reset with session=True starts the session again, a plain reset does not.
-    d = start(sweep(["cork", "polystyrene", "pvc"]), "--session-learning")
+    d = start(sweep(["cork", "polystyrene", "pvc"]))
     with d.client() as c:
         assert c.hello["minor"] >= 10
         start_state = c.status()["session"]
@@ -133,7 +133,7 @@ def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Call
         with pytest.raises(tofmat.CommandError) as e:
             c._call("reset", {"session": "yes"})
         assert e.value.code == "invalid_argument" and "session" in str(e.value)
-    plain = start(sweep(["cork"]), name="plain")  # (off by default)
+    plain = start(sweep(["cork"]), "--no-session-learning", name="plain")
     with plain.client() as c:
         assert "session" not in c.status()
     eq12 = start(sweep(["cork"]), "--classifier", "eq12", name="eq12")

@@ -289,9 +289,12 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
       ->capture_default_str();
   app.add_flag("--open-set", o.profile.open_set,
                "label a sweep no material explains 'unknown' (--classifier session; docs/evaluation.md)");
-  app.add_flag("--session-learning", o.profile.session_learning,
-               "the session matcher learns how far this capture session moved from the sweeps it has labelled "
-               "(docs/evaluation.md; --classifier session)");
+  CLI::Option* learning =
+      app.add_flag("--session-learning,!--no-session-learning", o.profile.session_learning,
+                   "the session matcher learns how far this capture session moved from the sweeps it has labelled "
+                   "(the default with --classifier session; docs/evaluation.md); --no-session-learning: each "
+                   "sweep on its own under the calibration's spread")
+          ->capture_default_str();
   app.add_option("--roi", roi, "region of interest X0,Y0,X1,Y1 (default: 48 x 48 at the centre)");
   app.add_option("--candidates", candidates, "candidate materials (default: all in the table)")->delimiter(',');
   // (the ranges profile.cpp's check_config enforces, checked here so they are usage errors: status 2)
@@ -425,9 +428,13 @@ std::optional<CommandLine> parse_command_line(int argc, char** argv, int& exit_c
                                  "it bounds an Eq. (12) distance (mm^2), so it needs --classifier eq12 (the "
                                  "default classifier is session, whose scores are no distance; so are a learned "
                                  "model's)");
-    if (o.profile.session_learning && o.profile.method != Method::kSession)
-      throw CLI::ValidationError("--session-learning",
-                                 "learns the session matcher's session: it needs --classifier session");
+    // (on by default: it is the session matcher's, so another classifier leaves it out unless asked for)
+    if (o.profile.method != Method::kSession) {
+      if (learning->count() > 0 && o.profile.session_learning)
+        throw CLI::ValidationError("--session-learning",
+                                   "learns the session matcher's session: it needs --classifier session");
+      o.profile.session_learning = false;
+    }
     if (o.profile.open_set && o.profile.method != Method::kSession)
       throw CLI::ValidationError("--open-set",
                                  "needs --classifier session: Eq. (12) has no noise model to judge a fit");

@@ -59,11 +59,11 @@ struct ProfileConfig {
   // angle than the sweeps is called unknown.
   bool open_set = false;
   // The session matcher learns how far this session moved from the sweeps
-  // it labels (session_learner.hpp, docs/evaluation.md): --session-learning.
-  // Off by default: learned on a session that did not move, it labels a
-  // target at another angle than the table's with more confidence than it
-  // has (docs/benchmarks.md, still targets).
-  bool session_learning = false;
+  // it labels (session_learner.hpp, docs/evaluation.md): how far a box's
+  // sessions move is not known, and a matcher that assumes the calibration's
+  // spread loses to Eq. (12) where they barely move. On by default
+  // (--no-session-learning: every sweep on its own); Method::kSession only.
+  bool session_learning = true;
   // Not a setting: the session's learner the Pipeline keeps across profile
   // changes (null: the session matcher alone). Method::kSession only.
   std::shared_ptr<SessionLearner> learner;
