@@ -352,18 +352,25 @@ def test_a_small_simulator_run(monkeypatch: pytest.MonkeyPatch) -> None:
     from tofmat.evaluation import sim_sessions
 
     angles: list[float | None] = []
+    asked: list[tuple[object, object]] = []  # (lengths, sessions per material) of each draw
     draw = sim_sessions.SimSessions.draw
 
     def spy(self: sim_sessions.SimSessions, *args: object, **kwargs: object) -> object:
         angles.append(kwargs.get("yaw_deg"))  # type: ignore[arg-type]
+        asked.append((args[0], args[1]))
         return draw(self, *args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(sim_sessions.SimSessions, "draw", spy)
     res = run.evaluate_sim(["wood", "copper", "fakeleather"], 1, lengths=[3, 30])
     assert res.source == "sim" and res.materials == 3
-    # The splits at random angles; the confidence's tail check at each scale at 0 and at 30 degrees.
-    assert angles == [None, None, *[y for _ in run.TAIL_SCALES for y in sim_sessions.TAIL_YAWS_DEG]]
+    # The splits at random angles; the confidence's tail check at each scale at 0 and at 30 degrees, every
+    # length, and then its short sweeps (3 bins here) again at each angle, more of them.
+    assert angles == [None, None, *[y for _ in run.TAIL_SCALES for y in sim_sessions.TAIL_YAWS_DEG * 2]]
     assert sim_sessions.TAIL_YAWS_DEG == (0.0, 30.0)
+    assert run.SIM_SHORT_TAIL_FACTOR > 1 and 1 <= run.SIM_SHORT_TAIL_BINS < 10
+    tail = asked[2:]
+    assert all(a == ([3, 30], 1) for a in tail[0::4] + tail[1::4])
+    assert all(a == ([3], run.SIM_SHORT_TAIL_FACTOR) for a in tail[2::4] + tail[3::4])
     test = [r for r in res.rows if r.split == "test"]
     assert {r.method for r in test} == {"eq12", "session"}
     assert all(sorted(r.accuracy) == [3, 30] and all(0 <= a <= 100 for a in r.accuracy.values()) for r in test)

@@ -329,8 +329,8 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
 def table_cmd(device: str, library: str, materials: str | None, n_bins: int, depth_range: list[float], yaw: float,
               keep_current: bool, calibration_sessions: int | None, output: Path) -> None:  # fmt: skip
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against),
-    and calibrate it for itself: the sessions the calibration renders take about 18 s a material at the
-    default 6 (about 9 minutes for the whole library on one core)."""
+    and calibrate it for itself: the sessions the calibration renders take about 40 s a material at the
+    default 6 (about 20 minutes of one core for the whole library)."""
     from .table import database_bins, simulated_table
 
     if len(depth_range) != 2 or not depth_range[0] < depth_range[1]:

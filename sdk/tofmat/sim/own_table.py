@@ -16,7 +16,7 @@ from .. import ExemplarTable
 from .._progress import Progress
 
 # Rendered sessions a material and split the calibration draws (as docs/evaluation.md's simulator
-# figures are drawn): about 9 minutes for the whole library on one core.
+# figures are drawn): about 20 minutes for the whole library on one core.
 CALIBRATION_SESSIONS = 6
 
 
