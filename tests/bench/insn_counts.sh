@@ -82,6 +82,9 @@ for op in unpack unpack_roi; do
     'BEGIN { printf "| %s | %d | %d | %d | %.1f | %.1f |\n", op, d, s, n, d / s, d / n }'
 done
 
+# A table row's name for the query window: "1 bin", "10 bins", or all five lengths (0).
+window_label() { [ "$window" = 0 ] && echo "all five lengths" || echo "$window bin$([ "$window" = 1 ] || echo s)"; }
+
 # The session-robust matcher (docs/evaluation.md), tuned settings, a whole
 # query against the 29 materials: its float reference (double) against its
 # fixed-point path (scalar and NEON kernels), next to Eq. (12)'s fixed NEON
@@ -94,7 +97,7 @@ for window in 1 10 100 0; do
   f=$(per_unit session float)
   x=$(per_unit session scalar)
   n=$(per_unit session best)
-  label=$([ "$window" = 0 ] && echo "all five lengths" || echo "$window bin$([ "$window" = 1 ] || echo s)")
+  label=$(window_label)
   awk -v l="$label" -v e="$e" -v f="$f" -v x="$x" -v n="$n" \
     'BEGIN { printf "| %s | %d | %d | %d | %d | %.2f |\n", l, e, f, x, n, f / n }'
 done
@@ -109,7 +112,7 @@ echo "|---|---:|---:|---:|"
 for window in 1 10 100 0; do
   n=$(per_unit session best)
   l=$(per_unit learning best)
-  label=$([ "$window" = 0 ] && echo "all five lengths" || echo "$window bin$([ "$window" = 1 ] || echo s)")
+  label=$(window_label)
   awk -v lb="$label" -v n="$n" -v l="$l" 'BEGIN { printf "| %s | %d | %d | %.2f |\n", lb, n, l, l / n }'
 done
 window=0
