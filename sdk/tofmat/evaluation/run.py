@@ -37,10 +37,12 @@ TAIL_SCALES = (0.0, 0.25, 0.5, 1.0, 2.0)
 # simulator's split is rendered, at about 5 s a session: its check uses the split's own size for
 # every length, and SIM_SHORT_TAIL_FACTOR times it for the short ones.)
 TAIL_SESSIONS_FACTOR = 6
-# The simulator's sweeps of up to SIM_SHORT_TAIL_BINS bins cost a frame or a few to render (a
-# session's five lengths, 144), and they are the ones Eq. (12) is confidently wrong on when a session
-# moves twice as far as the calibration's (its 1-bin labels: 1.2 % in sessions of sweeps at 2 x, where
-# none of the split's own 348 a spread was): the check draws them this many times as often.
+# The simulator's sweeps of up to SIM_SHORT_TAIL_BINS bins are the ones Eq. (12) is confidently wrong
+# on when a session moves twice as far as the calibration's (its 1-bin labels: 1.2 % in sessions of
+# sweeps at 2 x, where none of the split's own 348 a spread was): the check draws them this many times
+# as often, each in a session of its own (the session's state is what makes a label confidently
+# wrong). Their frames are few, but each session builds its own renderer: the table's calibration
+# takes about three times the CPU it did without them (19 min of one core against 6).
 SIM_SHORT_TAIL_FACTOR = 8
 SIM_SHORT_TAIL_BINS = 3
 
