@@ -166,6 +166,17 @@ class Classifier {
     d["weights"] = s.weights;
     d["scale"] = s.scale;
     d["sweeps"] = s.sweeps;
+    if (!s.terms_mm.empty()) {
+      // The learned offsets per row, and the drift's Legendre degree 1 and 2 terms per row (mm).
+      std::vector<double> offsets;
+      std::vector<std::vector<double>> drift;
+      for (const auto& t : s.terms_mm) {
+        offsets.push_back(t[0]);
+        drift.push_back({t[1], t[2]});
+      }
+      d["offsets_mm"] = offsets;
+      d["drift_mm"] = drift;
+    }
     return d;
   }
 
@@ -406,12 +417,14 @@ void register_classifier(pyb::module_& m) {
            "queries: float array (n, n_rows, n_bins). Returns a list of results.")
       .def("learn", &Classifier::learn, pyb::arg("query"),
            "learning=True: a finished sweep's whole query (n_rows, n_bins) teaches the classifier how far this "
-           "session moved (docs/evaluation.md). Raises ValueError without learning or if no element is valid.")
+           "session moved, and where (docs/evaluation.md). Raises ValueError without learning or if no element is "
+           "valid.")
       .def("reset_session", &Classifier::reset_session,
-           "learning=True: a new session (the learned weights start again equal).")
+           "learning=True: a new session (the prior weights again, no offsets learned).")
       .def_property_readonly("session", &Classifier::session,
                              "learning=True: the learned session {'scales', 'weights', 'scale' (the weights' "
-                             "mean), 'sweeps'}; None otherwise.")
+                             "mean), 'sweeps', 'offsets_mm' (per row), 'drift_mm' (per row, Legendre degrees "
+                             "1 and 2)}; None otherwise.")
       .def_property_readonly("materials", &Classifier::materials, "Candidate materials searched.")
       .def_property_readonly("backend", &Classifier::backend)
       .def_property_readonly("method", &Classifier::method, "'eq12' or 'session'.")

@@ -3,7 +3,9 @@
 // closed form over scorers with known scores, the weights' update (evidence,
 // cap, forgetting, reset), the scales it skips, and on a small table of real
 // session classifiers: an unmoved session settles on scale 0, a moved one on a
-// wide scale, and each then labels a sweep the other way of matching gets wrong.
+// wide scale, and each then labels a sweep the other way of matching gets wrong;
+// and the session's offsets it learns (session_offsets.hpp): the posterior
+// mean, forgetting, clipping, and twins told apart in a session that moved.
 #include "tofmat/core/session_learner.hpp"
 
 #include <gtest/gtest.h>
@@ -240,7 +242,7 @@ TEST(SessionLearner, AnUnmovedSessionSettlesOnScaleZeroAndTellsTwinsApart) {
     std::mt19937 rng(7);
     learn_six_sweeps(*l, t, 0.0, rng);
     const auto st = l->state();
-    EXPECT_GT(st.weights[0], 0.9) << (fixed ? "fixed" : "float");
+    EXPECT_GT(st.weights[0], 0.8) << (fixed ? "fixed" : "float");
     EXPECT_LT(st.scale, 0.1);
     // The session did not move: a sweep of b is b, not a moved by 1.2 mm.
     int right = 0;
@@ -252,9 +254,11 @@ TEST(SessionLearner, AnUnmovedSessionSettlesOnScaleZeroAndTellsTwinsApart) {
   }
 }
 
-TEST(SessionLearner, AMovedSessionSettlesOnAWideScale) {
+TEST(SessionLearner, AMovedSessionSettlesOnAWideScaleWithoutLearningItsOffsets) {
   Twins t;
-  auto l = SessionLearner::make(t.table, twins_prior(), false);
+  SessionLearning weights_only;
+  weights_only.learn_offsets = false;
+  auto l = SessionLearner::make(t.table, twins_prior(), false, {}, {}, weights_only);
   std::mt19937 rng(11);
   // The session moved row 0 by 4 mm: no material explains a sweep without an offset.
   learn_six_sweeps(*l, t, 4.0, rng);
@@ -262,6 +266,135 @@ TEST(SessionLearner, AMovedSessionSettlesOnAWideScale) {
   EXPECT_GT(st.scale, 1.0);
   EXPECT_LT(st.weights[0], 1e-6);
   EXPECT_EQ(st.sweeps, 6u);
+  EXPECT_TRUE(st.terms_mm.empty());
+}
+
+TEST(SessionLearner, LearnsWhereTheSessionMovedAndThenTellsTwinsApart) {
+  // A session that moved row 0 by 2.4 mm: material a then reads as b moved by 1.2 mm, and a
+  // matcher that only knows how far sessions move cannot tell them apart. Learned from sweeps of
+  // both, the offset comes out and the twins separate again.
+  Twins t;
+  for (bool fixed : {false, true}) {
+    const char* backend = fixed ? "fixed" : "float";
+    auto l = SessionLearner::make(t.table, twins_prior(), fixed);
+    std::mt19937 rng(5);
+    for (int i = 0; i < 12; ++i) {
+      const auto q = t.sweep(i % 2, 2.4, rng);
+      l->learn(l->classify(q.data(), q.size(), true));
+    }
+    const auto st = l->state();
+    ASSERT_EQ(st.terms_mm.size(), 2u) << backend;
+    EXPECT_NEAR(st.terms_mm[0][0], 2.4, 0.2) << backend;
+    EXPECT_NEAR(st.terms_mm[1][0], 0.0, 0.1) << backend;
+    EXPECT_EQ(st.terms_mm[0][1], 0.0) << backend;  // (no drift term in this prior)
+    int right = 0;
+    for (int i = 0; i < 20; ++i) {
+      const int m = i % 2;
+      const auto q = t.sweep(m, 2.4, rng);
+      right += l->classify(q.data(), q.size()).mixture.best().index == static_cast<std::uint32_t>(m);
+    }
+    EXPECT_EQ(right, 20) << backend;
+    // A new session forgets where the last one was.
+    l->reset();
+    EXPECT_EQ(l->state().terms_mm[0][0], 0.0) << backend;
+  }
+}
+
+TEST(SessionLearner, ScaleZeroAndLongSweepsScoreTheQueryAsItIsTheOtherScalesLessTheLearnedOffsets) {
+  Twins t;
+  const SessionPrior prior = twins_prior();
+  SessionLearning settings = two_scales(0.9);
+  settings.long_sweep_bins = 20;
+  settings.long_sweep_scale = 1.0;
+  std::vector<float> seen(2, std::nanf(""));  // what each scale's scorer saw at row 0, bin 15
+  std::vector<SessionLearner::Scorer> scorers;
+  for (std::size_t k = 0; k < 2; ++k) {
+    auto c = std::make_shared<const SessionClassifier>(t.table, scaled(prior, settings.scales[k]));
+    scorers.emplace_back([c, k, &seen](const float* q, std::size_t n) {
+      seen[k] = q[15];
+      return c->classify(q, n);
+    });
+  }
+  SessionLearner l(settings, std::move(scorers), 2, std::make_shared<const SessionClassifier>(t.table, prior));
+  std::mt19937 rng(3);
+  for (int i = 0; i < 8; ++i) {
+    const auto q = t.sweep(i % 2, 2.4, rng);
+    l.learn(l.classify(q.data(), q.size(), true));
+  }
+  const double learned = l.state().terms_mm[0][0];
+  ASSERT_GT(learned, 1.0);
+  auto q = t.sweep(0, 2.4, rng);
+  l.classify(q.data(), q.size(), true);
+  EXPECT_EQ(seen[0], q[15]);
+  EXPECT_NEAR(seen[1], q[15] - learned, 1e-5);
+  // A long sweep (the 25 bins from 0) is scored as it is at every scale.
+  for (std::uint32_t j = 0; j < 25; ++j) q[j] = t.table->material_values(0)[j] + 2.4f, q[40 + j] = 3.0f;
+  l.classify(q.data(), q.size(), true);
+  EXPECT_EQ(seen[0], q[15]);
+  EXPECT_EQ(seen[1], q[15]);
+}
+
+TEST(SessionOffsets, TheMeanIsThePosteriorMeanOfTheSharedTermsAndForgets) {
+  Twins t;
+  SessionPrior p = twins_prior();
+  auto reference = std::make_shared<const SessionClassifier>(t.table, p);
+  SessionOffsets o(reference, 0.5);
+  const std::uint32_t bins = t.table->n_bins();
+  // Material a moved by 1 mm on row 0, every element, no noise: with n elements of variance v
+  // and the prior sd 2 mm, the posterior mean is (n / v) / (n / v + 1 / 4) x 1 mm.
+  std::vector<float> q(2 * bins, std::nanf(""));
+  for (std::uint32_t j = 0; j < 10; ++j) {
+    q[j] = t.table->material_values(0)[j] + 1.0f;
+    q[bins + j] = 3.0f;
+  }
+  const auto e = o.evidence(q.data(), q.size(), {{0, 1.0}});
+  const double v = 0.2 * 0.2, info = 10.0 / v;
+  EXPECT_NEAR(e.lambda[0][0][0], info, 1e-9);
+  EXPECT_NEAR(e.eta[0][0], info * 1.0, 1e-5);
+  o.learn(e);
+  EXPECT_NEAR(o.terms_mm()[0][0], info / (info + 0.25), 1e-6);
+  EXPECT_NEAR(o.shift()[3], info / (info + 0.25), 1e-6);
+  // A second sweep at 0 mm: the first counts half (forget 0.5).
+  for (std::uint32_t j = 0; j < 10; ++j) q[j] = t.table->material_values(0)[j];
+  o.learn(o.evidence(q.data(), q.size(), {{0, 1.0}}));
+  EXPECT_NEAR(o.terms_mm()[0][0], 0.5 * info / (1.5 * info + 0.25), 1e-6);
+  // Shares split the evidence, negligible ones are left out; none left: no evidence.
+  const auto split = o.evidence(q.data(), q.size(), {{0, 0.5}, {1, 0.5}, {1, 1e-4}});
+  EXPECT_NEAR(split.lambda[0][0][0], info, 1e-9);
+  EXPECT_TRUE(o.evidence(q.data(), q.size(), {{0, 1e-4}}).empty());
+  o.reset();
+  EXPECT_EQ(o.terms_mm()[0][0], 0.0);
+  EXPECT_EQ(o.shift()[3], 0.0f);
+}
+
+TEST(SessionOffsets, OneWildElementBarelyMovesTheMean) {
+  Twins t;
+  auto reference = std::make_shared<const SessionClassifier>(t.table, twins_prior());
+  SessionOffsets o(reference, 1.0);
+  const std::uint32_t bins = t.table->n_bins();
+  std::vector<float> q(2 * bins, std::nanf(""));
+  for (std::uint32_t j = 0; j < 10; ++j) q[j] = t.table->material_values(0)[j];
+  q[4] += 1000.0f;  // a flying pixel's bin
+  o.learn(o.evidence(q.data(), q.size(), {{0, 1.0}}));
+  // Down-weighted by the robust fit to 3 sds' worth (0.6 mm of 10 elements' information).
+  EXPECT_LT(std::fabs(o.terms_mm()[0][0]), 0.07);
+  EXPECT_GT(o.terms_mm()[0][0], 0.0);
+}
+
+TEST(SessionOffsets, BadInputIsRefused) {
+  Twins t;
+  auto reference = std::make_shared<const SessionClassifier>(t.table, twins_prior());
+  EXPECT_THROW(SessionOffsets(nullptr, 0.9), std::invalid_argument);
+  EXPECT_THROW(SessionOffsets(reference, 0.0), std::invalid_argument);
+  EXPECT_THROW(SessionOffsets(reference, 1.5), std::invalid_argument);
+  SessionOffsets o(reference, 0.9);
+  std::vector<float> q(2 * t.table->n_bins(), 1.0f);
+  EXPECT_THROW(o.evidence(q.data(), q.size() - 1, {{0, 1.0}}), std::invalid_argument);
+  EXPECT_THROW(o.evidence(q.data(), q.size(), {{7, 1.0}}), std::invalid_argument);
+  SessionOffsets::Evidence wrong;
+  wrong.lambda.resize(3);
+  wrong.eta.resize(3);
+  EXPECT_THROW(o.learn(wrong), std::invalid_argument);
 }
 
 }  // namespace

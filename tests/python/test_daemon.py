@@ -110,11 +110,12 @@ def test_the_open_set_calls_a_material_no_candidate_explains_unknown(start: Call
 
 def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Callable[..., Daemon]) -> None:
     # The default: the simulated camera against its own table, a session that did not move. Each finished
-    # sweep (the target leaving) teaches the learner; status reports it (protocol 1.10), and a
-    # reset with session=True starts the session again, a plain reset does not.
+    # sweep (the target leaving) teaches the learner; status reports it (protocol 1.10; where the
+    # session moved, 1.12), and a reset with session=True starts the session again, a plain reset
+    # does not.
     d = start(sweep(["cork", "polystyrene", "pvc"]))
     with d.client() as c:
-        assert c.hello["minor"] >= 10
+        assert c.hello["minor"] >= 12
         start_state = c.status()["session"]
         # A session starts leaning on the calibration's own spread (scale 1).
         w = start_state["weights"]
@@ -125,11 +126,20 @@ def test_the_session_matcher_learns_its_session_from_finished_sweeps(start: Call
         assert learned["sweeps"] >= 4
         assert learned["weights"][0] > 0.9 and learned["scale"] < 0.1, learned  # no session change
         assert abs(sum(learned["weights"]) - 1.0) < 1e-9
+        # Where it moved: a row offset and two drift terms per table row, learned (not the zeros a
+        # session starts with) and small (the simulated session did not move).
+        rows = len(learned["offsets_mm"])
+        assert rows == 2 and len(learned["drift_mm"]) == rows and all(len(d) == 2 for d in learned["drift_mm"])
+        assert any(o != 0.0 for o in learned["offsets_mm"]), learned
+        assert all(abs(o) < 1.0 for o in learned["offsets_mm"]), learned
+        assert start_state["offsets_mm"] == [0.0] * rows
         c.reset()
         assert c.status()["session"]["sweeps"] >= learned["sweeps"]
         c.reset(session=True)
         again = c.status()["session"]
         assert again["sweeps"] < learned["sweeps"] and again["weights"][0] < 0.5
+        if again["sweeps"] == 0:
+            assert again["offsets_mm"] == [0.0] * rows
         with pytest.raises(tofmat.CommandError) as e:
             c._call("reset", {"session": "yes"})
         assert e.value.code == "invalid_argument" and "session" in str(e.value)

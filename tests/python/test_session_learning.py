@@ -49,18 +49,33 @@ def sweep(table: tofmat.ExemplarTable, material: str, lo: int, n: int, rng: np.r
     return q
 
 
+def learned_shift(table: tofmat.ExemplarTable, session: dict[str, object]) -> np.ndarray:
+    """The learned offsets and drift at every element (n_rows, n_bins): what the scales above 0 take
+    out of a query before they score it (session_offsets.hpp)."""
+    x = 2.0 * ((np.arange(table.n_bins) + 0.5) / table.n_bins - 0.5)
+    offsets = np.asarray(session["offsets_mm"], np.float64)[:, None]
+    drift = np.asarray(session["drift_mm"], np.float64)
+    return (offsets + drift[:, :1] * x + drift[:, 1:] * 0.5 * (3.0 * x * x - 1.0)).astype(np.float32)
+
+
 def test_the_score_is_the_mixture_of_the_scaled_session_matchers(real_table: tofmat.ExemplarTable) -> None:
     rng = np.random.default_rng(3)
     learning = tofmat.Classifier(real_table, learning=True)
     prior = tofmat.SessionPrior.tuned(real_table)
     by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
-    # Before any sweep the weights are the prior's; after three they are what the sweeps' evidence made them.
+    # Before any sweep the weights are the prior's and nothing is learned of where the session is;
+    # after three sweeps they are what the sweeps' evidence made them, and the scales above 0 score
+    # the query less the offsets learned so far (scale 0 as it is: the table's own session).
     assert learning.session["weights"] == pytest.approx(PRIOR_WEIGHTS)
+    assert learning.session["offsets_mm"] == [0.0] * real_table.n_rows
     for k in range(4):
-        q = sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 12, rng)
+        q = sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 12, rng, offset=(0.8, -0.3))
         got = {r.material: r.distance for r in learning.classify(q).ranking}
         w = np.array(learning.session["weights"])
-        per = [{r.material: r.distance for r in c.classify(q).ranking} for c in by_scale]
+        moved = q - learned_shift(real_table, learning.session)
+        assert (k == 0) == bool(np.all(moved[np.isfinite(q)] == q[np.isfinite(q)]))
+        per = [{r.material: r.distance for r in c.classify(q if s == 0.0 else moved).ranking}
+               for s, c in zip(SCALES, by_scale, strict=True)]  # fmt: skip
         for name, d in got.items():
             terms = [math.log(wk) - p[name] for wk, p in zip(w, per, strict=True) if wk > 0]
             want = -float(np.logaddexp.reduce(terms))
@@ -68,10 +83,21 @@ def test_the_score_is_the_mixture_of_the_scaled_session_matchers(real_table: tof
         learning.learn(q)
     s = learning.session
     assert s["sweeps"] == 4 and s["scales"] == SCALES and sum(s["weights"]) == pytest.approx(1.0)
-    # Sweeps read straight off the table: a session that did not move.
-    assert s["weights"][0] > 0.9 and s["scale"] < 0.1
+    # Sweeps read off the table moved by 0.8 and -0.3 mm: the offsets are learned towards them.
+    assert 0.3 < s["offsets_mm"][0] < 1.0 and -0.45 < s["offsets_mm"][1] < 0.0, s
     learning.reset_session()
     assert learning.session["sweeps"] == 0 and learning.session["weights"] == pytest.approx(PRIOR_WEIGHTS)
+    assert learning.session["offsets_mm"] == [0.0] * real_table.n_rows
+
+
+def test_an_unmoved_session_settles_on_scale_zero(real_table: tofmat.ExemplarTable) -> None:
+    rng = np.random.default_rng(3)
+    learning = tofmat.Classifier(real_table, learning=True)
+    for k in range(4):
+        learning.learn(sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 12, rng))
+    s = learning.session
+    assert s["weights"][0] > 0.9 and s["scale"] < 0.1, s
+    assert all(abs(o) < 0.2 for o in s["offsets_mm"]), s
 
 
 def test_a_long_sweep_is_scored_no_wider_than_the_calibrations_scale(real_table: tofmat.ExemplarTable) -> None:

@@ -74,14 +74,12 @@ FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const Exemp
     fit_basis_[static_cast<std::size_t>(t)].resize(bins);
   }
   for (std::uint32_t j = 0; j < bins; ++j) {
-    const double x = 2.0 * ((j + 0.5) / bins - 0.5);
-    const double legendre[3] = {1.0, x, 0.5 * (3.0 * x * x - 1.0)};
     for (int t = 0; t < k; ++t) {
-      basis_[static_cast<std::size_t>(t)][j] =
-          static_cast<std::int32_t>(std::lround(std::ldexp(legendre[reference_.degree(t)], kBasisBits)));
+      const double a = session_basis(j, bins, reference_.degree(t));
+      basis_[static_cast<std::size_t>(t)][j] = static_cast<std::int32_t>(std::lround(std::ldexp(a, kBasisBits)));
       // |P1|, |P2| < 1 at a bin's centre: within int32 in Q31 (held there all the same).
-      fit_basis_[static_cast<std::size_t>(t)][j] = static_cast<std::int32_t>(
-          std::clamp(std::nearbyint(std::ldexp(legendre[reference_.degree(t)], 31)), -2147483647.0, 2147483647.0));
+      fit_basis_[static_cast<std::size_t>(t)][j] =
+          static_cast<std::int32_t>(std::clamp(std::nearbyint(std::ldexp(a, 31)), -2147483647.0, 2147483647.0));
     }
   }
   const SessionPrior& p = reference_.prior();

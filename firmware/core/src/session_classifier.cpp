@@ -189,9 +189,7 @@ Classification SessionClassifier::classify(const float* query, std::size_t n) co
   std::vector<std::array<double, kMaxTerms>> basis(q.index.size());
   for (std::size_t i = 0; i < q.index.size(); ++i) {
     const std::uint32_t j = q.index[i] % bins;
-    const double x = 2.0 * ((j + 0.5) / bins - 0.5);
-    const double legendre[3] = {1.0, x, 0.5 * (3.0 * x * x - 1.0)};
-    for (int t = 0; t < k; ++t) basis[i][t] = legendre[degree_[t]];
+    for (int t = 0; t < k; ++t) basis[i][t] = session_basis(j, bins, degree_[t]);
   }
   const bool huber = std::isfinite(prior_.huber_k);
   const double hk = prior_.huber_k;

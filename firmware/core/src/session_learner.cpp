@@ -87,14 +87,21 @@ SessionLearner::ScaledScorer each_scale(const SessionLearning& settings, std::ve
 
 }  // namespace
 
-SessionLearner::SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows)
-    : SessionLearner(settings, each_scale(settings, std::move(scorers)), n_rows) {}
+SessionLearner::SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows,
+                               std::shared_ptr<const SessionClassifier> offsets)
+    : SessionLearner(settings, each_scale(settings, std::move(scorers)), n_rows, std::move(offsets)) {}
 
-SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows)
+SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows,
+                               std::shared_ptr<const SessionClassifier> offsets)
     : settings_(std::move(settings)), scorer_(std::move(scorer)), n_rows_(n_rows) {
   settings_.validate();
   if (!scorer_) throw std::invalid_argument("session learning: no scorer");
   if (n_rows_ == 0) throw std::invalid_argument("session learning: a query has at least one row");
+  if (offsets && settings_.learn_offsets) {
+    if (offsets->table().n_rows() != n_rows_)
+      throw std::invalid_argument("session learning: the offsets' session matcher has another count of rows");
+    offsets_ = std::make_unique<SessionOffsets>(std::move(offsets), settings_.forget);
+  }
   if (settings_.long_sweep_bins > 0) {
     const auto at = std::find(settings_.scales.begin(), settings_.scales.end(), settings_.long_sweep_scale);
     long_scale_ = static_cast<std::size_t>(at - settings_.scales.begin());
@@ -116,14 +123,19 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
     ScaledScorer scorer = [c](const float* q, std::size_t n, const std::vector<bool>& wanted) {
       return c->classify_scaled(q, n, wanted);
     };
-    return std::make_shared<SessionLearner>(std::move(settings), std::move(scorer), table->n_rows());
+    // (the fixed matcher's float reference is at the calibration's prior: it learns the offsets)
+    std::shared_ptr<const SessionClassifier> reference(c, &c->reference());
+    return std::make_shared<SessionLearner>(std::move(settings), std::move(scorer), table->n_rows(),
+                                            std::move(reference));
   }
   std::vector<Scorer> scorers;
   for (double s : settings.scales) {
     auto c = std::make_shared<const SessionClassifier>(table, scaled(prior, s), noise_mm, candidates);
     scorers.emplace_back([c](const float* q, std::size_t n) { return c->classify(q, n); });
   }
-  return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers), table->n_rows());
+  auto reference = std::make_shared<const SessionClassifier>(table, prior, noise_mm, candidates);
+  return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers), table->n_rows(),
+                                          std::move(reference));
 }
 
 SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t n, bool every_scale) const {
@@ -137,9 +149,22 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   const bool long_sweep = settings_.long_sweep_bins > 0 && bins_covered(query, n, n_rows_) >= settings_.long_sweep_bins;
   for (std::size_t k = 0; k < k_count; ++k) scored_as[k] = long_sweep && k > long_scale_ ? long_scale_ : k;
   std::vector<double> log_w;
+  std::vector<float> shifted;  // the query less the learned offsets (empty: nothing learned, or not shifted)
   {
     std::lock_guard<std::mutex> lock(mutex_);
     log_w = log_weight_;
+    if (offsets_) {
+      const std::vector<float>& shift = offsets_->shift();
+      if (shift.size() != n) {
+        throw std::invalid_argument("session learning: a query of " + std::to_string(n) +
+                                    " elements, the table's have " + std::to_string(shift.size()));
+      }
+      // A long sweep pins its own offsets: it is scored as it is.
+      if (!long_sweep && std::any_of(shift.begin(), shift.end(), [](float v) { return v != 0.0F; })) {
+        shifted.assign(query, query + n);
+        for (std::size_t i = 0; i < n; ++i) shifted[i] -= shift[i];
+      }
+    }
   }
   const double norm = log_sum_exp(log_w);
   for (double& w : log_w) w -= norm;
@@ -153,7 +178,28 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   }
   if (every_scale) std::fill(scored.begin(), scored.end(), true);
 
-  std::vector<Classification> by_scale = scorer_(query, n, scored);
+  // Scale 0 is the table's own session, offsets and all: it scores the query as it is; the other
+  // scales score it less the learned offsets (session_offsets.hpp).
+  std::vector<Classification> by_scale;
+  if (shifted.empty()) {
+    by_scale = scorer_(query, n, scored);
+  } else {
+    std::vector<bool> as_is(k_count, false), moved = scored;
+    for (std::size_t k = 0; k < k_count; ++k) {
+      if (settings_.scales[k] == 0.0) {
+        as_is[k] = scored[k];
+        moved[k] = false;
+      }
+    }
+    const auto any = [](const std::vector<bool>& v) { return std::find(v.begin(), v.end(), true) != v.end(); };
+    by_scale = any(moved) ? scorer_(shifted.data(), n, moved) : std::vector<Classification>(k_count);
+    if (any(as_is)) {
+      std::vector<Classification> plain = scorer_(query, n, as_is);
+      if (plain.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
+      for (std::size_t k = 0; k < k_count; ++k)
+        if (as_is[k]) by_scale[k] = std::move(plain[k]);
+    }
+  }
   if (by_scale.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
   std::size_t first = k_count;  // the first scored scale: its ranking gives the candidates' order
   for (std::size_t k = 0; k < k_count && first == k_count; ++k)
@@ -212,6 +258,17 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   std::sort(out.mixture.ranking.begin(), out.mixture.ranking.end(), [](const Match& a, const Match& b) {
     return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
   });
+  if (every_scale && offsets_ && !out.mixture.ranking.empty()) {
+    // Each candidate's posterior share under the mixture (the candidates equally likely).
+    const double best = out.mixture.ranking.front().distance;
+    std::vector<std::pair<std::uint32_t, double>> shares;
+    for (const Match& m : out.mixture.ranking) {
+      const double share = std::exp(best - m.distance);
+      if (share >= SessionOffsets::kNegligibleShare) shares.emplace_back(m.index, share);
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    out.offsets = offsets_->evidence(query, n, shares);
+  }
   return out;
 }
 
@@ -236,12 +293,14 @@ void SessionLearner::learn(const Scored& sweep) {
     top = std::max(top, log_weight_[k]);
   }
   for (double& w : log_weight_) w -= top;  // (kept near 0: the weights are relative)
+  if (offsets_) offsets_->learn(sweep.offsets);
   ++sweeps_;
 }
 
 void SessionLearner::reset() {
   std::lock_guard<std::mutex> lock(mutex_);
   log_weight_ = log_prior_;
+  if (offsets_) offsets_->reset();
   sweeps_ = 0;
 }
 
@@ -253,6 +312,7 @@ SessionLearner::State SessionLearner::state() const {
     std::lock_guard<std::mutex> lock(mutex_);
     log_w = log_weight_;
     s.sweeps = sweeps_;
+    if (offsets_) s.terms_mm = offsets_->terms_mm();
   }
   const double norm = log_sum_exp(log_w);
   for (std::size_t k = 0; k < log_w.size(); ++k) {

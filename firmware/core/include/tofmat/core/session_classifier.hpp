@@ -67,6 +67,14 @@ struct SessionPrior {
   void validate(std::uint32_t n_rows) const;
 };
 
+// The nuisance term of Legendre degree `degree` (0, 1 or 2) at the centre of
+// bin `bin` of `bins`: the basis is Legendre over the table's depth range,
+// x = 2 ((bin + 1/2) / bins - 1/2) in (-1, 1).
+inline double session_basis(std::uint32_t bin, std::uint32_t bins, int degree) {
+  const double x = 2.0 * ((bin + 0.5) / bins - 0.5);
+  return degree == 0 ? 1.0 : degree == 1 ? x : 0.5 * (3.0 * x * x - 1.0);
+}
+
 // The prior with its offsets and drift spreads times `scale` (finite, >= 0;
 // std::invalid_argument otherwise); the noise model unchanged: how far a
 // session moves, as the session learner weighs it (session_learner.hpp).

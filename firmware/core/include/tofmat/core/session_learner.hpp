@@ -36,8 +36,18 @@
 //   (at twice the spread, 100-bin sweeps scored under scale 2 are 2.4 points
 //   under scale 1), so its scales above long_sweep_scale are scored as that
 //   scale. What the weights learn is unchanged: every scale's own evidence.
+//
+// Beside the weights (how far the session moved) it learns where it moved:
+// the mean of the session's offsets and drift (session_offsets.hpp), taken
+// out of the query before the scales above 0 score it; they then weigh how
+// far the session sits from that mean. Scale 0 stays the table's own session
+// and scores the query as it is: where the session did not move, the learned
+// mean is only the labels' noise, and shifting scale 0 by it lost 4 to 7
+// points at 3 and 10 bins (docs/evaluation.md). A long sweep pins its own
+// offsets and is scored as it is at every scale.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -48,6 +58,7 @@
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/exemplar_table.hpp"
 #include "tofmat/core/session_classifier.hpp"
+#include "tofmat/core/session_offsets.hpp"
 
 namespace tofmat {
 
@@ -65,6 +76,9 @@ struct SessionLearning {
   // scored as that scale. 0: no query is.
   std::uint32_t long_sweep_bins = 20;
   double long_sweep_scale = 1.0;
+  // Learn the session's offsets and drift too (session_offsets.hpp), where
+  // the learner is given a session matcher to learn them with (make() does).
+  bool learn_offsets = true;
 
   // Throws std::invalid_argument naming the bad setting.
   void validate() const;
@@ -84,10 +98,15 @@ class SessionLearner {
   // One scorer per scale of `settings`, for queries of n_rows rows (a
   // query's n elements are n_rows rows of n / n_rows bins, as the table's).
   // Throws std::invalid_argument on bad settings, a count that is not the
-  // scales', or n_rows 0.
-  SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows);
+  // scales', or n_rows 0. `offsets`: the session matcher at the
+  // calibration's prior to learn the session's offsets with (null, or
+  // settings.learn_offsets false: only the weights are learned); its table's
+  // rows must be n_rows.
+  SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows,
+                 std::shared_ptr<const SessionClassifier> offsets = nullptr);
   // One scorer for every scale of `settings`; the same errors but the count.
-  SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows);
+  SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows,
+                 std::shared_ptr<const SessionClassifier> offsets = nullptr);
 
   // Session classifiers of the table under prior x each scale, on the float
   // path (one SessionClassifier a scale) or the fixed-point one (one
@@ -100,8 +119,9 @@ class SessionLearner {
                                               SessionLearning settings = {});
 
   struct Scored {
-    Classification mixture;        // the ranking by the mixture's score D(m), fit from m's likeliest scale
-    std::vector<double> evidence;  // E_k per scale
+    Classification mixture;            // the ranking by the mixture's score D(m), fit from m's likeliest scale
+    std::vector<double> evidence;      // E_k per scale
+    SessionOffsets::Evidence offsets;  // on the session's terms (every_scale, when it learns them)
   };
   // The query under the weights learned so far. A scale whose weight is
   // under e^-kNegligibleNats of the largest adds nothing to D(m) and is not
@@ -113,12 +133,12 @@ class SessionLearner {
   // element with the query) or for n not a multiple of the rows.
   Scored classify(const float* query, std::size_t n, bool every_scale = false) const;
   // A finished sweep (classify(..., true) of its whole query) moves the
-  // weights. Throws std::invalid_argument for another count of scales, or
+  // weights and the learned offsets. Throws std::invalid_argument for another count of scales, or
   // for a sweep not scored at every scale.
   void learn(const Scored& sweep);
   // A weight this many nats under the largest is not scored by classify.
   static constexpr double kNegligibleNats = 30.0;
-  // A new session: the prior weights, no sweep learned.
+  // A new session: the prior weights, no offsets, no sweep learned.
   void reset();
 
   struct State {
@@ -126,6 +146,9 @@ class SessionLearner {
     std::vector<double> weights;  // summing to 1
     double scale = 0.0;           // the weights' mean scale
     std::uint64_t sweeps = 0;     // learned since the session began
+    // The learned offsets' terms per row, mm (offset, drift degree 1 and 2;
+    // session_offsets.hpp); empty when the learner does not learn them.
+    std::vector<std::array<double, kSessionMaxTerms>> terms_mm;
   };
   State state() const;
   const SessionLearning& settings() const { return settings_; }
@@ -134,10 +157,11 @@ class SessionLearner {
   SessionLearning settings_;
   ScaledScorer scorer_;
   std::uint32_t n_rows_;
-  std::size_t long_scale_ = 0;      // the index of settings_.long_sweep_scale in the scales
-  std::vector<double> log_prior_;   // log prior_weights (0 each for equal weights)
-  mutable std::mutex mutex_;        // guards what follows: one learner serves every region of a session
-  std::vector<double> log_weight_;  // up to a constant
+  std::size_t long_scale_ = 0;               // the index of settings_.long_sweep_scale in the scales
+  std::vector<double> log_prior_;            // log prior_weights (0 each for equal weights)
+  mutable std::mutex mutex_;                 // guards what follows: one learner serves every region of a session
+  std::vector<double> log_weight_;           // up to a constant
+  std::unique_ptr<SessionOffsets> offsets_;  // null: not learned
   std::uint64_t sweeps_ = 0;
 };
 

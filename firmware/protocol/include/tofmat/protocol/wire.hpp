@@ -27,7 +27,7 @@ inline constexpr std::uint16_t kProtocolVersion = 1;
 // adds (fields, events, streams, commands, values), and clients ignore what
 // they do not know, so a client of any minor talks to a daemon of any other
 // (docs/protocol.md, Versions; its change list says what each one added).
-inline constexpr std::uint16_t kProtocolMinor = 11;
+inline constexpr std::uint16_t kProtocolMinor = 12;
 inline constexpr char kMagic[4] = {'T', 'M', 'A', 'T'};
 inline constexpr std::size_t kHeaderBytes = 12;
 // The metadata of any message (the largest, a hello or status with 255
