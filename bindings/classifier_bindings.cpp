@@ -166,16 +166,9 @@ class Classifier {
     d["weights"] = s.weights;
     d["scale"] = s.scale;
     d["sweeps"] = s.sweeps;
-    if (!s.terms_mm.empty()) {
-      // The learned offsets per row, and the drift's Legendre degree 1 and 2 terms per row (mm).
-      std::vector<double> offsets;
-      std::vector<std::vector<double>> drift;
-      for (const auto& t : s.terms_mm) {
-        offsets.push_back(t[0]);
-        drift.push_back({t[1], t[2]});
-      }
-      d["offsets_mm"] = offsets;
-      d["drift_mm"] = drift;
+    if (!s.offsets_mm.empty()) {
+      d["offsets_mm"] = s.offsets_mm;
+      d["drift_mm"] = s.drift_mm;
     }
     return d;
   }

@@ -266,7 +266,7 @@ TEST(SessionLearner, AMovedSessionSettlesOnAWideScaleWithoutLearningItsOffsets) 
   EXPECT_GT(st.scale, 1.0);
   EXPECT_LT(st.weights[0], 1e-6);
   EXPECT_EQ(st.sweeps, 6u);
-  EXPECT_TRUE(st.terms_mm.empty());
+  EXPECT_TRUE(st.offsets_mm.empty() && st.drift_mm.empty());
 }
 
 TEST(SessionLearner, LearnsWhereTheSessionMovedAndThenTellsTwinsApart) {
@@ -283,10 +283,11 @@ TEST(SessionLearner, LearnsWhereTheSessionMovedAndThenTellsTwinsApart) {
       l->learn(l->classify(q.data(), q.size(), true));
     }
     const auto st = l->state();
-    ASSERT_EQ(st.terms_mm.size(), 2u) << backend;
-    EXPECT_NEAR(st.terms_mm[0][0], 2.4, 0.2) << backend;
-    EXPECT_NEAR(st.terms_mm[1][0], 0.0, 0.1) << backend;
-    EXPECT_EQ(st.terms_mm[0][1], 0.0) << backend;  // (no drift term in this prior)
+    ASSERT_EQ(st.offsets_mm.size(), 2u) << backend;
+    ASSERT_EQ(st.drift_mm.size(), 2u) << backend;
+    EXPECT_NEAR(st.offsets_mm[0], 2.4, 0.2) << backend;
+    EXPECT_NEAR(st.offsets_mm[1], 0.0, 0.1) << backend;
+    EXPECT_EQ(st.drift_mm[0][0], 0.0) << backend;  // (no drift term in this prior)
     int right = 0;
     for (int i = 0; i < 20; ++i) {
       const int m = i % 2;
@@ -296,7 +297,7 @@ TEST(SessionLearner, LearnsWhereTheSessionMovedAndThenTellsTwinsApart) {
     EXPECT_EQ(right, 20) << backend;
     // A new session forgets where the last one was.
     l->reset();
-    EXPECT_EQ(l->state().terms_mm[0][0], 0.0) << backend;
+    EXPECT_EQ(l->state().offsets_mm[0], 0.0) << backend;
   }
 }
 
@@ -321,7 +322,7 @@ TEST(SessionLearner, ScaleZeroAndLongSweepsScoreTheQueryAsItIsTheOtherScalesLess
     const auto q = t.sweep(i % 2, 2.4, rng);
     l.learn(l.classify(q.data(), q.size(), true));
   }
-  const double learned = l.state().terms_mm[0][0];
+  const double learned = l.state().offsets_mm[0];
   ASSERT_GT(learned, 1.0);
   auto q = t.sweep(0, 2.4, rng);
   l.classify(q.data(), q.size(), true);

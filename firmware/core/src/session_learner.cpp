@@ -180,9 +180,14 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
 
   // Scale 0 is the table's own session, offsets and all: it scores the query as it is; the other
   // scales score it less the learned offsets (session_offsets.hpp).
+  const auto score = [&](const float* q, const std::vector<bool>& wanted) {
+    std::vector<Classification> r = scorer_(q, n, wanted);
+    if (r.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
+    return r;
+  };
   std::vector<Classification> by_scale;
   if (shifted.empty()) {
-    by_scale = scorer_(query, n, scored);
+    by_scale = score(query, scored);
   } else {
     std::vector<bool> as_is(k_count, false), moved = scored;
     for (std::size_t k = 0; k < k_count; ++k) {
@@ -192,15 +197,13 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       }
     }
     const auto any = [](const std::vector<bool>& v) { return std::find(v.begin(), v.end(), true) != v.end(); };
-    by_scale = any(moved) ? scorer_(shifted.data(), n, moved) : std::vector<Classification>(k_count);
+    by_scale = any(moved) ? score(shifted.data(), moved) : std::vector<Classification>(k_count);
     if (any(as_is)) {
-      std::vector<Classification> plain = scorer_(query, n, as_is);
-      if (plain.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
+      std::vector<Classification> plain = score(query, as_is);
       for (std::size_t k = 0; k < k_count; ++k)
         if (as_is[k]) by_scale[k] = std::move(plain[k]);
     }
   }
-  if (by_scale.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
   std::size_t first = k_count;  // the first scored scale: its ranking gives the candidates' order
   for (std::size_t k = 0; k < k_count && first == k_count; ++k)
     if (scored[k]) first = k;
@@ -312,7 +315,12 @@ SessionLearner::State SessionLearner::state() const {
     std::lock_guard<std::mutex> lock(mutex_);
     log_w = log_weight_;
     s.sweeps = sweeps_;
-    if (offsets_) s.terms_mm = offsets_->terms_mm();
+    if (offsets_) {
+      for (const auto& t : offsets_->terms_mm()) {
+        s.offsets_mm.push_back(t[0]);
+        s.drift_mm.push_back({t[1], t[2]});
+      }
+    }
   }
   const double norm = log_sum_exp(log_w);
   for (std::size_t k = 0; k < log_w.size(); ++k) {

@@ -19,6 +19,9 @@ SessionOffsets::SessionOffsets(std::shared_ptr<const SessionClassifier> referenc
   rows_ = reference_->table().n_rows();
   bins_ = reference_->table().n_bins();
   k_ = reference_->terms();
+  basis_.resize(bins_);
+  for (std::uint32_t j = 0; j < bins_; ++j)
+    for (int t = 0; t < k_; ++t) basis_[j][t] = session_basis(j, bins_, reference_->degree(t));
   reset();
 }
 
@@ -65,12 +68,9 @@ SessionOffsets::Evidence SessionOffsets::evidence(const float* query, std::size_
         const std::size_t at = std::size_t{r} * bins_ + j;
         const float q = query[at], c = curve[at];
         if (!std::isfinite(q) || std::isnan(c)) continue;
-        std::array<double, kSessionMaxTerms> a{};
+        const auto& a = basis_[j];
         double fit = 0.0;
-        for (int t = 0; t < k_; ++t) {
-          a[t] = session_basis(j, bins_, reference_->degree(t));
-          fit += a[t] * mean_[r][t];
-        }
+        for (int t = 0; t < k_; ++t) fit += a[t] * mean_[r][t];
         basis.push_back(a);
         e.push_back(static_cast<double>(q) - static_cast<double>(c) - fit);
       }
@@ -135,7 +135,7 @@ void SessionOffsets::learn(const Evidence& sweep) {
     session_detail::cholesky_solve(P, k_, eta, mean_[r]);
     for (std::uint32_t j = 0; j < bins_; ++j) {
       double fit = 0.0;
-      for (int t = 0; t < k_; ++t) fit += session_basis(j, bins_, reference_->degree(t)) * mean_[r][t];
+      for (int t = 0; t < k_; ++t) fit += basis_[j][t] * mean_[r][t];
       shift_[std::size_t{r} * bins_ + j] = static_cast<float>(fit);
     }
   }

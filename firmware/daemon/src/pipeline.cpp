@@ -205,15 +205,9 @@ nlohmann::json Pipeline::status() const {
   if (learner_) {                                                        // (minor 10)
     const auto l = learner_->state();
     s["session"] = {{"sweeps", l.sweeps}, {"scale", l.scale}, {"scales", l.scales}, {"weights", l.weights}};
-    if (!l.terms_mm.empty()) {  // (minor 12) where the session moved: per row its offset and drift
-      std::vector<double> offsets;
-      std::vector<std::vector<double>> drift;
-      for (const auto& t : l.terms_mm) {
-        offsets.push_back(t[0]);
-        drift.push_back({t[1], t[2]});
-      }
-      s["session"]["offsets_mm"] = offsets;
-      s["session"]["drift_mm"] = drift;
+    if (!l.offsets_mm.empty()) {  // (minor 12) where the session moved
+      s["session"]["offsets_mm"] = l.offsets_mm;
+      s["session"]["drift_mm"] = l.drift_mm;
     }
   }
   return s;

@@ -42,9 +42,9 @@
 // out of the query before the scales above 0 score it; they then weigh how
 // far the session sits from that mean. Scale 0 stays the table's own session
 // and scores the query as it is: where the session did not move, the learned
-// mean is only the labels' noise, and shifting scale 0 by it lost 4 to 7
-// points at 3 and 10 bins (docs/evaluation.md). A long sweep pins its own
-// offsets and is scored as it is at every scale.
+// mean is only the labels' noise, and shifting scale 0 by it costs labels
+// (docs/evaluation.md). A long sweep pins its own offsets and is scored as it
+// is at every scale.
 #pragma once
 
 #include <array>
@@ -146,9 +146,11 @@ class SessionLearner {
     std::vector<double> weights;  // summing to 1
     double scale = 0.0;           // the weights' mean scale
     std::uint64_t sweeps = 0;     // learned since the session began
-    // The learned offsets' terms per row, mm (offset, drift degree 1 and 2;
-    // session_offsets.hpp); empty when the learner does not learn them.
-    std::vector<std::array<double, kSessionMaxTerms>> terms_mm;
+    // Where the session moved (session_offsets.hpp), per row, mm: its offset,
+    // and its drift's Legendre degree 1 and 2 terms; empty when the learner
+    // does not learn them.
+    std::vector<double> offsets_mm;
+    std::vector<std::array<double, 2>> drift_mm;
   };
   State state() const;
   const SessionLearning& settings() const { return settings_; }

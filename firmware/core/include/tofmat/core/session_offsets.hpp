@@ -7,12 +7,10 @@
 //
 // The session matcher integrates each sweep's terms beta out under a prior
 // N(0, S) centred on the table's own session. But the terms are the
-// session's, common to every sweep in it: a target at another angle than the
-// table's, a camera warmer than at recording, move every material's curve
-// alike. Each labelled sweep is evidence on them. For a candidate m and a row,
-// with the query's differences e_j = q_j - c_mj from m's curve, the basis a_j
-// and the element variance v_m (the session matcher's noise model), the sweep
-// adds to the information
+// session's, common to every sweep in it: a row offset, a camera warmer than
+// at recording, move every material's curve alike. Each labelled sweep is evidence on them. For a candidate m and a
+// row, with the query's differences e_j = q_j - c_mj from m's curve, the basis a_j and the element variance v_m (the
+// session matcher's noise model), the sweep adds to the information
 //   Lambda += A' A / v_m,   eta += A' e / v_m,
 // weighted by m's posterior share p_m under the learner's mixture (a sweep
 // the learner is unsure of teaches about every likely candidate, none much).
@@ -76,8 +74,9 @@ class SessionOffsets {
   double forget_;
   std::uint32_t rows_, bins_;
   int k_;
-  std::vector<std::array<double, kSessionMaxTerms>> mean_;  // per row, in the reference's term order
-  Evidence learned_;                                        // Lambda, eta so far (decayed)
+  std::vector<std::array<double, kSessionMaxTerms>> basis_;  // per bin, the terms' values
+  std::vector<std::array<double, kSessionMaxTerms>> mean_;   // per row, in the reference's term order
+  Evidence learned_;                                         // Lambda, eta so far (decayed)
   std::vector<float> shift_;
 };
 
