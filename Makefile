@@ -124,15 +124,9 @@ test-python:
 	TOFMAT_DB_DIR=$(DB) $(PYTHON) -m pytest tests/python -q -n $(JOBS)
 
 # libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus, JOBS at
-# once (each prints its result when it ends; any failure fails the target after all have run).
+# once; any failure fails the target after all have run, its report and input printed last.
 fuzz: build-sanitize
-	@find $(FUZZDIR)/tests/fuzz -maxdepth 1 -name 'fuzz_*' -type f -executable | sort | xargs -P$(JOBS) -I{} bash -c '\
-	  t={}; name=$$(basename $$t); mkdir -p $(FUZZDIR)/corpus/$$name; \
-	  out=$$($$t -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 -dict=tests/fuzz/$${name#fuzz_}.dict \
-	    $(FUZZDIR)/corpus/$$name tests/fuzz/corpus/$$name 2>&1); rc=$$?; \
-	  echo "fuzz: $$name for $(FUZZ_SECONDS) s"; \
-	  grep -E "stat::number_of_executed_units|ERROR|SUMMARY|Test unit written" <<<"$$out"; \
-	  exit $$rc'
+	mk/fuzz.sh $(FUZZDIR) $(FUZZ_SECONDS) $(JOBS)
 
 # Everything that runs on the box, for aarch64: tofmatd (with libusb, spdlog,
 # CLI11), the core, the driver, the protocol, the simulator source, and
