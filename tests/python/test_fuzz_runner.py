@@ -16,7 +16,9 @@ from conftest import REPO
 
 RUNNER = REPO / "mk" / "fuzz.sh"
 
+# Says the seed it was given, as libFuzzer does.
 PASSING = """#!/usr/bin/env bash
+for a in "$@"; do case $a in -seed=*) echo "INFO: Seed: ${a#-seed=}";; esac; done
 echo "#2 INITED"
 echo "stat::number_of_executed_units: 1234"
 """
@@ -43,18 +45,19 @@ def _targets(tmp_path: Path, scripts: dict[str, str]) -> Path:
     return build
 
 
-def _run(build: Path) -> subprocess.CompletedProcess[str]:
+def _run(build: Path, seed: int = 0) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        ["bash", str(RUNNER), str(build), "1", "2"], cwd=REPO, capture_output=True, text=True, timeout=60
+        ["bash", str(RUNNER), str(build), "1", "2", str(seed)], cwd=REPO, capture_output=True, text=True, timeout=60
     )
 
 
 def test_every_target_passing_passes(tmp_path: Path) -> None:
     build = _targets(tmp_path, {"fuzz_a": PASSING, "fuzz_b": PASSING})
-    result = _run(build)
+    result = _run(build, seed=5)
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "fuzz: fuzz_a for 1 s: number_of_executed_units: 1234 (exit 0)" in result.stdout
-    assert "fuzz: fuzz_b for 1 s: number_of_executed_units: 1234 (exit 0)" in result.stdout
+    # The seed given reaches every target, so the run can be repeated.
+    assert "fuzz: fuzz_a for 1 s, seed 5: number_of_executed_units: 1234 (exit 0)" in result.stdout
+    assert "fuzz: fuzz_b for 1 s, seed 5: number_of_executed_units: 1234 (exit 0)" in result.stdout
     assert "FAILED" not in result.stdout
 
 
@@ -66,7 +69,7 @@ def test_a_failure_is_reported_last_with_its_input(tmp_path: Path) -> None:
     out = result.stdout
     tail = out[out.index("fuzz: FAILED") :]
     assert "fuzz_c for 1 s" not in tail  # every target's line came before the report
-    assert tail.startswith("fuzz: FAILED fuzz_a (exit 77)")
+    assert tail.startswith("fuzz: FAILED fuzz_a (exit 77, seed ")
     assert "ERROR: AddressSanitizer: heap-buffer-overflow" in tail
     assert "fuzz: fuzz_a input fuzz_a-crash-0123, 7 bytes" in tail
     encoded = re.search(r"base64 of it.*:\n((?:  \S+\n)+)", tail)
