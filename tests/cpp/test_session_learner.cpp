@@ -37,6 +37,7 @@ SessionLearner::Scorer fixed_scores(const std::vector<double>& scores, int* call
 SessionLearning two_scales(double forget = 1.0, double cap = 10.0) {
   SessionLearning s;
   s.scales = {0.0, 1.0};
+  s.long_sweeps = {{20, 1.0}};
   s.forget = forget;
   s.evidence_cap = cap;
   s.prior_weights = {};  // equal
@@ -114,6 +115,7 @@ TEST(SessionLearner, BadSettingsAreRefusedByName) {
   s.scales = {-1.0, 1.0};
   EXPECT_THROW(s.validate(), std::invalid_argument);
   s.scales = {0.0, 1.0};
+  s.long_sweeps = {};
   s.forget = 0.0;
   EXPECT_THROW(s.validate(), std::invalid_argument);
   s.forget = 0.9;
@@ -124,13 +126,20 @@ TEST(SessionLearner, BadSettingsAreRefusedByName) {
   s.prior_weights = {1.0, 0.0};
   EXPECT_THROW(s.validate(), std::invalid_argument);
   s.prior_weights = {1.0, 3.0};
-  s.long_sweep_scale = 0.5;  // not one of the scales
+  EXPECT_NO_THROW(s.validate());  // no long sweeps
+  s.long_sweeps = {{20, 0.5}};  // not one of the scales
   EXPECT_THROW(s.validate(), std::invalid_argument);
-  s.long_sweep_bins = 0;  // no long sweeps: the scale is not used
+  s.long_sweeps = {{0, 1.0}};  // no bins
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.long_sweeps = {{20, 1.0}, {20, 0.0}};  // not up in bins
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.long_sweeps = {{20, 0.0}, {40, 1.0}};  // not down in scale
+  EXPECT_THROW(s.validate(), std::invalid_argument);
+  s.long_sweeps = {{20, 1.0}, {40, 0.0}};
   EXPECT_NO_THROW(s.validate());
-  s.long_sweep_bins = 20;
-  s.long_sweep_scale = 1.0;
+  s.long_sweeps = {{20, 1.0}};
   EXPECT_NO_THROW(s.validate());
+  EXPECT_NO_THROW(SessionLearning{}.validate());  // the defaults
   EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0})}, 1), std::invalid_argument);  // 1 scorer, 2 scales
   EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 0), std::invalid_argument);
   SessionLearner two_rows(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 2);
@@ -159,30 +168,38 @@ TEST(SessionLearner, ASessionStartsAndRestartsFromThePriorWeights) {
   EXPECT_EQ(l.state().sweeps, 0u);
 }
 
-TEST(SessionLearner, ALongSweepScoresTheWideScalesAsTheLongSweepScale) {
+TEST(SessionLearner, ALongSweepScoresTheWideScalesAsItsTiersScale) {
   SessionLearning s;
   s.scales = {0.0, 1.0, 2.0};
   s.prior_weights = {};
-  s.long_sweep_bins = 3;
-  s.long_sweep_scale = 1.0;
-  int calls2 = 0;
+  s.long_sweeps = {{3, 1.0}, {4, 0.0}};
+  int calls1 = 0, calls2 = 0;
   // Scale 2 alone prefers candidate 1.
-  SessionLearner l(s, {fixed_scores({4.0, 6.0}), fixed_scores({2.0, 3.0}), fixed_scores({5.0, 1.0}, &calls2)}, 1);
+  SessionLearner l(
+      s, {fixed_scores({4.0, 6.0}), fixed_scores({2.0, 3.0}, &calls1), fixed_scores({5.0, 1.0}, &calls2)}, 1);
   const float nan = std::nanf("");
-  const float short_sweep[4] = {0.0f, 0.0f, nan, nan};  // 2 bins
-  const float long_sweep[4] = {0.0f, nan, 0.0f, 0.0f};  // 3 bins
-  const auto by_own = l.classify(short_sweep, 4);
+  const float short_sweep[5] = {0.0f, 0.0f, nan, nan, nan};  // 2 bins
+  const float long_sweep[5] = {0.0f, nan, 0.0f, 0.0f, nan};  // 3 bins
+  const float longer_sweep[5] = {0.0f, nan, 0.0f, 0.0f, 0.0f};  // 4 bins
+  const auto by_own = l.classify(short_sweep, 5);
   EXPECT_EQ(calls2, 1);
   EXPECT_EQ(by_own.mixture.best().index, 1u);
   EXPECT_NEAR(by_own.mixture.best().distance, -std::log((std::exp(-6.0) + std::exp(-3.0) + std::exp(-1.0)) / 3.0),
               1e-12);
-  const auto as_one = l.classify(long_sweep, 4);
+  const auto as_one = l.classify(long_sweep, 5);
   EXPECT_EQ(calls2, 1);  // scale 2 enters as scale 1 and is not scored
   EXPECT_EQ(as_one.mixture.best().index, 0u);
   EXPECT_NEAR(as_one.mixture.best().distance, -std::log((std::exp(-4.0) + 2.0 * std::exp(-2.0)) / 3.0), 1e-12);
   EXPECT_EQ(as_one.evidence[2], -std::numeric_limits<double>::infinity());
+  // The next tier: every scale enters as scale 0, the only one scored.
+  const int calls1_before = calls1;
+  const auto as_zero = l.classify(longer_sweep, 5);
+  EXPECT_EQ(calls1, calls1_before);
+  EXPECT_EQ(calls2, 1);
+  EXPECT_NEAR(as_zero.mixture.best().distance, 4.0, 1e-12);
+  EXPECT_EQ(as_zero.evidence[1], -std::numeric_limits<double>::infinity());
   // Learning still weighs scale 2 by its own evidence.
-  const auto every = l.classify(long_sweep, 4, true);
+  const auto every = l.classify(long_sweep, 5, true);
   EXPECT_EQ(calls2, 2);
   EXPECT_NEAR(every.evidence[2], std::log(std::exp(-5.0) + std::exp(-1.0)), 1e-12);
   EXPECT_EQ(every.mixture.best().index, 0u);
@@ -304,9 +321,7 @@ TEST(SessionLearner, LearnsWhereTheSessionMovedAndThenTellsTwinsApart) {
 TEST(SessionLearner, ScaleZeroAndLongSweepsScoreTheQueryAsItIsTheOtherScalesLessTheLearnedOffsets) {
   Twins t;
   const SessionPrior prior = twins_prior();
-  SessionLearning settings = two_scales(0.9);
-  settings.long_sweep_bins = 20;
-  settings.long_sweep_scale = 1.0;
+  SessionLearning settings = two_scales(0.9);  // (long sweeps from 20 bins)
   std::vector<float> seen(2, std::nanf(""));  // what each scale's scorer saw at row 0, bin 15
   std::vector<SessionLearner::Scorer> scorers;
   for (std::size_t k = 0; k < 2; ++k) {

@@ -100,18 +100,19 @@ def test_an_unmoved_session_settles_on_scale_zero(real_table: tofmat.ExemplarTab
     assert all(abs(o) < 0.2 for o in s["offsets_mm"]), s
 
 
-def test_a_long_sweep_is_scored_no_wider_than_the_calibrations_scale(real_table: tofmat.ExemplarTable) -> None:
-    # From 20 bins on, the scales above 1 enter the mixture with scale 1's scores; at 19 with their own.
+def test_a_long_sweep_is_scored_no_wider_than_its_tiers_scale(real_table: tofmat.ExemplarTable) -> None:
+    # From 20 bins on, the scales above 1 enter the mixture with scale 1's scores, from 40 those
+    # above 0.5 with scale 0.5's; under 20 every scale with its own.
     rng = np.random.default_rng(4)
     prior = tofmat.SessionPrior.tuned(real_table)
     by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
-    for n, held in ((19, False), (20, True)):
+    for n, widest in ((19, None), (20, 1.0), (39, 1.0), (40, 0.5)):
         learning = tofmat.Classifier(real_table, learning=True)
         q = sweep(real_table, "wood", 50, n, rng, offset=(1.5, 0.5))
         per = [{r.material: r.distance for r in c.classify(q).ranking} for c in by_scale]
         for r in learning.classify(q).ranking:
             terms = [
-                math.log(w) - per[SCALES.index(1.0) if held and s > 1.0 else k][r.material]
+                math.log(w) - per[SCALES.index(widest) if widest is not None and s > widest else k][r.material]
                 for k, (s, w) in enumerate(zip(SCALES, PRIOR_WEIGHTS, strict=True))
             ]
             want = -float(np.logaddexp.reduce(terms))

@@ -65,8 +65,14 @@ void SessionLearning::validate() const {
         throw std::invalid_argument("session learning: a prior weight must be finite and > 0");
     }
   }
-  if (long_sweep_bins > 0 && std::find(scales.begin(), scales.end(), long_sweep_scale) == scales.end())
-    throw std::invalid_argument("session learning: long_sweep_scale must be one of the scales");
+  for (std::size_t t = 0; t < long_sweeps.size(); ++t) {
+    const LongSweep& tier = long_sweeps[t];
+    if (tier.bins == 0) throw std::invalid_argument("session learning: a long sweep has at least 1 bin");
+    if (std::find(scales.begin(), scales.end(), tier.scale) == scales.end())
+      throw std::invalid_argument("session learning: a long sweep's scale must be one of the scales");
+    if (t > 0 && !(tier.bins > long_sweeps[t - 1].bins && tier.scale < long_sweeps[t - 1].scale))
+      throw std::invalid_argument("session learning: long sweeps go up in bins and down in scale");
+  }
 }
 
 namespace {
@@ -102,9 +108,9 @@ SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, st
       throw std::invalid_argument("session learning: the offsets' session matcher has another count of rows");
     offsets_ = std::make_unique<SessionOffsets>(std::move(offsets), settings_.forget);
   }
-  if (settings_.long_sweep_bins > 0) {
-    const auto at = std::find(settings_.scales.begin(), settings_.scales.end(), settings_.long_sweep_scale);
-    long_scale_ = static_cast<std::size_t>(at - settings_.scales.begin());
+  for (const SessionLearning::LongSweep& tier : settings_.long_sweeps) {
+    const auto at = std::find(settings_.scales.begin(), settings_.scales.end(), tier.scale);
+    long_tiers_.emplace_back(tier.bins, static_cast<std::size_t>(at - settings_.scales.begin()));
   }
   log_prior_.assign(settings_.scales.size(), 0.0);
   for (std::size_t k = 0; k < settings_.prior_weights.size(); ++k) log_prior_[k] = std::log(settings_.prior_weights[k]);
@@ -144,10 +150,20 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
     throw std::invalid_argument("session learning: a query of " + std::to_string(n) + " elements is not " +
                                 std::to_string(n_rows_) + " rows");
   }
-  // (scored_as[k]: whose scores scale k enters the mixture with; itself but in a long sweep)
+  // (scored_as[k]: whose scores scale k enters the mixture with; itself but in a long sweep, where
+  // it is no wider than the scale of the last tier the query reaches)
+  std::size_t widest = k_count - 1;
+  bool long_sweep = false;
+  if (!long_tiers_.empty()) {
+    const std::uint32_t covered = bins_covered(query, n, n_rows_);
+    for (const auto& [bins, index] : long_tiers_) {
+      if (covered < bins) break;
+      long_sweep = true;
+      widest = index;
+    }
+  }
   std::vector<std::size_t> scored_as(k_count);
-  const bool long_sweep = settings_.long_sweep_bins > 0 && bins_covered(query, n, n_rows_) >= settings_.long_sweep_bins;
-  for (std::size_t k = 0; k < k_count; ++k) scored_as[k] = long_sweep && k > long_scale_ ? long_scale_ : k;
+  for (std::size_t k = 0; k < k_count; ++k) scored_as[k] = std::min(k, widest);
   std::vector<double> log_w;
   std::vector<float> shifted;  // the query less the learned offsets (empty: nothing learned, or not shifted)
   {

@@ -31,11 +31,14 @@
 //   weights lost up to 9.4 points (3 bins) to the better of Eq. (12) and the
 //   session matcher on that split at some spread from 0 to 2 x the
 //   calibration's; these weights lose at most 2.8 there.
-// - A long sweep (long_sweep_bins or more bins) pins its own offsets and
-//   drift down, and there a prior wider than the calibration's costs labels
-//   (at twice the spread, 100-bin sweeps scored under scale 2 are 2.4 points
-//   under scale 1), so its scales above long_sweep_scale are scored as that
-//   scale. What the weights learn is unchanged: every scale's own evidence.
+// - A long sweep pins its own offsets and drift down, and there a prior
+//   wider than the calibration's costs labels (at twice the spread, 100-bin
+//   sweeps scored under scale 2 are 2.4 points under scale 1), the more so
+//   the longer the sweep: from 20 bins its scales above 1 are scored as 1,
+//   from 40 bins those above 0.5 as 0.5 (against 1 there: +0.6 to +5.0 points
+//   at 45 to 100 bins in sessions moved 0.5 to 2 x the spread, at worst -0.8
+//   from the fifth sweep, -3.3 on a first one). What the weights learn is
+//   unchanged: every scale's own evidence.
 //
 // Beside the weights (how far the session moved) it learns where it moved:
 // the mean of the session's offsets and drift (session_offsets.hpp), taken
@@ -53,6 +56,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <utility>
 #include <vector>
 
 #include "tofmat/core/classifier.hpp"
@@ -71,11 +75,15 @@ struct SessionLearning {
   // The weights a session starts with, one per scale (> 0; normalised), or
   // empty for equal weights.
   std::vector<double> prior_weights{0.02, 0.02, 0.02, 0.70, 0.20, 0.04};
-  // A query covering at least this many of the table's bins (any row) is a
-  // long sweep: its scales above long_sweep_scale (one of `scales`) are
-  // scored as that scale. 0: no query is.
-  std::uint32_t long_sweep_bins = 20;
-  double long_sweep_scale = 1.0;
+  // A query covering at least `bins` of the table's bins (any row) is a long
+  // sweep: its scales above `scale` (one of `scales`) are scored as that
+  // scale. The tiers in increasing bins and decreasing scales; a query takes
+  // the last it reaches. Empty: no query is a long sweep.
+  struct LongSweep {
+    std::uint32_t bins;
+    double scale;
+  };
+  std::vector<LongSweep> long_sweeps{{20, 1.0}, {40, 0.5}};
   // Learn the session's offsets and drift too (session_offsets.hpp), where
   // the learner is given a session matcher to learn them with (make() does).
   bool learn_offsets = true;
@@ -127,7 +135,7 @@ class SessionLearner {
   // under e^-kNegligibleNats of the largest adds nothing to D(m) and is not
   // scored (its evidence is -infinity) unless every_scale: a handheld frame
   // then costs about one session matcher once the session is learned. In a
-  // long sweep, scales above long_sweep_scale enter D(m) with that scale's
+  // long sweep, scales above its tier's scale enter D(m) with that scale's
   // scores (and are scored only for their evidence, when every_scale).
   // Throws std::invalid_argument as the scorers do (no candidate shares an
   // element with the query) or for n not a multiple of the rows.
@@ -159,7 +167,8 @@ class SessionLearner {
   SessionLearning settings_;
   ScaledScorer scorer_;
   std::uint32_t n_rows_;
-  std::size_t long_scale_ = 0;               // the index of settings_.long_sweep_scale in the scales
+  // settings_.long_sweeps as (bins, the index of its scale in the scales)
+  std::vector<std::pair<std::uint32_t, std::size_t>> long_tiers_;
   std::vector<double> log_prior_;            // log prior_weights (0 each for equal weights)
   mutable std::mutex mutex_;                 // guards what follows: one learner serves every region of a session
   std::vector<double> log_weight_;           // up to a constant
