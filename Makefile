@@ -125,7 +125,7 @@ test-python:
 
 # libFuzzer targets (clang, ASan+UBSan), each run for FUZZ_SECONDS from its seed corpus, JOBS at
 # once; any failure fails the target after all have run, its report and input printed last.
-# FUZZ_SEED: the commit's (repeatable: the same run again where it failed), 0 for libFuzzer's own.
+# FUZZ_SEED: the commit's (each commit explores afresh), 0 for libFuzzer's own.
 FUZZ_SEED ?= $(shell echo $$((0x$$(git rev-parse --short=7 HEAD 2>/dev/null || echo 1) % 2147483647 + 1)))
 fuzz: build-sanitize
 	mk/fuzz.sh $(FUZZDIR) $(FUZZ_SECONDS) $(JOBS) $(FUZZ_SEED)

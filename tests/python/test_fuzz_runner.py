@@ -6,7 +6,6 @@ the targets."""
 
 from __future__ import annotations
 
-import base64
 import re
 import stat
 import subprocess
@@ -72,9 +71,11 @@ def test_a_failure_is_reported_last_with_its_input(tmp_path: Path) -> None:
     assert tail.startswith("fuzz: FAILED fuzz_a (exit 77, seed ")
     assert "ERROR: AddressSanitizer: heap-buffer-overflow" in tail
     assert "fuzz: fuzz_a input fuzz_a-crash-0123, 7 bytes" in tail
-    encoded = re.search(r"base64 of it.*:\n((?:  \S+\n)+)", tail)
+    # The hint's own command replays it: the lines between the two markers are what base64 -d reads.
+    encoded = re.search(r"its base64.*\n((?:.*\n)*?)fuzz: end\n", tail)
     assert encoded is not None, tail
-    assert base64.b64decode("".join(encoded.group(1).split())) == b"in\x00put\xff"
+    decoded = subprocess.run(["base64", "-d"], input=encoded.group(1).encode(), capture_output=True, check=True)
+    assert decoded.stdout == b"in\x00put\xff"
     # The whole log is kept beside the build.
     assert "Test unit written" in (build / "logs" / "fuzz_a.log").read_text()
 
@@ -86,3 +87,27 @@ def test_a_target_that_dies_without_a_report_shows_its_last_lines(tmp_path: Path
     assert result.returncode == 1
     tail = result.stdout[result.stdout.index("fuzz: FAILED") :]
     assert "ParseDictionaryFile: error in line 3" in tail
+
+
+def test_every_failure_is_reported(tmp_path: Path) -> None:
+    build = _targets(tmp_path, {"fuzz_a": FAILING, "fuzz_b": PASSING, "fuzz_c": FAILING})
+    result = _run(build)
+    assert result.returncode == 1
+    reports = re.findall(r"^fuzz: FAILED (\S+) \(exit ([^,]+)", result.stdout, re.M)
+    assert reports == [("fuzz_a", "77"), ("fuzz_c", "77")]
+
+
+def test_a_target_without_a_result_is_a_failure(tmp_path: Path) -> None:
+    # The runner's shell dies (as under the OOM killer): no exit code is written, and xargs stops.
+    killer = "#!/usr/bin/env bash\nkill -9 $PPID\n"
+    build = _targets(tmp_path, {"fuzz_a": killer})
+    result = _run(build)
+    assert result.returncode == 1
+    assert "fuzz: FAILED fuzz_a (exit none (its runner did not finish)" in result.stdout
+
+
+def test_a_build_without_targets_is_an_error(tmp_path: Path) -> None:
+    build = _targets(tmp_path, {})
+    result = _run(build)
+    assert result.returncode == 1
+    assert "no fuzz targets" in result.stderr
