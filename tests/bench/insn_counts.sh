@@ -105,7 +105,8 @@ window=0
 
 # The session learner (tofmatd's default, session_learner.hpp) as a session
 # starts: a query scored under all six scaled priors (four in a sweep of 20
-# bins or more) on the fixed path with NEON, against the session matcher alone.
+# bins or more, three from 40) on the fixed path with NEON, against the session
+# matcher alone.
 echo
 echo "| session learner: query of | session fixed (NEON) | learner fixed (NEON), every scale | learner / session |"
 echo "|---|---:|---:|---:|"
