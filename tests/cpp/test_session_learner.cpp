@@ -127,7 +127,7 @@ TEST(SessionLearner, BadSettingsAreRefusedByName) {
   EXPECT_THROW(s.validate(), std::invalid_argument);
   s.prior_weights = {1.0, 3.0};
   EXPECT_NO_THROW(s.validate());  // no long sweeps
-  s.long_sweeps = {{20, 0.5}};  // not one of the scales
+  s.long_sweeps = {{20, 0.5}};    // not one of the scales
   EXPECT_THROW(s.validate(), std::invalid_argument);
   s.long_sweeps = {{0, 1.0}};  // no bins
   EXPECT_THROW(s.validate(), std::invalid_argument);
@@ -139,7 +139,7 @@ TEST(SessionLearner, BadSettingsAreRefusedByName) {
   EXPECT_NO_THROW(s.validate());
   s.long_sweeps = {{20, 1.0}};
   EXPECT_NO_THROW(s.validate());
-  EXPECT_NO_THROW(SessionLearning{}.validate());  // the defaults
+  EXPECT_NO_THROW(SessionLearning{}.validate());                                     // the defaults
   EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0})}, 1), std::invalid_argument);  // 1 scorer, 2 scales
   EXPECT_THROW(SessionLearner(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 0), std::invalid_argument);
   SessionLearner two_rows(s, {fixed_scores({1.0}), fixed_scores({1.0})}, 2);
@@ -175,11 +175,11 @@ TEST(SessionLearner, ALongSweepScoresTheWideScalesAsItsTiersScale) {
   s.long_sweeps = {{3, 1.0}, {4, 0.0}};
   int calls1 = 0, calls2 = 0;
   // Scale 2 alone prefers candidate 1.
-  SessionLearner l(
-      s, {fixed_scores({4.0, 6.0}), fixed_scores({2.0, 3.0}, &calls1), fixed_scores({5.0, 1.0}, &calls2)}, 1);
+  SessionLearner l(s, {fixed_scores({4.0, 6.0}), fixed_scores({2.0, 3.0}, &calls1), fixed_scores({5.0, 1.0}, &calls2)},
+                   1);
   const float nan = std::nanf("");
-  const float short_sweep[5] = {0.0f, 0.0f, nan, nan, nan};  // 2 bins
-  const float long_sweep[5] = {0.0f, nan, 0.0f, 0.0f, nan};  // 3 bins
+  const float short_sweep[5] = {0.0f, 0.0f, nan, nan, nan};     // 2 bins
+  const float long_sweep[5] = {0.0f, nan, 0.0f, 0.0f, nan};     // 3 bins
   const float longer_sweep[5] = {0.0f, nan, 0.0f, 0.0f, 0.0f};  // 4 bins
   const auto by_own = l.classify(short_sweep, 5);
   EXPECT_EQ(calls2, 1);
@@ -322,7 +322,7 @@ TEST(SessionLearner, ScaleZeroAndLongSweepsScoreTheQueryAsItIsTheOtherScalesLess
   Twins t;
   const SessionPrior prior = twins_prior();
   SessionLearning settings = two_scales(0.9);  // (long sweeps from 20 bins)
-  std::vector<float> seen(2, std::nanf(""));  // what each scale's scorer saw at row 0, bin 15
+  std::vector<float> seen(2, std::nanf(""));   // what each scale's scorer saw at row 0, bin 15
   std::vector<SessionLearner::Scorer> scorers;
   for (std::size_t k = 0; k < 2; ++k) {
     auto c = std::make_shared<const SessionClassifier>(t.table, scaled(prior, settings.scales[k]));
