@@ -65,7 +65,11 @@ def test_the_quiet_run_is_the_cameras_rate(bench: dict[str, dict[str, Any]]) -> 
     assert 10.0 <= fps <= 31.0, quiet
     assert fewest_labels_per_second(fps) <= quiet["rate"] <= 1.1 * fps * LABELS_PER_FRAME + 1.0, quiet
     assert quiet["missed_frames"] == 0, quiet
-    assert quiet["gap_ms"] < 150.0, quiet
+    # No stall in serving: a label waits at most 150 ms, or 50 ms past the camera's own longest
+    # frame interval where the camera itself came late (it renders inside tofmatd on the same two
+    # cores: 140 ms once here beside a benchmark, the labels 155 ms).
+    source = quiet.get("source_gap_ms")  # (null: no two tracked frames in the window)
+    assert quiet["gap_ms"] < max(150.0, 150.0 if source is None else source + 50.0), quiet
 
 
 @pytest.mark.parametrize("attack", ATTACKS)
