@@ -88,7 +88,11 @@ def test_a_subscriber_keeps_its_labels_while_the_attack_runs(bench: dict[str, di
     assert s["missed_frames"] == 0 and row["frames_dropped"] == 0, (attack, s, row["frames_dropped"])
     assert s["camera_fps"] >= 10.0, (attack, s)
     assert s["rate"] >= fewest_labels_per_second(s["camera_fps"]) - 1.0, (attack, s)
-    assert s["gap_ms"] < 250.0 and s["max_ms"] < 250.0, (attack, s)
+    # (or 50 ms past the camera's own longest frame interval where the camera came late: it
+    # renders inside tofmatd, and once here beside an evaluation the flood's window waited 296 ms)
+    source = s.get("source_gap_ms")
+    assert s["gap_ms"] < max(250.0, 250.0 if source is None else source + 50.0), (attack, s)
+    assert s["max_ms"] < 250.0, (attack, s)
     # Memory and log bounded: 240,976 warning lines in 15 s before the fixes.
     assert row["peak_rss_mb"] < quiet["peak_rss_mb"] + 32.0, (attack, row["peak_rss_mb"])
     assert row["log_lines_added"] < 120, (attack, row["log_lines_added"])
