@@ -54,6 +54,14 @@ ATTACKS = ["flood", "load_table", "big_folder", "second_daemon", "idle_slots", "
            "connect_close", "control"]  # fmt: skip
 
 
+def gap_bound(stats: dict[str, Any], floor_ms: float) -> float:
+    """The longest wait for a label a window may hold: floor_ms, or 50 ms past the camera's own
+    longest frame interval where the camera itself came late (it renders inside tofmatd on the same
+    cores; beside other work here it once took 140 ms between frames). A stall in serving exceeds it."""
+    source = stats.get("source_gap_ms")  # (null: no two tracked frames in the window)
+    return floor_ms if source is None else max(floor_ms, source + 50.0)
+
+
 def test_the_quiet_run_is_the_cameras_rate(bench: dict[str, dict[str, Any]]) -> None:
     quiet = bench["(quiet)"]["stats"]
     # The scene: a label for each frame with a target (30 of every 36 frames), at the rate the
@@ -65,11 +73,7 @@ def test_the_quiet_run_is_the_cameras_rate(bench: dict[str, dict[str, Any]]) -> 
     assert 10.0 <= fps <= 31.0, quiet
     assert fewest_labels_per_second(fps) <= quiet["rate"] <= 1.1 * fps * LABELS_PER_FRAME + 1.0, quiet
     assert quiet["missed_frames"] == 0, quiet
-    # No stall in serving: a label waits at most 150 ms, or 50 ms past the camera's own longest
-    # frame interval where the camera itself came late (it renders inside tofmatd on the same two
-    # cores: 140 ms once here beside a benchmark, the labels 155 ms).
-    source = quiet.get("source_gap_ms")  # (null: no two tracked frames in the window)
-    assert quiet["gap_ms"] < max(150.0, 150.0 if source is None else source + 50.0), quiet
+    assert quiet["gap_ms"] < gap_bound(quiet, 150.0), quiet
 
 
 @pytest.mark.parametrize("attack", ATTACKS)
@@ -88,10 +92,7 @@ def test_a_subscriber_keeps_its_labels_while_the_attack_runs(bench: dict[str, di
     assert s["missed_frames"] == 0 and row["frames_dropped"] == 0, (attack, s, row["frames_dropped"])
     assert s["camera_fps"] >= 10.0, (attack, s)
     assert s["rate"] >= fewest_labels_per_second(s["camera_fps"]) - 1.0, (attack, s)
-    # (or 50 ms past the camera's own longest frame interval where the camera came late: it
-    # renders inside tofmatd, and once here beside an evaluation the flood's window waited 296 ms)
-    source = s.get("source_gap_ms")
-    assert s["gap_ms"] < max(250.0, 250.0 if source is None else source + 50.0), (attack, s)
+    assert s["gap_ms"] < gap_bound(s, 250.0), (attack, s)
     assert s["max_ms"] < 250.0, (attack, s)
     # Memory and log bounded: 240,976 warning lines in 15 s before the fixes.
     assert row["peak_rss_mb"] < quiet["peak_rss_mb"] + 32.0, (attack, row["peak_rss_mb"])

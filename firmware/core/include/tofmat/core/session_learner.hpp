@@ -35,9 +35,10 @@
 //   wider than the calibration's costs labels (at twice the spread, 100-bin
 //   sweeps scored under scale 2 are 2.4 points under scale 1), the more so
 //   the longer the sweep: from 20 bins its scales above 1 are scored as 1,
-//   from 40 bins those above 0.5 as 0.5 (against 1 there: +0.6 to +5.0 points
-//   at 45 to 100 bins in sessions moved 0.5 to 2 x the spread, at worst -0.8
-//   from the fifth sweep, -3.3 on a first one). What the weights learn is
+//   from 40 bins those above 0.5 as 0.5 (on 45- to 100-bin sweeps, against
+//   the better of Eq. (12) and the session matcher: from the fifth sweep -0.8
+//   to +3.6 points, on a first one -3.3 to +6.6; scored no wider than 1
+//   there, -0.3 to +0.1 and 0.0 to +0.8). What the weights learn is
 //   unchanged: every scale's own evidence.
 //
 // Beside the weights (how far the session moved) it learns where it moved:

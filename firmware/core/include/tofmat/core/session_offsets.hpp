@@ -8,9 +8,10 @@
 // The session matcher integrates each sweep's terms beta out under a prior
 // N(0, S) centred on the table's own session. But the terms are the
 // session's, common to every sweep in it: a row offset, a camera warmer than
-// at recording, move every material's curve alike. Each labelled sweep is evidence on them. For a candidate m and a
-// row, with the query's differences e_j = q_j - c_mj from m's curve, the basis a_j and the element variance v_m (the
-// session matcher's noise model), the sweep adds to the information
+// at recording, move every material's curve alike. Each labelled sweep is
+// evidence on them. For a candidate m and a row, with the query's differences
+// e_j = q_j - c_mj from m's curve, the basis a_j and the element variance v_m
+// (the session matcher's noise model), the sweep adds to the information
 //   Lambda += A' A / v_m,   eta += A' e / v_m,
 // weighted by m's posterior share p_m under the learner's mixture (a sweep
 // the learner is unsure of teaches about every likely candidate, none much).
