@@ -54,6 +54,8 @@ struct Harness {
     h.publish = [this](const protocol::Message& m, const std::string& stream) {
       std::lock_guard<std::mutex> lock(mutex);
       (stream == "sort" ? sorts : lines).push_back(m.meta);
+      // What a client that reads this event and then asks for status would get.
+      (stream == "sort" ? status_at_sort : status_at_line).push_back(line->status());
       cv.notify_all();
     };
     line = std::make_unique<SortingLine>(o, gpio, std::vector<std::string>{"wood", "cork", "pvc"}, std::move(h));
@@ -101,7 +103,7 @@ struct Harness {
   std::condition_variable cv;
   bool camera_ok = true;
   std::vector<std::uint64_t> bursts;
-  std::vector<nlohmann::json> sorts, lines;
+  std::vector<nlohmann::json> sorts, lines, status_at_sort, status_at_line;
 };
 
 TEST(SortingLine, AnItemIsPushedAtItsOutletOnTimeFromTheBarriersTimestamp) {
@@ -119,6 +121,7 @@ TEST(SortingLine, AnItemIsPushedAtItsOutletOnTimeFromTheBarriersTimestamp) {
   ASSERT_EQ(decided.size(), 1u);
   EXPECT_EQ(decided[0]["outlet"], "cork");
   EXPECT_EQ(decided[0]["reason"], "sorted");
+  EXPECT_EQ(h.status_at_sort.at(0)["sorted"], 1) << "the decision went out before status counted it";
   EXPECT_EQ(decided[0]["trigger_ns"].get<std::uint64_t>(), edge);
   EXPECT_NEAR(static_cast<double>(decided[0]["fire_ns"].get<std::uint64_t>()), static_cast<double>(edge + 200 * kMs),
               1000.0)
@@ -203,6 +206,8 @@ TEST(SortingLine, NoLabelGoesToRejectAndRaisesTheAlarmOutput) {
   ASSERT_EQ(decided.size(), 1u);
   EXPECT_EQ(decided[0]["reason"], "late");
   EXPECT_EQ(decided[0]["outlet"], "reject");
+  EXPECT_EQ(h.status_at_sort.at(0)["rejected"], 1) << "the decision went out before status counted it";
+  EXPECT_EQ(h.status_at_sort.at(0)["alarm"], true);
   const auto alarm = h.gpio->changes("alarm");
   ASSERT_GE(alarm.size(), 2u);
   EXPECT_TRUE(alarm[1].active);
@@ -226,6 +231,17 @@ TEST(SortingLine, TheCameraLostRejectsAndAlarmsUntilItIsBack) {
   h.line->camera(true);
   ASSERT_TRUE(h.wait_for([&] { return !h.gpio->changes("alarm").back().active; }, 1000));
   EXPECT_EQ(h.burst_count(), 0u);
+  // A client that reads the alarm's event and then asks for status sees the same alarm.
+  ASSERT_TRUE(h.wait_for([&] { return !h.lines.empty() && h.lines.back()["message"] == "off"; }, 1000));
+  std::lock_guard<std::mutex> lock(h.mutex);
+  std::vector<bool> alarms;
+  for (std::size_t k = 0; k < h.lines.size(); ++k)
+    if (h.lines[k]["kind"] == "alarm") {
+      EXPECT_EQ(h.status_at_line.at(k)["alarm"], h.lines[k]["message"] == "on") << h.lines[k];
+      alarms.push_back(h.lines[k]["message"] == "on");
+    }
+  EXPECT_EQ(alarms, (std::vector<bool>{true, false}));
+  EXPECT_GE(h.status_at_line.front()["faults"], 1) << "the camera's fault went out before status counted it";
 }
 
 TEST(SortingLine, AClientSeesWhatIsWrongWithTheConfiguration) {

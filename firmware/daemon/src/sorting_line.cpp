@@ -214,6 +214,8 @@ void SortingLine::publish_sort(const line::SortEvent& e) {
     m.meta["truth"] = *truth;
   else if (e.truth)
     m.meta["truth"] = *e.truth;
+  // A client that reads this event and then asks for status sees it counted.
+  take_snapshot(protocol::monotonic_ns());
   if (hooks_.publish) hooks_.publish(m, "sort");
 }
 
@@ -228,6 +230,7 @@ void SortingLine::publish_line(const std::string& kind, const std::string& messa
             {"message", message.substr(0, protocol::kMaxTextBytes)},
             {"alarm", sorter_ ? sorter_->alarm_on() : false},
             {"timestamp_ns", protocol::monotonic_ns()}};
+  take_snapshot(protocol::monotonic_ns());  // (as for a sort event: status counts what a client has read)
   if (hooks_.publish) hooks_.publish(m, "line");
 }
 
@@ -275,16 +278,21 @@ void SortingLine::run(const std::atomic<bool>& stop) {
     if (const auto item = filter_.advance(now)) sorter_->item(*item, now);
     handle_inbox(now);
     sorter_->poll(now);
-    // (What status() reports, copied here; the JSON is built when asked for.)
-    std::lock_guard<std::mutex> lock(status_mutex_);
-    snapshot_ = {sorter_->counts(),
-                 sorter_->on_belt(),
-                 sorter_->alarm_on(),
-                 motion_->speed_mm_s(now),
-                 filter_.glitches(),
-                 filter_.bounces(),
-                 encoder_ ? encoder_->quadrature().errors() : 0};
+    take_snapshot(now);
   }
+}
+
+void SortingLine::take_snapshot(std::uint64_t now_ns) {
+  if (!sorter_) return;
+  // (What status() reports, copied here; the JSON is built when asked for.)
+  std::lock_guard<std::mutex> lock(status_mutex_);
+  snapshot_ = {sorter_->counts(),
+               sorter_->on_belt(),
+               sorter_->alarm_on(),
+               motion_->speed_mm_s(now_ns),
+               filter_.glitches(),
+               filter_.bounces(),
+               encoder_ ? encoder_->quadrature().errors() : 0};
 }
 
 nlohmann::json SortingLine::status() const {

@@ -87,6 +87,7 @@ class SortingLine {
 
  private:
   void handle_inbox(std::uint64_t now_ns);
+  void take_snapshot(std::uint64_t now_ns);
   void publish_sort(const line::SortEvent& e);
   void publish_line(const std::string& kind, const std::string& message);
 
@@ -105,7 +106,8 @@ class SortingLine {
   mutable std::mutex inbox_mutex_;
   std::vector<line::BurstLabel> labels_;
   std::optional<bool> camera_;
-  // For status (under status_mutex_): the line thread's figures after each round.
+  // For status (under status_mutex_): the line thread's figures after each round,
+  // and before each sort event goes out.
   struct Snapshot {
     line::Sorter::Counts counts;
     std::size_t on_belt = 0;
