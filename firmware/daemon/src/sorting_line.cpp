@@ -224,13 +224,14 @@ void SortingLine::publish_line(const std::string& kind, const std::string& messa
     logger(LogCategory::kLine).warn("sorting line: alarm {}", message);
   else
     logger(LogCategory::kLine).warn("sorting line: {}: {}", kind, message);
+  const std::uint64_t now = protocol::monotonic_ns();
   protocol::Message m;
   m.meta = {{"event", "line"},
             {"kind", kind},
             {"message", message.substr(0, protocol::kMaxTextBytes)},
             {"alarm", sorter_ ? sorter_->alarm_on() : false},
-            {"timestamp_ns", protocol::monotonic_ns()}};
-  take_snapshot(protocol::monotonic_ns());  // (as for a sort event: status counts what a client has read)
+            {"timestamp_ns", now}};
+  take_snapshot(now);  // (as for a sort event: status counts what a client has read)
   if (hooks_.publish) hooks_.publish(m, "line");
 }
 

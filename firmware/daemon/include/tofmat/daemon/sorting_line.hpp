@@ -107,7 +107,7 @@ class SortingLine {
   std::vector<line::BurstLabel> labels_;
   std::optional<bool> camera_;
   // For status (under status_mutex_): the line thread's figures after each round,
-  // and before each sort event goes out.
+  // and before each sort or line event goes out.
   struct Snapshot {
     line::Sorter::Counts counts;
     std::size_t on_belt = 0;
