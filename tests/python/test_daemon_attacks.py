@@ -12,10 +12,12 @@ every new client out, and a reading client changed the profile.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -57,9 +59,18 @@ ATTACKS = ["flood", "load_table", "big_folder", "second_daemon", "idle_slots", "
 def gap_bound(stats: dict[str, Any], floor_ms: float) -> float:
     """The longest wait for a label a window may hold: floor_ms, or 50 ms past the camera's own
     longest frame interval where the camera itself came late (it renders inside tofmatd on the same
-    cores; beside other work here it once took 140 ms between frames). A stall in serving exceeds it."""
+    cores; beside other work here it once took 140 ms between frames); either plus the longest time
+    the harness itself was not run (its stall witness: the subscriber is in the harness's process,
+    and CI's machine once held it 230 ms). A stall in serving exceeds it."""
     source = stats.get("source_gap_ms")  # (null: no two tracked frames in the window)
-    return floor_ms if source is None else max(floor_ms, source + 50.0)
+    camera = floor_ms if source is None else max(floor_ms, source + 50.0)
+    return camera + stats["host_stall_ms"]
+
+
+def figures(stats: dict[str, Any]) -> str:
+    """The window's figures a gap or latency assertion turns on (pytest shortens a whole dict)."""
+    keys = ("gap_ms", "source_gap_ms", "host_stall_ms", "raw_gap_ms", "max_ms", "p99_ms", "camera_fps", "rate")
+    return ", ".join(f"{k} {stats.get(k)}" for k in keys)
 
 
 def test_the_quiet_run_is_the_cameras_rate(bench: dict[str, dict[str, Any]]) -> None:
@@ -73,7 +84,7 @@ def test_the_quiet_run_is_the_cameras_rate(bench: dict[str, dict[str, Any]]) -> 
     assert 10.0 <= fps <= 31.0, quiet
     assert fewest_labels_per_second(fps) <= quiet["rate"] <= 1.1 * fps * LABELS_PER_FRAME + 1.0, quiet
     assert quiet["missed_frames"] == 0, quiet
-    assert quiet["gap_ms"] < gap_bound(quiet, 150.0), quiet
+    assert quiet["gap_ms"] < gap_bound(quiet, 150.0), figures(quiet)
 
 
 @pytest.mark.parametrize("attack", ATTACKS)
@@ -92,8 +103,8 @@ def test_a_subscriber_keeps_its_labels_while_the_attack_runs(bench: dict[str, di
     assert s["missed_frames"] == 0 and row["frames_dropped"] == 0, (attack, s, row["frames_dropped"])
     assert s["camera_fps"] >= 10.0, (attack, s)
     assert s["rate"] >= fewest_labels_per_second(s["camera_fps"]) - 1.0, (attack, s)
-    assert s["gap_ms"] < gap_bound(s, 250.0), (attack, s)
-    assert s["max_ms"] < 250.0, (attack, s)
+    assert s["gap_ms"] < gap_bound(s, 250.0), (attack, figures(s))
+    assert s["max_ms"] < 250.0 + s["host_stall_ms"], (attack, figures(s))
     # Memory and log bounded: 240,976 warning lines in 15 s before the fixes.
     assert row["peak_rss_mb"] < quiet["peak_rss_mb"] + 32.0, (attack, row["peak_rss_mb"])
     assert row["log_lines_added"] < 120, (attack, row["log_lines_added"])
@@ -131,3 +142,27 @@ def test_what_each_attack_got(bench: dict[str, dict[str, Any]]) -> None:
     assert not accepted, counts["control"]
     assert counts["control"].get("unix:permission", 0) > 0 and counts["control"].get("tcp:permission", 0) > 0
     assert server["control"]["not_permitted"] > 0
+
+
+def test_the_stall_witness_sees_the_harness_stopped() -> None:
+    # The bounds above forgive a stall of the harness's own process only as long as its witness saw:
+    # stopped for 300 ms (SIGSTOP from outside, as a machine that does not run it), it must see that.
+    spec = importlib.util.spec_from_file_location("daemon_attacks", HARNESS)
+    assert spec is not None and spec.loader is not None
+    harness = importlib.util.module_from_spec(spec)
+    sys.modules["daemon_attacks"] = harness  # (its dataclasses look their module up)
+    spec.loader.exec_module(harness)
+    witness = harness.HostStallWitness()
+    witness.start()
+    try:
+        t0 = time.monotonic()
+        time.sleep(0.3)
+        t1 = time.monotonic()
+        pid = os.getpid()
+        subprocess.run(["sh", "-c", f"kill -STOP {pid}; sleep 0.3; kill -CONT {pid}"], check=True, timeout=10)
+        time.sleep(0.1)
+        t2 = time.monotonic()
+    finally:
+        witness.stop()
+    assert witness.longest_ms(t0, t1 - 0.05) < 250.0  # (running: late by scheduling only)
+    assert 280.0 <= witness.longest_ms(t1, t2) < 2000.0, witness.stalls

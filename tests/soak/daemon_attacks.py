@@ -1079,12 +1079,14 @@ class LabelStats:
     missed_frames: int = 0  # frames with a target in view that gave no label
     camera_fps: float = float("nan")  # the camera's frames a second over the window (by its frame numbers and clock)
     source_gap_ms: float = float("nan")  # longest frame interval while tracking, by the daemon's frame clock
+    host_stall_ms: float = 0.0  # longest time the harness itself was not run in the window (HostStallWitness)
     gap_end: float = float(
         "nan"
     )  # when the longest gap ended (time.monotonic of the label after it, or the window's end)
 
 
-def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: LabelRecord | None = None) -> LabelStats:
+def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: LabelRecord | None = None,
+                witness: HostStallWitness | None = None) -> LabelStats:  # fmt: skip
     """Figures of the labels that arrived in [t0, t1].
 
     The sweep labels every frame while a target is in view (`tracking`, then one `no_target` when
@@ -1130,6 +1132,8 @@ def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: La
     s.gap_ms, s.raw_gap_ms = max(gaps), max(raw)
     s.gap_end = ends[int(np.argmax(gaps))]
     s.source_gap_ms = max(source, default=float("nan"))
+    if witness is not None:
+        s.host_stall_ms = witness.longest_ms(t0, t1)
     return s
 
 
@@ -1183,6 +1187,43 @@ class Sampler:
         a, b = t0 - self.t_start, t1 - self.t_start
         with self._lock:
             return [s for s in self.samples if a <= s.t <= b]
+
+
+class HostStallWitness:
+    """The harness's own scheduling: a thread that asks to wake every 5 ms and keeps each time it woke
+    more than 10 ms late. The subscriber's thread is in this process, so such a stall (the machine or
+    this process not run: a virtual machine's host taking its cores, memory reclaim) delays its labels
+    as much, and is none of the daemon's doing; a stall in tofmatd does not delay this thread."""
+
+    PERIOD_S, LATE_S = 0.005, 0.010
+
+    def __init__(self) -> None:
+        self.stalls: list[tuple[float, float]] = []  # (start, end), time.monotonic()
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, name="stall-witness", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(5)
+
+    def _run(self) -> None:
+        t = time.monotonic()
+        while not self._stop.wait(self.PERIOD_S):
+            now = time.monotonic()
+            if now - t > self.PERIOD_S + self.LATE_S:
+                with self._lock:
+                    self.stalls.append((t + self.PERIOD_S, now))
+            t = now
+
+    def longest_ms(self, t0: float, t1: float) -> float:
+        """The longest stall that overlaps [t0, t1] (0 when none), whole."""
+        with self._lock:
+            return max(((b - a) * 1000.0 for a, b in self.stalls if b >= t0 and a <= t1), default=0.0)
 
 
 class FreshClientProbe:
@@ -1297,8 +1338,8 @@ class BenchRow:
     server: dict[str, int] = field(default_factory=dict)  # the daemon's client counters over the attack (server_status)
 
 
-def run_phase(daemon: DaemonUnderTest, sub: Subscriber, sampler: Sampler, name: str | None, seconds: float,
-              args: argparse.Namespace, uids: dict[str, int]) -> BenchRow:  # fmt: skip
+def run_phase(daemon: DaemonUnderTest, sub: Subscriber, sampler: Sampler, witness: HostStallWitness, name: str | None,
+              seconds: float, args: argparse.Namespace, uids: dict[str, int]) -> BenchRow:  # fmt: skip
     ta = time.monotonic()
     sample0 = sampler.sample()
     log0 = daemon.log_size()
@@ -1330,7 +1371,7 @@ def run_phase(daemon: DaemonUnderTest, sub: Subscriber, sampler: Sampler, name: 
     server = ({k: int(v) - int(status0["clients"].get(k, 0)) for k, v in status1["clients"].items()
                if isinstance(v, int) and k not in ("clients", "unix_clients", "tcp_clients")}
               if dropped is not None and status0 is not None and status1 is not None else {})  # fmt: skip
-    stats = label_stats(sub.window(t0, t1), t0, t1, before)
+    stats = label_stats(sub.window(t0, t1), t0, t1, before, witness)
     samples = sampler.between(ta, time.monotonic())
     rss = [s.rss_kb for s in samples if s.rss_kb is not None]
     fds = [s.fds for s in samples if s.fds is not None]
@@ -1398,9 +1439,11 @@ def bench(args: argparse.Namespace) -> int:
         daemon = DaemonUnderTest(Path(tmp), args.daemon_args, args.daemon_nice)
         t_start = time.monotonic()
         sampler = Sampler(daemon, 1.0, t_start)
+        witness = HostStallWitness()
         sub = Subscriber(str(daemon.socket))
         rows: list[BenchRow] = []
         try:
+            witness.start()
             daemon.start()
             sub.start()
             sampler.start()
@@ -1410,7 +1453,7 @@ def bench(args: argparse.Namespace) -> int:
             say(f"bench: tofmatd {daemon.pid}, {args.seconds} s a phase: quiet, then {', '.join(names)}")
             for name in [None, *names]:
                 settle(daemon, clients=1)
-                row = run_phase(daemon, sub, sampler, name, args.seconds, args, uids)
+                row = run_phase(daemon, sub, sampler, witness, name, args.seconds, args, uids)
                 if daemon.check_alive(name or "the quiet run"):
                     row.died = True
                     sub.errors["daemon restarted"] += 1
@@ -1419,10 +1462,12 @@ def bench(args: argparse.Namespace) -> int:
                 row.p99_ratio = row.stats.p99_ms / rows[0].stats.p99_ms if rows else 1.0
                 rows.append(row)
                 say(f"  {row.attack}: {row.stats.rate:.1f} labels/s, p99 {row.stats.p99_ms:.2f} ms, "
-                    f"gap {row.stats.gap_ms:.0f} ms; {row.headline}")  # fmt: skip
+                    f"gap {row.stats.gap_ms:.0f} ms (the harness's own longest stall {row.stats.host_stall_ms:.0f} ms); "
+                    f"{row.headline}")  # fmt: skip
         finally:
             sub.stop()
             sampler.stop()
+            witness.stop()
             rc = daemon.stop()
         table = format_bench(rows)
         print(table)
@@ -1477,9 +1522,11 @@ def soak(args: argparse.Namespace) -> int:
         daemon = DaemonUnderTest(Path(tmp), args.daemon_args, args.daemon_nice)
         t_start = time.monotonic()
         sampler = Sampler(daemon, 10.0, t_start)
+        witness = HostStallWitness()
         subs = [Subscriber(str(daemon.socket), name="unix"),
                 Subscriber(daemon.tcp_address, token=daemon.token, name="tcp")]  # fmt: skip
         try:
+            witness.start()
             daemon.start()
             for s in subs:
                 s.start()
@@ -1517,7 +1564,7 @@ def soak(args: argparse.Namespace) -> int:
                         changes.append(f"phase {k + 1} ({', '.join(group)}): {', '.join(changed)}")
                 p1 = time.monotonic()
                 bounds.append((p0, p1))
-                st = [label_stats(s.window(p0, p1), p0, p1, s.before(p0)) for s in subs]
+                st = [label_stats(s.window(p0, p1), p0, p1, s.before(p0), witness) for s in subs]
                 smp = sampler.sample()
                 line = {"phase": k + 1, "t": round(p1 - t_start), "attacks": group,
                         "labels_per_s": [round(x.rate, 1) for x in st], "p99_ms": [finite(x.p99_ms, 2) for x in st],
@@ -1539,8 +1586,10 @@ def soak(args: argparse.Namespace) -> int:
             for s in subs:
                 s.stop()
             sampler.stop()
+            witness.stop()
             rc = daemon.stop()
-        stats = {s.name: label_stats(s.window(t_attacks, t_end), t_attacks, t_end, s.before(t_attacks)) for s in subs}
+        stats = {s.name: label_stats(s.window(t_attacks, t_end), t_attacks, t_end, s.before(t_attacks), witness)
+                 for s in subs}  # fmt: skip
         samples = sampler.samples
         rss = [s.rss_kb for s in samples if s.rss_kb is not None]
         fds = [s.fds for s in samples if s.fds is not None]
@@ -1565,7 +1614,8 @@ def soak(args: argparse.Namespace) -> int:
         if gap > GAP_LIMIT_MS:
             source = max((s.source_gap_ms for s in stats.values() if not math.isnan(s.source_gap_ms)), default=math.nan)
             failures.append(f"the longest gap between labels was {gap:.0f} ms (> {GAP_LIMIT_MS:.0f} ms; the longest "
-                            f"between tracked frames by the daemon's frame clock: {num(source, 0)} ms), ending "
+                            f"between tracked frames by the daemon's frame clock: {num(source, 0)} ms; the harness's own "
+                            f"longest stall {worst.host_stall_ms:.0f} ms), ending "
                             f"{gap_where}")  # fmt: skip
         if rss_growth > RSS_GROWTH_LIMIT:
             failures.append(f"RSS grew by {rss_growth * 100:.1f} % from the 60-s sample to the end "
