@@ -323,6 +323,52 @@ def test_the_session_spread_and_the_angle_on_the_simulator(sim_table: Path) -> N
     assert bad.exit_code != 0 and "--yaws goes with --source sim" in bad.output
 
 
+def test_a_table_of_angles_labels_materials_and_sums_their_exemplars(sim_table: Path) -> None:
+    # Each material twice over (the same curve as two exemplars): the material's probability is the
+    # sum of its exemplars', so labels and confidences equal the single table's, and no label is an angle.
+    from tofmat.evaluation.angle_tables import material_labels, record_angle_table
+
+    table = tofmat.ExemplarTable.load(str(sim_table))
+    names, n = list(table.materials), len(table.materials)
+    twice = tofmat.ExemplarTable([f"{m}@{k}" for k in (0, 1) for m in names],
+                                 np.concatenate([table.features, table.features]), table.bins, table.rows)  # fmt: skip
+    rng = np.random.default_rng(5)
+    queries = np.repeat(table.features, 6, axis=0) + rng.normal(0.0, 1.5, (6 * n, *table.features.shape[1:]))
+    queries[:, :, : table.n_bins // 2] = np.nan  # (half the range: sweeps, not whole curves)
+    queries = queries.astype(np.float32)
+    for method in ("eq12", "session"):
+        single = tofmat.Classifier(table, method=method).classify_batch(queries)
+        label, conf = material_labels(tofmat.Classifier(twice, method=method).classify_batch(queries),
+                                      np.tile(np.arange(n), 2), n)  # fmt: skip
+        assert label.tolist() == [r.index for r in single], method
+        assert np.allclose(conf, [r.confidence for r in single], rtol=1e-6, atol=1e-9), method
+        assert ((label == np.repeat(np.arange(n), 6)).mean()) > 0.5, method  # (the queries are labellable)
+    # The recorded table of angles: one exemplar per material and angle, named for both.
+    angles, owner = record_angle_table(names[:2], (0.0, 30.0), table)
+    assert list(angles.materials) == [f"{names[0]}@0", f"{names[1]}@0", f"{names[0]}@30", f"{names[1]}@30"]
+    assert owner.tolist() == [0, 1, 0, 1]
+    assert not np.allclose(angles.features[0], angles.features[2], equal_nan=True)  # (the angle changes the curve)
+    for bad, why in (((10.0, 10.0), "must differ"), ((75.0,), "0..60"), ((), "at least one")):
+        with pytest.raises(ValueError, match=why):
+            record_angle_table(names[:2], bad, table)
+
+
+def test_the_simulator_rows_against_a_table_of_angles(sim_table: Path) -> None:
+    args = ["-q", "evaluate", "--source", "sim", "--sim-table", str(sim_table), "--sim-sessions", "1"]
+    r = CliRunner().invoke(main, [*args, "--session-scales", "0", "--yaws", "30", "--table-yaws", "10,30", "--json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    assert [x["method"] for x in rows] == ["eq12", "session", "eq12, table at 10/30 deg", "session, table at 10/30 deg"]
+    for x in rows:
+        assert x["yaw_deg"] == 30.0 and x["accuracy"] and all(0.0 <= v <= 100.0 for v in x["accuracy"].values())
+    for extra, why in ((["--table-yaws", "10,10"], "must differ"),
+                       (["--table-yaws", "10", "--sweeps-per-session", "2"], "without --sweeps-per-session")):  # fmt: skip
+        bad = CliRunner().invoke(main, [*args, "--session-scales", "0", "--yaws", "30", *extra])
+        assert bad.exit_code != 0 and why in bad.output, bad.output
+    bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--session-scales", "1", "--table-yaws", "10"])
+    assert bad.exit_code != 0 and "--table-yaws goes with --source sim" in bad.output
+
+
 def test_thickness_among_the_acrylics_with_confusions(real_tmx: Path) -> None:
     # --materials evaluates a few of the table's curves among themselves (candidates and targets).
     acrylics = ["acryl", "acryl1mm", "acryl2mm", "acryl3mm"]

@@ -75,6 +75,13 @@ from ..report.cli import resolve_table, table_option
     "the simulated camera's table is recorded at 10).",
 )
 @click.option(
+    "--table-yaws",
+    help="With --source sim --session-scales: also Eq. (12) and the session matcher against a table of the same "
+    "materials recorded by the simulated camera at each of these angles, degrees, comma-separated (e.g. "
+    "0,10,20,30), each angle's exemplar a candidate of its own and a material's probability the sum of its "
+    "exemplars'.",
+)
+@click.option(
     "--sweeps-per-session",
     type=click.IntRange(1, 1000),
     help="With --session-scales: sessions of this many sweeps (materials and lengths at random), labelled in "
@@ -100,6 +107,7 @@ def evaluate(
     models: tuple[Path, ...],
     session_scales: str | None,
     yaws: str | None,
+    table_yaws: str | None,
     sweeps_per_session: int | None,
     as_json: bool,
     plot: Path | None,
@@ -114,9 +122,21 @@ def evaluate(
         raise UserError("--sweeps-per-session goes with --session-scales (e.g. --session-scales 0,0.25,0.5,1,2)")
     if yaws is not None and (session_scales is None or source != "sim"):
         raise UserError("--yaws goes with --source sim --session-scales")
+    if table_yaws is not None and (session_scales is None or source != "sim" or sweeps_per_session is not None):
+        raise UserError("--table-yaws goes with --source sim --session-scales, without --sweeps-per-session")
     if session_scales is not None and source == "sim":
         return _evaluate_sim_scales(
-            session_scales, yaws, sim_table, sim_materials, sim_sessions, sweeps_per_session, as_json, out, plot, models
+            session_scales,
+            yaws,
+            sim_table,
+            sim_materials,
+            sim_sessions,
+            sweeps_per_session,
+            as_json,
+            out,
+            plot,
+            models,
+            _numbers(table_yaws, "--table-yaws") if table_yaws is not None else (),
         )
     if session_scales is not None:
         return _evaluate_scales(
@@ -274,6 +294,7 @@ def _evaluate_sim_scales(
     out: Path | None,
     plot: Path | None,
     models: tuple[Path, ...] = (),
+    table_yaws: tuple[float, ...] = (),
 ) -> None:
     from ..tools.tables import open_table
     from . import scales as single
@@ -302,7 +323,7 @@ def _evaluate_sim_scales(
             learned = _scales_model(models, table, sweeps_per_session)
             if sweeps_per_session is None:
                 scale_rows = single.evaluate_sim_scales(
-                    table, values, angles, sim_sessions, progress=progress, learned=learned
+                    table, values, angles, sim_sessions, progress=progress, learned=learned, table_yaws=table_yaws
                 )
                 rows: list[Any] = scale_rows
                 text = single.format_markdown(scale_rows)

@@ -33,7 +33,9 @@ CONFIDENT = 0.9
 @dataclass(frozen=True)
 class ScaleRow:
     scale: float  # of the calibration's session spreads (row offsets and waveform state)
-    method: str  # "eq12" or "session", as tofmat.Classifier ships them; "onnx": a learned model (tofmat train)
+    # "eq12" or "session", as tofmat.Classifier ships them; "onnx": a learned model (tofmat train); "eq12,
+    # table at 0/10/20/30 deg" and the like: against a table of each material at those angles (angle_tables)
+    method: str
     accuracy: dict[int, float]  # % right by sweep length
     confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
     queries: dict[int, int]
@@ -173,15 +175,23 @@ def evaluate_sim_scales(
     lengths: tuple[int, ...] = LENGTHS,
     progress: Progress | None = None,
     learned: LearnedClassifier | None = None,
+    table_yaws: tuple[float, ...] = (),
 ) -> list[ScaleRow]:
-    """The shipped matchers (and ``learned``, a model trained for ``table``) on simulator sweeps against ``table`` (the simulated camera's, recorded
-    at one angle): sessions drawn with the calibration's spreads times each scale, the target at
-    each angle (the same seeds throughout: only the spread and the angle change). Rendered: about
-    5 s a session of 29 materials, per scale and angle."""
+    """The shipped matchers (and ``learned``, a model trained for ``table``) on simulator sweeps
+    against ``table`` (the simulated camera's, recorded at one angle): sessions drawn with the
+    calibration's spreads times each scale, the target at each angle (the same seeds throughout:
+    only the spread and the angle change). With ``table_yaws``, Eq. (12) and the session matcher
+    also against a table of ``table``'s materials recorded at each of those angles
+    (angle_tables.record_angle_table), on the same sweeps. Rendered: about 5 s a session of 29
+    materials, per scale and angle; each angle's table about 5 s."""
+    from .angle_tables import angle_table_labels, record_angle_table
     from .sim_sessions import SimSessions, sim_session_model
 
     check_scales(scales)
     base = sim_session_model(calibrated_json()[0])
+    names = list(table.materials)
+    angles = record_angle_table(names, table_yaws, table, progress) if table_yaws else None
+    tag = "/".join(f"{y:g}" for y in table_yaws)
     out: list[ScaleRow] = []
     cells = [(s, y) for s in scales for y in yaws]
     for i, (s, y) in enumerate(cells):
@@ -191,6 +201,10 @@ def evaluate_sim_scales(
             list(lengths), sessions_per_material, SPLIT_SEEDS["test"], yaw_deg=y
         )
         out.extend(_rows(table, s, q, y, learned))
+        if angles is not None:
+            for method in ("eq12", "session"):
+                label, conf = angle_table_labels(angles[0], angles[1], len(names), method, q.queries)
+                out.append(_row(s, f"{method}, table at {tag} deg", label, q.truth, conf, q.lengths, y, names))
     return out
 
 

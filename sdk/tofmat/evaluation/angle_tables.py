@@ -1,0 +1,78 @@
+# SPDX-License-Identifier: LicenseRef-tofmat-proprietary
+"""Tables that hold each material at several angles, and the labels a matcher gives with one.
+
+A table recorded at one angle of the target reads a target at another as a session that moved
+(docs/evaluation.md): the curves change with the surface's orientation. The paper's database holds
+13 orientations of each material for this. Here the simulated camera records a material at each
+of several angles, the exemplars enter one table as separate candidates named ``material@angle``,
+and a material's probability is the sum of its exemplars' (a mixture of equal weights), so the
+label is the material, never the angle.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from .. import ClassificationResult, Classifier, ExemplarTable
+from .._progress import Progress
+
+
+def record_angle_table(
+    materials: Sequence[str], yaws_deg: Sequence[float], like: ExemplarTable, progress: Progress | None = None
+) -> tuple[ExemplarTable, npt.NDArray[np.int64]]:
+    """Each of ``materials`` recorded by the simulated camera in its nominal session at each of
+    ``yaws_deg`` degrees (as ``tofmat sim table --yaw Y`` records one), over ``like``'s bins and rows;
+    the table's entries are named ``material@Y``, and the second array gives each entry's index into
+    ``materials``. Raises ValueError for no angle, an angle repeated, or one outside 0..60 degrees."""
+    from ..sim import Renderer, load_device, load_library
+    from ..sim.table import simulated_table
+
+    if not yaws_deg:
+        raise ValueError("a table of angles needs at least one angle")
+    if len(set(yaws_deg)) != len(yaws_deg):
+        raise ValueError(f"a table's angles must differ, got {', '.join(f'{y:g}' for y in yaws_deg)}")
+    if any(not 0.0 <= y <= 60.0 for y in yaws_deg):
+        raise ValueError(f"a table's angles must be 0..60 degrees, got {', '.join(f'{y:g}' for y in yaws_deg)}")
+    renderer = Renderer(load_device(), load_library(), 0)
+    features = []
+    for k, yaw in enumerate(yaws_deg):
+        if progress:
+            progress(k, len(yaws_deg), f"recording the table at {yaw:g} degrees")
+        features.append(simulated_table(renderer, list(materials), like.bins, yaw_deg=yaw, distortion=False).features)
+    names = [f"{m}@{y:g}" for y in yaws_deg for m in materials]
+    table = ExemplarTable(names, np.concatenate(features), like.bins, like.rows)
+    return table, np.tile(np.arange(len(materials), dtype=np.int64), len(yaws_deg))
+
+
+def material_labels(
+    results: Sequence[ClassificationResult], owner: npt.NDArray[np.int64], n_materials: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    """Each result's label as a material (index into the materials ``owner`` maps the table's entries
+    to) and its confidence: the material whose exemplars' probabilities sum highest, and that sum;
+    -1 and 0 for a query no candidate shares an element with."""
+    labels = np.full(len(results), -1, dtype=np.int64)
+    conf = np.zeros(len(results))
+    for i, res in enumerate(results):
+        p = np.zeros(n_materials)
+        for r in res.ranking:
+            p[owner[r.index]] += r.probability
+        if p.sum() > 0.0:
+            labels[i] = int(np.argmax(p))
+            conf[i] = float(p[labels[i]])
+    return labels, conf
+
+
+def angle_table_labels(
+    table: ExemplarTable,
+    owner: npt.NDArray[np.int64],
+    n_materials: int,
+    method: Literal["eq12", "session"],
+    queries: np.ndarray,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+    """``method``'s labels (as shipped: tofmat.Classifier's prior and temperatures) of ``queries`` against
+    a table of angles (record_angle_table), as materials, with their confidence."""
+    return material_labels(Classifier(table, method=method).classify_batch(queries), owner, n_materials)
