@@ -78,8 +78,8 @@ from ..report.cli import resolve_table, table_option
     "--table-yaws",
     help="With --source sim --session-scales: also Eq. (12) and the session matcher against a table of the same "
     "materials recorded by the simulated camera at each of these angles, degrees, comma-separated (e.g. "
-    "0,10,20,30), each angle's exemplar a candidate of its own and a material's probability the sum of its "
-    "exemplars'.",
+    "0,10,20,30), each angle's exemplar a candidate of its own: the label is the best exemplar's material, its "
+    "confidence the sum of that material's exemplars' probabilities.",
 )
 @click.option(
     "--sweeps-per-session",
