@@ -1004,30 +1004,48 @@ class LabelRecord:
     state: str
 
 
-class Subscriber:
+class BackgroundThread:
+    """What the harness's measuring threads share: `_run` on a daemon thread from start() until
+    stop() sets `_stop` (and waits up to JOIN_S for it), and a lock for what it collects."""
+
+    JOIN_S = 5.0
+
+    def __init__(self, name: str) -> None:
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(self.JOIN_S)
+
+    def _run(self) -> None:
+        raise NotImplementedError
+
+
+class Subscriber(BackgroundThread):
     """A well-behaved client on its own thread: tofmat.Client's label stream, every label timed."""
+
+    JOIN_S = 10.0
 
     def __init__(self, address: str, token: str | None = None, name: str = "unix") -> None:
         self.address, self.token, self.name = address, token, name
         self.records: list[LabelRecord] = []
         self.errors: Counter[str] = Counter()
         self.reconnects = 0
-        self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, name=f"subscriber-{name}", daemon=True)
+        super().__init__(f"subscriber-{name}")
 
     def start(self, wait_s: float = 30.0) -> None:
-        self._thread.start()
+        super().start()
         deadline = time.monotonic() + wait_s
         while not self.records:
             if time.monotonic() > deadline:
                 raise RuntimeError(f"subscriber {self.name}: no label within {wait_s} s ({dict(self.errors)})")
             time.sleep(0.05)
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(10)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -1154,15 +1172,13 @@ def cpu_percent(a: Sample, b: Sample) -> float:
     return (b.cpu_s - a.cpu_s) / (b.t - a.t) * 100.0
 
 
-class Sampler:
+class Sampler(BackgroundThread):
     """The daemon's RSS, open file descriptors and log size, every `interval` seconds."""
 
     def __init__(self, daemon: DaemonUnderTest, interval: float, t_start: float) -> None:
         self.daemon, self.interval, self.t_start = daemon, interval, t_start
         self.samples: list[Sample] = []
-        self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, name="sampler", daemon=True)
+        super().__init__("sampler")
 
     def sample(self) -> Sample:
         b, n = self.daemon.log_size()
@@ -1170,14 +1186,6 @@ class Sampler:
         with self._lock:
             self.samples.append(s)
         return s
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(5)
 
     def _run(self) -> None:
         while not self._stop.wait(self.interval):
@@ -1189,7 +1197,7 @@ class Sampler:
             return [s for s in self.samples if a <= s.t <= b]
 
 
-class HostStallWitness:
+class HostStallWitness(BackgroundThread):
     """The harness's own scheduling: a thread that asks to wake every 5 ms and keeps each time it woke
     more than 10 ms late. The subscriber's thread is in this process, so such a stall (the machine or
     this process not run: a virtual machine's host taking its cores, memory reclaim) delays its labels
@@ -1199,17 +1207,7 @@ class HostStallWitness:
 
     def __init__(self) -> None:
         self.stalls: list[tuple[float, float]] = []  # (start, end), time.monotonic()
-        self._stop = threading.Event()
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._run, name="stall-witness", daemon=True)
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(5)
+        super().__init__("stall-witness")
 
     def _run(self) -> None:
         t = time.monotonic()
@@ -1226,8 +1224,10 @@ class HostStallWitness:
             return max(((b - a) * 1000.0 for a, b in self.stalls if b >= t0 and a <= t1), default=0.0)
 
 
-class FreshClientProbe:
+class FreshClientProbe(BackgroundThread):
     """Every `interval` s: can a new tofmat.Client connect and get status() within 2 s?"""
+
+    JOIN_S = 10.0
 
     def __init__(self, socket_path: Path, interval: float = 1.0) -> None:
         self.socket_path, self.interval = socket_path, interval
@@ -1235,16 +1235,7 @@ class FreshClientProbe:
         self.tries = 0
         self.worst_s = 0.0
         self.failures: Counter[str] = Counter()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="probe", daemon=True)
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(10)
+        super().__init__("probe")
 
     def _run(self) -> None:
         while not self._stop.wait(self.interval if self.tries else 0.5):
