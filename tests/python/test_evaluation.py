@@ -351,6 +351,8 @@ def test_a_table_of_angles_labels_materials_and_sums_their_exemplars(sim_table: 
     for bad, why in (((10.0, 10.0), "must differ"), ((75.0,), "0..60"), ((), "at least one")):
         with pytest.raises(ValueError, match=why):
             record_angle_table(names[:2], bad, table)
+    with pytest.raises(ValueError, match="at most 255"):  # (refused before anything is recorded)
+        record_angle_table([f"m{k}" for k in range(29)], tuple(float(y) for y in range(0, 45, 5)), table)
 
 
 def test_the_simulator_rows_against_a_table_of_angles(sim_table: Path) -> None:

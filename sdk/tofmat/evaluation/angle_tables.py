@@ -20,6 +20,8 @@ import numpy.typing as npt
 from .. import ClassificationResult, Classifier, ExemplarTable
 from .._progress import Progress
 
+MAX_ENTRIES = 255  # a table's candidates at most (firmware/core exemplar_table.hpp, kMaxMaterials)
+
 
 def record_angle_table(
     materials: Sequence[str], yaws_deg: Sequence[float], like: ExemplarTable, progress: Progress | None = None
@@ -27,7 +29,8 @@ def record_angle_table(
     """Each of ``materials`` recorded by the simulated camera in its nominal session at each of
     ``yaws_deg`` degrees (as ``tofmat sim table --yaw Y`` records one), over ``like``'s bins and rows,
     with its calibration (and its noise, for its own materials); the table's entries are named
-    ``material@Y``, and the second array gives each entry's index into ``materials``. Raises ValueError for no angle, an angle repeated, or one outside 0..60 degrees."""
+    ``material@Y``, and the second array gives each entry's index into ``materials``. Raises ValueError for no angle, an angle repeated, one outside 0..60 degrees, or
+    more exemplars than a table holds."""
     from ..sim import Renderer, load_device, load_library
     from ..sim.table import simulated_table
 
@@ -37,6 +40,11 @@ def record_angle_table(
         raise ValueError(f"a table's angles must differ, got {', '.join(f'{y:g}' for y in yaws_deg)}")
     if any(not 0.0 <= y <= 60.0 for y in yaws_deg):
         raise ValueError(f"a table's angles must be 0..60 degrees, got {', '.join(f'{y:g}' for y in yaws_deg)}")
+    if len(materials) * len(yaws_deg) > MAX_ENTRIES:
+        raise ValueError(
+            f"{len(materials)} materials at {len(yaws_deg)} angles are {len(materials) * len(yaws_deg)} exemplars: "
+            f"a table holds at most {MAX_ENTRIES}"
+        )
     renderer = Renderer(load_device(), load_library(), 0)
     features = []
     for k, yaw in enumerate(yaws_deg):
