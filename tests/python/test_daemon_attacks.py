@@ -60,8 +60,9 @@ def gap_bound(stats: dict[str, Any], floor_ms: float) -> float:
     """The longest wait for a label a window may hold: floor_ms, or 50 ms past the camera's own
     longest frame interval where the camera itself came late (it renders inside tofmatd on the same
     cores; beside other work here it once took 140 ms between frames); either plus the longest time
-    the harness itself was not run (its stall witness: the subscriber is in the harness's process,
-    and CI's machine once held it 230 ms). A stall in serving exceeds it."""
+    the harness itself was not run during that gap or the slowest label's wait (its stall witness:
+    the subscriber is in the harness's process; on CI a window once waited 269 ms for a label with
+    every latency in bound). A stall in serving exceeds it."""
     source = stats.get("source_gap_ms")  # (null: no two tracked frames in the window)
     camera = floor_ms if source is None else max(floor_ms, source + 50.0)
     return camera + stats["host_stall_ms"]

@@ -1097,7 +1097,9 @@ class LabelStats:
     missed_frames: int = 0  # frames with a target in view that gave no label
     camera_fps: float = float("nan")  # the camera's frames a second over the window (by its frame numbers and clock)
     source_gap_ms: float = float("nan")  # longest frame interval while tracking, by the daemon's frame clock
-    host_stall_ms: float = 0.0  # longest time the harness itself was not run in the window (HostStallWitness)
+    # The longest time the harness itself was not run (HostStallWitness) during the longest gap or the
+    # slowest label's wait: what of those two figures is the harness's own doing, at most.
+    host_stall_ms: float = 0.0
     gap_end: float = float(
         "nan"
     )  # when the longest gap ended (time.monotonic of the label after it, or the window's end)
@@ -1124,34 +1126,43 @@ def label_stats(records: Sequence[LabelRecord], t0: float, t1: float, before: La
         s.p50_ms, s.p99_ms, s.max_ms = (float(np.percentile(lat, 50)), float(np.percentile(lat, 99)),
                                         float(lat.max()))  # fmt: skip
     chain: list[LabelRecord] = ([before] if before is not None else []) + list(records)
-    gaps, raw, source, ends = [], [], [], []
+    gaps, raw, source, starts, ends = [], [], [], [], []
     last_arrival = t0
     for a, b in pairwise(chain):
         gap = (b.arrival - a.arrival) * 1000.0
         if a.state == "tracking":
             gaps.append(gap)
+            starts.append(a.arrival)
             ends.append(b.arrival)
             s.missed_frames += max(b.frame - a.frame - 1, 0)
             source.append((b.timestamp_ns - a.timestamp_ns) * 1e-6)
         else:
             gaps.append(gap - (b.timestamp_ns - a.timestamp_ns) * 1e-6 + FRAME_MS)
+            starts.append(a.arrival)
             ends.append(b.arrival)
         raw.append((b.arrival - max(a.arrival, t0)) * 1000.0)
     if chain:
         last = chain[-1]
         tail = (t1 - last.arrival) * 1000.0
         gaps.append(tail if last.state == "tracking" else tail - SCENE_GAP * FRAME_MS)
+        starts.append(last.arrival)
         ends.append(t1)
         last_arrival = last.arrival
     else:
         gaps.append((t1 - t0) * 1000.0)
+        starts.append(t0)
         ends.append(t1)
     raw.append((t1 - max(last_arrival, t0)) * 1000.0)
     s.gap_ms, s.raw_gap_ms = max(gaps), max(raw)
-    s.gap_end = ends[int(np.argmax(gaps))]
+    worst = int(np.argmax(gaps))
+    s.gap_end = ends[worst]
     s.source_gap_ms = max(source, default=float("nan"))
     if witness is not None:
-        s.host_stall_ms = witness.longest_ms(t0, t1)
+        s.host_stall_ms = witness.longest_ms(starts[worst], ends[worst])
+        if records:
+            slowest = max(records, key=lambda r: r.latency_ms)
+            waited = witness.longest_ms(slowest.arrival - slowest.latency_ms * 1e-3, slowest.arrival)
+            s.host_stall_ms = max(s.host_stall_ms, waited)
     return s
 
 
