@@ -43,10 +43,12 @@ Result to_result(const ExemplarTable& table, const Classification& c, const Cali
   const Verdict v = judge(c, table.n_rows(), calibration, vagueness);
   Result r;
   r.unknown = v.unknown;
-  r.ranking.reserve(c.ranking.size());
-  for (std::size_t i = 0; i < c.ranking.size(); ++i) {
-    const Match& m = c.ranking[i];
-    r.ranking.push_back({table.materials()[m.index], m.index, m.distance, m.valid, m.fit, v.probability[i]});
+  // by material: a table may hold several exemplars of one, each material ranked by its best
+  const std::vector<MaterialRank> ranks = rank_materials(c, v, table);
+  r.ranking.reserve(ranks.size());
+  for (const MaterialRank& k : ranks) {
+    const Match& m = c.ranking[k.position];
+    r.ranking.push_back({k.material, m.index, m.distance, m.valid, m.fit, k.probability});
   }
   return r;
 }
@@ -272,9 +274,11 @@ class Classifier {
 }  // namespace
 
 void register_classifier(pyb::module_& m) {
-  pyb::class_<RankedMatch>(m, "RankedMatch", "One candidate of a ranking.")
-      .def_readonly("material", &RankedMatch::material)
-      .def_readonly("index", &RankedMatch::index, "Index into table.materials.")
+  pyb::class_<RankedMatch>(m, "RankedMatch",
+                           "One material of a ranking (a table with several exemplars of a material, entries "
+                           "named MATERIAL@TAG, ranks the material once, by its best exemplar).")
+      .def_readonly("material", &RankedMatch::material, "The material (an entry 'cork@30' is one of 'cork').")
+      .def_readonly("index", &RankedMatch::index, "Index of the material's best exemplar into table.materials.")
       .def_readonly("distance", &RankedMatch::distance,
                     "Eq. (12) distance, mm^2; for method='session' the score (negative log-likelihood).")
       .def_readonly("valid", &RankedMatch::valid, "Elements valid in both the query and the exemplar.")
@@ -283,7 +287,8 @@ void register_classifier(pyb::module_& m) {
                     "deviate (large: worse than noise allows); NaN for method='eq12'.")
       .def_readonly("probability", &RankedMatch::probability,
                     "Calibrated probability that the query is this material, given that it is one of the "
-                    "candidates (softmax of the scores at the sweep length's temperature).")
+                    "candidates (softmax of the scores at the sweep length's temperature, summed over the "
+                    "material's exemplars).")
       .def("__repr__", [](const RankedMatch& r) { return "RankedMatch(" + match_repr(r) + ")"; });
 
   pyb::class_<Result>(m, "ClassificationResult", "The label of a query and the full ranking, best first.")
@@ -293,14 +298,14 @@ void register_classifier(pyb::module_& m) {
           "The label: the best match's material, or 'unknown' when no candidate explains the query.")
       .def_property_readonly(
           "index", [](const Result& r) { return r.unknown ? std::int64_t{-1} : std::int64_t{r.ranking.front().index}; },
-          "Index of the label into table.materials; -1 when unknown.")
+          "Index of the label's best exemplar into table.materials; -1 when unknown.")
       .def_property_readonly("distance", [](const Result& r) { return r.ranking.front().distance; })
       .def_property_readonly("valid", [](const Result& r) { return r.ranking.front().valid; })
       .def_property_readonly(
           "fit", [](const Result& r) { return r.ranking.front().fit; }, "The best match's fit (RankedMatch.fit).")
       .def_property_readonly(
           "confidence", [](const Result& r) { return r.ranking.front().probability; },
-          "The best match's calibrated probability among the candidates.")
+          "The label's calibrated probability among the candidates (summed over its exemplars).")
       .def_readonly("unknown", &Result::unknown,
                     "True when the classifier was made with open_set=True and the best match's fit exceeds "
                     "the calibration's threshold at the sweep's length.")

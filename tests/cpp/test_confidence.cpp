@@ -127,4 +127,52 @@ TEST(Calibration, UnknownIsAReservedMaterialName) {
   EXPECT_NO_THROW(validate_material_name("unknown2"));
 }
 
+TEST(Exemplars, ANameMaterialAtTagIsOneExemplarOfThatMaterial) {
+  EXPECT_NO_THROW(validate_material_name("cork@30"));
+  for (const char* bad : {"@30", "cork@", "cork@30@2", "unknown@30"})
+    EXPECT_THROW(validate_material_name(bad), std::invalid_argument) << bad;
+  EXPECT_EQ(exemplar_material("cork@30"), "cork");
+  EXPECT_EQ(exemplar_material("cork"), "cork");
+  const ExemplarTable t({"cork@0", "paper", "cork@30", "wood@0"}, {RowSpec{16, 120}}, BinSpec::linspace(600, 1200, 2),
+                        std::vector<float>(8, 1.0f));
+  EXPECT_TRUE(t.has_exemplars());
+  EXPECT_EQ(t.distinct_materials(), (std::vector<std::string>{"cork", "paper", "wood"}));
+  EXPECT_EQ(t.material_of(2), "cork");
+  EXPECT_EQ(t.material_id(3), 2u);
+  // a material names all its exemplars, an entry only itself; an entry twice is an error
+  EXPECT_EQ(candidate_names_to_indices(t, {"wood", "cork"}), (std::vector<std::uint32_t>{3, 0, 2}));
+  EXPECT_EQ(candidate_names_to_indices(t, {"cork@30"}), (std::vector<std::uint32_t>{2}));
+  EXPECT_THROW(candidate_names_to_indices(t, {"cork", "cork@30"}), std::invalid_argument);
+  EXPECT_THROW(candidate_names_to_indices(t, {"cork@10"}), std::invalid_argument);
+  EXPECT_THROW(candidate_names_to_indices(t, {"cork@0@1"}), std::invalid_argument);
+}
+
+TEST(Exemplars, AMaterialRanksOnceByItsBestExemplarWithItsExemplarsProbabilitiesSummed) {
+  const ExemplarTable t({"cork@0", "paper", "cork@30", "wood"}, {RowSpec{16, 120}}, BinSpec::linspace(600, 1200, 2),
+                        std::vector<float>(8, 1.0f));
+  const Classification c = ranking({{2, 1.0, 2}, {1, 1.5, 2}, {0, 2.0, 2}, {3, 4.0, 2}});
+  Verdict v;
+  v.probability = {0.4, 0.3, 0.2, 0.1};
+  const auto r = rank_materials(c, v, t);
+  ASSERT_EQ(r.size(), 3u);
+  EXPECT_EQ(r[0].material, "cork");
+  EXPECT_EQ(r[0].position, 0u);  // cork@30, the best of cork's
+  EXPECT_NEAR(r[0].probability, 0.6, 1e-12);
+  EXPECT_EQ(r[1].material, "paper");
+  EXPECT_NEAR(r[1].probability, 0.3, 1e-12);
+  EXPECT_EQ(r[2].material, "wood");
+  EXPECT_EQ(r[2].position, 3u);
+  // a table of one entry per material: the ranking as it was
+  const ExemplarTable plain({"a", "b"}, {RowSpec{16, 120}}, BinSpec::linspace(600, 1200, 2),
+                            std::vector<float>(4, 1.0f));
+  EXPECT_FALSE(plain.has_exemplars());
+  Verdict w;
+  w.probability = {0.7, 0.3};
+  const auto p = rank_materials(ranking({{1, 1.0, 2}, {0, 2.0, 2}}), w, plain);
+  ASSERT_EQ(p.size(), 2u);
+  EXPECT_EQ(p[0].material, "b");
+  EXPECT_DOUBLE_EQ(p[0].probability, 0.7);
+  EXPECT_THROW(rank_materials(ranking({{1, 1.0, 2}}), w, plain), std::invalid_argument);
+}
+
 }  // namespace

@@ -538,3 +538,35 @@ def test_fixed_backend_errors_and_candidates(real_table) -> None:
     q[:, 50:60] = real_table.features[real_table.index_of("pvc"), :, 50:60]
     assert fixed.classify(q).material == "pvc"
     assert [r.material for r in fixed.classify_batch(np.stack([q, q]))] == ["pvc", "pvc"]
+
+
+def test_exemplars_of_one_material_label_and_rank_as_that_material(rng) -> None:
+    """Entries named MATERIAL@TAG are exemplars of MATERIAL: the label, ranking and candidates speak of
+    the material, ranked by its best exemplar, with its exemplars' probabilities summed."""
+    bins = tofmat.BinSpec.linspace(600.0, 1200.0, 8)
+    base = rng.normal(0.0, 3.0, (3, 2, 8))
+    names = ["cork@0", "paper@0", "cork@30", "paper@30", "wood"]
+    features = np.stack([base[0], base[1], base[0] + 0.8, base[1] + 0.8, base[2]])
+    table = tofmat.ExemplarTable(names, features, bins, [(16, 120), (80, 120)])
+    clf = tofmat.Classifier(table, method="eq12")
+    res = clf.classify(features[2] + rng.normal(0.0, 0.05, (2, 8)))
+    assert res.material == "cork"
+    assert table.materials[res.index] == "cork@30"  # the best exemplar
+    assert sorted(r.material for r in res.ranking) == ["cork", "paper", "wood"]  # each material once
+    assert res.confidence == pytest.approx(1.0 - sum(r.probability for r in res.ranking[1:]))
+    # the material's probability is its exemplars' sum: more than the table's best entry alone would have
+    plain = tofmat.Classifier(
+        tofmat.ExemplarTable([n.replace("@", "_") for n in names], features, bins, [(16, 120), (80, 120)]),
+        method="eq12",
+    )
+    alone = plain.classify(features[2] + 0.0)
+    assert alone.material == "cork_30"
+    assert clf.classify(features[2] + 0.0).confidence > alone.confidence
+    # a material as a candidate takes all its exemplars; an exemplar's own name takes that one
+    assert {r.index for r in tofmat.Classifier(table, materials=["cork"]).classify(features[0]).ranking} == {0}
+    only = tofmat.Classifier(table, materials=["cork@0", "wood"]).classify(features[2])
+    assert [r.material for r in only.ranking] == ["cork", "wood"] and only.index == 0
+    with pytest.raises(ValueError, match="twice"):
+        tofmat.Classifier(table, materials=["cork", "cork@30"])
+    with pytest.raises(ValueError, match="MATERIAL@TAG"):
+        tofmat.ExemplarTable(["cork@"], features[:1], bins, [(16, 120), (80, 120)])

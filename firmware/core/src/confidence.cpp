@@ -163,4 +163,24 @@ Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& 
   return v;
 }
 
+std::vector<MaterialRank> rank_materials(const Classification& c, const Verdict& verdict, const ExemplarTable& table) {
+  if (verdict.probability.size() != c.ranking.size())
+    throw std::invalid_argument("a verdict of " + std::to_string(verdict.probability.size()) +
+                                " probabilities for a ranking of " + std::to_string(c.ranking.size()));
+  std::vector<MaterialRank> out;
+  out.reserve(c.ranking.size());
+  // where each material sits in `out` (a table of up to 255 entries: a lookup per entry, not a search)
+  std::vector<std::int32_t> slot(table.distinct_materials().size(), -1);
+  for (std::size_t i = 0; i < c.ranking.size(); ++i) {
+    const std::uint32_t id = table.material_id(c.ranking[i].index);
+    if (slot[id] < 0) {
+      slot[id] = static_cast<std::int32_t>(out.size());
+      out.push_back({table.material_of(c.ranking[i].index), i, verdict.probability[i]});
+    } else {
+      out[static_cast<std::size_t>(slot[id])].probability += verdict.probability[i];
+    }
+  }
+  return out;
+}
+
 }  // namespace tofmat

@@ -16,6 +16,8 @@ namespace tofmat {
 
 std::vector<RowSpec> kinect2_database_rows() { return {{16, 120}, {80, 120}}; }
 
+std::string exemplar_material(const std::string& name) { return name.substr(0, name.find('@')); }
+
 void validate_material_name(const std::string& name) {
   if (name.empty() || name.size() > kMaxNameBytes) {
     throw std::invalid_argument("material name must be 1.." + std::to_string(kMaxNameBytes) + " bytes: '" + name + "'");
@@ -27,6 +29,13 @@ void validate_material_name(const std::string& name) {
   }
   // The label of a query that fits no material (confidence.hpp's kUnknownLabel).
   if (name == "unknown") throw std::invalid_argument("material name 'unknown' is reserved for open-set rejection");
+  const std::size_t at = name.find('@');
+  if (at == std::string::npos) return;
+  if (at == 0 || at + 1 == name.size() || name.find('@', at + 1) != std::string::npos)
+    throw std::invalid_argument("an exemplar's name is MATERIAL@TAG, one '@' between two non-empty parts: '" + name +
+                                "'");
+  if (name.compare(0, at, "unknown") == 0 && at == 7)
+    throw std::invalid_argument("material name 'unknown' is reserved for open-set rejection: '" + name + "'");
 }
 
 ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<RowSpec> rows, BinSpec bins,
@@ -51,6 +60,10 @@ ExemplarTable::ExemplarTable(std::vector<std::string> materials, std::vector<Row
   for (const auto& name : materials_) {
     validate_material_name(name);
     if (!seen.insert(name).second) throw std::invalid_argument("duplicate material name '" + name + "'");
+    std::string material = exemplar_material(name);
+    const auto it = std::find(distinct_.begin(), distinct_.end(), material);
+    material_ids_.push_back(static_cast<std::uint32_t>(it - distinct_.begin()));
+    if (it == distinct_.end()) distinct_.push_back(std::move(material));
   }
   const std::size_t expected = materials_.size() * elements_per_material();
   if (values_.size() != expected) {
@@ -237,11 +250,20 @@ std::vector<std::uint32_t> candidate_names_to_indices(const ExemplarTable& table
                                                       const std::vector<std::string>& names) {
   std::vector<std::uint32_t> out;
   for (const auto& n : names) {
-    const auto i = table.index_of(n);
-    if (i < 0) throw std::invalid_argument("candidate \"" + n + "\" is not in the table");
-    if (std::find(out.begin(), out.end(), static_cast<std::uint32_t>(i)) != out.end())
-      throw std::invalid_argument("candidate \"" + n + "\" is given twice");
-    out.push_back(static_cast<std::uint32_t>(i));
+    std::vector<std::uint32_t> entries;
+    if (n.find('@') != std::string::npos) {
+      if (const auto i = table.index_of(n); i >= 0) entries.push_back(static_cast<std::uint32_t>(i));
+    } else {
+      for (std::uint32_t k = 0; k < table.n_materials(); ++k)
+        if (table.material_of(k) == n) entries.push_back(k);
+    }
+    if (entries.empty()) throw std::invalid_argument("candidate \"" + n + "\" is not in the table");
+    for (std::uint32_t k : entries) {
+      if (std::find(out.begin(), out.end(), k) != out.end())
+        throw std::invalid_argument("candidate \"" + n + "\" is given twice (as \"" + table.materials()[k] +
+                                    "\" or its material)");
+      out.push_back(k);
+    }
   }
   return out;
 }

@@ -87,7 +87,7 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
     };
     hooks.publish = [this](const protocol::Message& m, const std::string& stream) { server_->publish(stream, m); };
     hooks.item_truth = [this](std::uint64_t trigger_ns) { return source_->item_truth(trigger_ns); };
-    line_ = std::make_unique<SortingLine>(options_.line, gpio_backend, table->materials(), std::move(hooks));
+    line_ = std::make_unique<SortingLine>(options_.line, gpio_backend, table->distinct_materials(), std::move(hooks));
   }
   if (options_.button.enabled())
     button_ = std::make_unique<ResetButton>(options_.button, gpio_backend, [this](std::uint64_t t) {

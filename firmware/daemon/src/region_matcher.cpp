@@ -148,17 +148,18 @@ bool RegionMatcher::unknown(const Classification& c) const { return rejected(c, 
 
 protocol::LabelEvent RegionMatcher::label_event(const Classification& c, int top_k) const {
   protocol::LabelEvent e;
-  const auto& names = table_->materials();
   const Verdict v = judge(c, table_->n_rows(), calibration_, vagueness_);
-  e.material = v.unknown ? "" : names[c.best().index];
+  // by material: a table may hold several exemplars of one (ExemplarTable::materials())
+  const std::vector<MaterialRank> ranks = rank_materials(c, v, *table_);
+  e.material = v.unknown ? "" : ranks.front().material;
   e.index = v.unknown ? -1 : static_cast<std::int32_t>(c.best().index);
-  e.confidence = v.confidence();
+  e.confidence = ranks.front().probability;
   if (std::isfinite(c.best().fit)) e.fit = c.best().fit;
   e.distance = c.best().distance;
   e.valid = c.best().valid;
   e.bins_covered = bins_covered();
-  const std::size_t k = std::min(c.ranking.size(), static_cast<std::size_t>(std::max(top_k, 1)));
-  for (std::size_t i = 0; i < k; ++i) e.ranking.push_back({names[c.ranking[i].index], c.ranking[i].distance});
+  const std::size_t k = std::min(ranks.size(), static_cast<std::size_t>(std::max(top_k, 1)));
+  for (std::size_t i = 0; i < k; ++i) e.ranking.push_back({ranks[i].material, c.ranking[ranks[i].position].distance});
   return e;
 }
 

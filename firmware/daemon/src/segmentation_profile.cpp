@@ -42,7 +42,9 @@ class SegmentationProfile : public Profile {
         vote_(kWidth, kHeight, kRegionStepQ8, kRegionMinPixels, static_cast<int>(compact_.candidates().size())) {
     if (c.accumulate > 1)
       for (auto& plane : accumulated_) plane.resize(kPixels);
-    for (auto k : compact_.candidates()) names_.push_back(table_->materials()[k]);
+    // (a label per candidate entry, named by its material: a table's exemplars of one material share a
+    // name; the region vote still counts them apart)
+    for (auto k : compact_.candidates()) names_.push_back(table_->material_of(k));
     for (int b = 0; b < workers_.bands() && config_.smooth > 1; ++b) {
       box_.emplace_back(kWidth, kHeight, config_.smooth);
       majority_.emplace_back(kWidth, kHeight, config_.smooth, static_cast<int>(names_.size()));
@@ -132,16 +134,18 @@ class SegmentationProfile : public Profile {
   double accuracy(const FrameTruth& t, const std::vector<std::uint8_t>& labels) const {
     // Each truth material's label (kNoLabel: not a candidate, never right),
     // once a frame: then an integer comparison per pixel.
-    std::vector<std::uint8_t> label_of(t.materials.size(), protocol::kNoLabel);
-    for (std::size_t m = 0; m < t.materials.size(); ++m)
-      for (std::size_t k = 0; k < names_.size(); ++k)
-        if (names_[k] == t.materials[m]) label_of[m] = static_cast<std::uint8_t>(k);
+    // Each label's truth material (-1: none), once a frame: then an integer
+    // comparison per pixel (a table of exemplars gives one material several labels).
+    std::vector<std::int32_t> truth_of(protocol::kNoLabel + 1, -1);
+    for (std::size_t k = 0; k < names_.size(); ++k)
+      for (std::size_t m = 0; m < t.materials.size(); ++m)
+        if (names_[k] == t.materials[m]) truth_of[k] = static_cast<std::int32_t>(m);
     std::size_t total = 0, right = 0;
     for (std::size_t i = 0; i < kPixels; ++i) {
       const auto m = static_cast<std::size_t>(t.target[i]);  // (-1 -> beyond every index)
-      if (m >= label_of.size()) continue;
+      if (m >= t.materials.size()) continue;
       ++total;
-      right += labels[i] == label_of[m] && label_of[m] != protocol::kNoLabel;
+      right += truth_of[labels[i]] == static_cast<std::int32_t>(m);
     }
     return total ? static_cast<double>(right) / static_cast<double>(total) : 0.0;
   }

@@ -78,4 +78,23 @@ Verdict judge(const Classification& c, std::uint32_t n_rows, const Calibration& 
 // judge()'s unknown alone, without the probabilities.
 bool rejected(const Classification& c, std::uint32_t n_rows, const Calibration& calibration);
 
+// One material's place in a classification, for tables that hold several
+// exemplars of a material (ExemplarTable::materials()): the ranking position
+// of its best exemplar and the sum of its exemplars' probabilities (the
+// posterior of a mixture of its exemplars, equally likely). The label is the
+// best exemplar's material, the paper's nearest neighbour over orientations;
+// not the material of the largest sum, which under the flat softmax of a
+// short sweep is the material nearest on average over its exemplars, not the
+// one at the query's angle (docs/evaluation.md).
+struct MaterialRank {
+  std::string material;
+  std::size_t position = 0;  // into Classification::ranking
+  double probability = 0.0;
+};
+
+// The ranking's materials, each once, in the order of their best exemplars
+// (a table of one entry per material: the ranking itself, its probabilities
+// unchanged). `verdict` is judge()'s for `c`.
+std::vector<MaterialRank> rank_materials(const Classification& c, const Verdict& verdict, const ExemplarTable& table);
+
 }  // namespace tofmat

@@ -16,6 +16,10 @@
 
 namespace tofmat {
 
+// The material an entry's name names: the part before '@' ("cork@30" is an
+// exemplar of "cork"), or the whole name without one.
+std::string exemplar_material(const std::string& name);
+
 // At most 255 materials: the protocol's limit (a label map's uint8 index, 255
 // = none), so that every table that loads can be served.
 inline constexpr std::size_t kMaxMaterials = 255;
@@ -101,7 +105,20 @@ class ExemplarTable {
   std::uint32_t n_bins() const { return bins_.count; }
   std::size_t elements_per_material() const { return static_cast<std::size_t>(n_rows()) * n_bins(); }
 
+  // The table's entries by name. An entry named "MATERIAL@TAG" is one exemplar
+  // of MATERIAL (a recording at one angle, say "cork@30"): a table may hold
+  // several of a material, and labels, rankings, candidates and sorting rules
+  // speak of the material (exemplar_material()).
   const std::vector<std::string>& materials() const { return materials_; }
+  // The distinct materials of the entries, in the order each first appears
+  // (materials() itself for a table of one entry per material).
+  const std::vector<std::string>& distinct_materials() const { return distinct_; }
+  // The material entry m is an exemplar of, as an index into
+  // distinct_materials(), and by name.
+  std::uint32_t material_id(std::size_t m) const { return material_ids_.at(m); }
+  const std::string& material_of(std::size_t m) const { return distinct_[material_id(m)]; }
+  // Whether some material has more than one entry.
+  bool has_exemplars() const { return distinct_.size() != materials_.size(); }
   const std::vector<RowSpec>& rows() const { return rows_; }
   const BinSpec& bins() const { return bins_; }
   // Step of the int16 quantisation this table went through (0 = never quantised).
@@ -142,12 +159,16 @@ class ExemplarTable {
   std::vector<float> noise_mm_;
   std::optional<DepthDistortion> distortion_;
   std::optional<TableCalibration> calibration_;
+  std::vector<std::string> distinct_;        // distinct_materials()
+  std::vector<std::uint32_t> material_ids_;  // per entry, into distinct_
 };
 
 // The Kinect v2 database's rows: 16 vs 120 MHz, then 80 vs 120 MHz.
 std::vector<RowSpec> kinect2_database_rows();
 
-// Throws std::invalid_argument unless the name is 1..64 bytes of printable ASCII.
+// Throws std::invalid_argument unless the name is 1..64 bytes of printable
+// ASCII without spaces, not "unknown", and with at most one '@', between a
+// material and a tag that are both non-empty (and the material not "unknown").
 void validate_material_name(const std::string& name);
 
 // Every material holds a measured curve: at least one valid value, and (with
@@ -162,9 +183,10 @@ void validate_material_name(const std::string& name);
 void check_measured(const ExemplarTable& table, const std::string& source,
                     const std::vector<std::string>& material_files = {}, bool rows_must_vary = true);
 
-// Candidate names as indices into `table`, in the order given. Throws
-// std::invalid_argument naming a name that is not in the table or that is
-// given twice.
+// Candidate names as indices into `table`, in the order given: a name with an
+// '@' is one entry's ("cork@30": that exemplar), one without is a material's
+// ("cork": each of its entries, "cork" and "cork@30" alike, in table order). Throws std::invalid_argument naming a name
+// that is not in the table or that names an entry already given.
 std::vector<std::uint32_t> candidate_names_to_indices(const ExemplarTable& table,
                                                       const std::vector<std::string>& names);
 
