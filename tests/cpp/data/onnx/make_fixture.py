@@ -14,7 +14,8 @@
   NaN bias (NaN out), and with one output fewer than the table's materials.
 
 Usage: python3 make_fixture.py DB_DIR [OUT_DIR]. Deterministic: tests/python/test_learn.py checks
-that it gives the committed files again.
+that it gives the committed files again (expected.npy to 1e-12: the last bit of NumPy's matrix
+products depends on the CPU its BLAS kernel was chosen for).
 """
 
 from __future__ import annotations
