@@ -185,13 +185,18 @@ SYN_OFFSETS = {"tile": (1.0, -0.5), "wood": (-0.5, 0.2), "paper": (-2.0, 0.3), "
                "glass": (3.0, -1.0), "resin": (-3.0, -0.6)}  # fmt: skip
 # A small run: harmonics to h = 7, two restarts, two rounds (the second chooses every kind again
 # against the refined device: the first round's choice is made against the stage-1 device only).
+# Joint passes of 150 evaluations: the assertions below hold over the seeds 0-3 (worst: albedo
+# 3.3 % off (paper), 80/120 MHz harmonics 0.0007 off, median rms 0.014 mm; measured with
+# tofmat.sim.calibrate on this problem, seed varied), so another CPU's roundoff, which can send the
+# fit down another restart's path, stays inside them. With 60 evaluations seeds 1-3 ended at 4.2-5.2 %
+# (paper's albedo) and a CI machine at 5.3 % (foam's) and 0.0054.
 # Session drift off: with one capture per material a session state cannot be told from the
 # material (docs/simulator.md). Step gains, step offsets and scale errors stay at their ideal
 # values: free, they trade with the near-opaque materials' kernels (tile's b goes 0.1 -> 0.3 at
 # the same 0.02 mm curve rms), a near-gauge that six curves do not resolve.
 SYN_CONFIG = cal.CalibrationConfig(
     restarts=2, rounds=2, kind_cycles=1, seed=0, group_hmax=(7, 7, 7), session_drift=False,
-    joint_passes=(2, 2), joint_nfev=60, joint_step_gains=False, joint_step_offsets=False,
+    joint_passes=(2, 2), joint_nfev=150, joint_step_gains=False, joint_step_offsets=False,
     joint_scale_errors=False, ridge=1.0,
 )  # fmt: skip
 
