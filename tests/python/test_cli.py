@@ -366,6 +366,48 @@ def test_sim_table_calibrates_the_table_it_records(tmp_path: Path) -> None:
     assert_clean_error(run("sim", "table", "--materials", "cork", "-o", other, ok=False), "one material")
 
 
+def test_sim_table_records_every_material_at_each_angle(tmp_path: Path) -> None:
+    small = ["--materials", "cork,paper", "--bins", "20"]
+    path = tmp_path / "angles.tmx"
+    p = run("sim", "table", *small, "--yaws", "0,30", "--calibration-sessions", "0", "-o", path)
+    assert "2 materials at 0, 30 degrees, 4 exemplars" in p.stdout and "not calibrated" in p.stdout, p.stdout
+    t = tofmat.ExemplarTable.load(path)
+    assert t.materials == ["cork@0", "paper@0", "cork@30", "paper@30"] and t.calibration is None
+    # Each exemplar is its material at its angle: the 0-degree ones are what --yaw 0 records, the
+    # 30-degree curves differ from them, and each carries its own depth distortion.
+    one = tmp_path / "zero.tmx"
+    run("sim", "table", *small, "--yaw", "0", "--calibration-sessions", "0", "-o", one)
+    zero = tofmat.ExemplarTable.load(one)
+    assert np.array_equal(t.features[:2], zero.features, equal_nan=True)
+    assert not np.allclose(t.features[2:], t.features[:2], equal_nan=True)
+    assert t.distortion_mm is not None and zero.distortion_mm is not None
+    assert np.array_equal(t.distortion_mm[:2], zero.distortion_mm, equal_nan=True)
+    # A label names the material, never the angle.
+    r = tofmat.Classifier(t, method="eq12").classify(t.features[3])
+    assert r.material == "paper" and [m.material for m in r.ranking] == ["paper", "cork"]
+    # --keep-current keeps a table of these materials at these angles, records another again.
+    before = path.read_bytes()
+    assert "kept" in run("sim", "table", *small, "--yaws", "0,30", "--keep-current", "--calibration-sessions", "0",
+                         "-o", path).stdout  # fmt: skip
+    assert path.read_bytes() == before
+    p = run("sim", "table", *small, "--yaws", "0,20", "--keep-current", "--calibration-sessions", "0", "-o", path)
+    assert "recording it again" in p.stderr and tofmat.ExemplarTable.load(path).materials[2] == "cork@20"
+    # With a calibration: the first angle's, on every exemplar of the material.
+    cal = tmp_path / "cal.tmx"
+    p = run("sim", "table", *small, "--yaws", "10,40", "--calibration-sessions", "1", "-o", cal)
+    assert "calibrated on 1 sessions" in p.stdout, p.stdout
+    c = tofmat.ExemplarTable.load(cal)
+    assert c.calibration is not None and c.materials == ["cork@10", "paper@10", "cork@40", "paper@40"]
+    # Bad angles: a clear error, nothing written.
+    bad = tmp_path / "bad.tmx"
+    for yaws, what in (("0,0", "must differ"), ("0,70", "--yaws"), ("x", "--yaws")):
+        assert_clean_error(run("sim", "table", *small, "--yaws", yaws, "-o", bad, ok=False), what)
+    assert_clean_error(run("sim", "table", *small, "--yaw", "5", "--yaws", "0,30", "-o", bad, ok=False), "not both")
+    many = ",".join(str(y) for y in range(0, 60, 5))  # 12 angles x 29 materials > 255 exemplars
+    assert_clean_error(run("sim", "table", "--yaws", many, "-o", bad, ok=False), "at most 255")
+    assert not bad.exists()
+
+
 def test_the_commands_own_sim_table_is_calibrated_once(tmp_path: Path) -> None:
     # What `tofmat demo` and the other commands without --table use (build/sim_table.tmx).
     from tofmat.sim.own_table import ensure_sim_table

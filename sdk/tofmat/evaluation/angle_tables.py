@@ -12,7 +12,7 @@ that material's exemplars' probabilities (a mixture of equal weights).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -20,19 +20,29 @@ import numpy.typing as npt
 from .. import ClassificationResult, Classifier, ExemplarTable
 from .._progress import Progress
 
+if TYPE_CHECKING:
+    from ..sim import Renderer
+
 MAX_ENTRIES = 255  # a table's candidates at most (firmware/core exemplar_table.hpp, kMaxMaterials)
 
 
 def record_angle_table(
-    materials: Sequence[str], yaws_deg: Sequence[float], like: ExemplarTable, progress: Progress | None = None
+    materials: Sequence[str],
+    yaws_deg: Sequence[float],
+    like: ExemplarTable,
+    progress: Progress | None = None,
+    renderer: Renderer | None = None,
+    distortion: bool = False,
 ) -> tuple[ExemplarTable, npt.NDArray[np.int64]]:
-    """Each of ``materials`` recorded by the simulated camera in its nominal session at each of
-    ``yaws_deg`` degrees (as ``tofmat sim table --yaw Y`` records one), over ``like``'s bins and rows,
-    with its calibration (and its noise, for its own materials); the table's entries are named
-    ``material@Y``, and the second array gives each entry's index into ``materials``. Raises ValueError for no angle, an angle repeated, one outside 0..60 degrees, or
-    more exemplars than a table holds."""
+    """Each of ``materials`` recorded by the simulated camera (``renderer``; default: the default
+    device and library) in its nominal session at each of ``yaws_deg`` degrees (as ``tofmat sim table
+    --yaw Y`` records one), over ``like``'s bins and rows, with its calibration (and its noise, for its
+    own materials); with ``distortion``, each exemplar carries its material's depth distortion at its
+    angle. The table's entries are named ``material@Y``, and the second array gives each entry's index
+    into ``materials``. Raises ValueError for no angle, an angle repeated, one outside 0..60 degrees,
+    or more exemplars than a table holds."""
     from ..sim import Renderer, load_device, load_library
-    from ..sim.table import simulated_table
+    from ..sim.table import DISTORTION_GRID, simulated_table
 
     if not yaws_deg:
         raise ValueError("a table of angles needs at least one angle")
@@ -45,12 +55,16 @@ def record_angle_table(
             f"{len(materials)} materials at {len(yaws_deg)} angles are {len(materials) * len(yaws_deg)} exemplars: "
             f"a table holds at most {MAX_ENTRIES}"
         )
-    renderer = Renderer(load_device(), load_library(), 0)
-    features = []
+    if renderer is None:
+        renderer = Renderer(load_device(), load_library(), 0)
+    features, distortions = [], []
     for k, yaw in enumerate(yaws_deg):
         if progress:
             progress(k, len(yaws_deg), f"recording the table at {yaw:g} degrees")
-        features.append(simulated_table(renderer, list(materials), like.bins, yaw_deg=yaw, distortion=False).features)
+        at_yaw = simulated_table(renderer, list(materials), like.bins, yaw_deg=yaw, distortion=distortion)
+        features.append(at_yaw.features)
+        if at_yaw.distortion_mm is not None:
+            distortions.append(at_yaw.distortion_mm)
     names = [f"{m}@{y:g}" for y in yaws_deg for m in materials]
     # (like's noise and calibration, when ``materials`` are its own: what it was calibrated for holds
     # for its materials at any angle, and the rows match it with the single table as they would)
@@ -58,6 +72,8 @@ def record_angle_table(
     if like.noise_mm is not None and list(materials) == list(like.materials):
         noise = np.tile(np.asarray(like.noise_mm), (len(yaws_deg), 1))
     table = ExemplarTable(names, np.concatenate(features), like.bins, like.rows, noise)
+    if distortions:
+        table = table.with_distortion(DISTORTION_GRID, np.concatenate(distortions))
     if like.calibration is not None:
         table = table.with_calibration(like.calibration)
     return table, np.tile(np.arange(len(materials), dtype=np.int64), len(yaws_deg))

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import click
 import numpy as np
+from click.core import ParameterSource
 
 from .._clikit import FiniteFloat, NumberList, TofmatGroup, progress_bar
 from .._extras import require, require_pyplot
@@ -310,6 +311,13 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
 )
 @click.option("--yaw", default=10.0, show_default=True, type=FiniteFloat(-80, 80), help="Target orientation, degrees.")
 @click.option(
+    "--yaws",
+    type=NumberList(float, 0, 60),
+    help="Y1,Y2,...: record every material at each of these orientations (degrees, 0..60; instead of --yaw): "
+    "the table's entries are MATERIAL@Y, exemplars of one material (labels and rankings name the material; "
+    "docs/table-format.md). The calibration, when there is one, is the table's at the first angle.",
+)
+@click.option(
     "--keep-current",
     is_flag=True,
     help="Leave OUTPUT as it is if it already holds a table with a depth distortion (a table of an older "
@@ -327,7 +335,8 @@ def bench_cmd(device: str, library: str, frames: int, threads: int) -> None:
     "-o", "--output", required=True, type=click.Path(dir_okay=False, path_type=Path), help="Table file (.tmx)."
 )
 def table_cmd(device: str, library: str, materials: str | None, n_bins: int, depth_range: list[float], yaw: float,
-              keep_current: bool, calibration_sessions: int | None, output: Path) -> None:  # fmt: skip
+              yaws: list[float] | None, keep_current: bool, calibration_sessions: int | None,
+              output: Path) -> None:  # fmt: skip
     """Record an exemplar table with the simulated camera (what tofmatd on --source sim matches against),
     and calibrate it for itself: the sessions the calibration renders take about 40 s a material at the
     default 6 (about 20 minutes of one core for the whole library)."""
@@ -335,6 +344,13 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, dep
 
     if len(depth_range) != 2 or not depth_range[0] < depth_range[1]:
         raise click.BadParameter("give START,END with START < END", param_hint="--range")
+    if yaws is not None:
+        given = click.get_current_context().get_parameter_source("yaw")
+        if given is not ParameterSource.DEFAULT:
+            raise click.BadParameter("give --yaw or --yaws, not both", param_hint="--yaws")
+        if len(set(yaws)) != len(yaws):
+            raise click.BadParameter(f"the angles must differ, got {', '.join(f'{y:g}' for y in yaws)}",
+                                     param_hint="--yaws")  # fmt: skip
     default_sim = device == DEFAULT_DEVICE and library == DEFAULT_LIBRARY
     if calibration_sessions is None:
         calibration_sessions = CALIBRATION_SESSIONS if default_sim else 0
@@ -343,8 +359,24 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, dep
             "the calibration renders its sessions with the default device and library; give 0 with others",
             param_hint="--calibration-sessions",
         )
+    r = _renderer(device, library)
+    names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
+    from ..evaluation.angle_tables import MAX_ENTRIES
+
+    if yaws is not None and len(names) * len(yaws) > MAX_ENTRIES:
+        raise click.BadParameter(
+            f"{len(names)} materials at {len(yaws)} angles are {len(names) * len(yaws)} exemplars: "
+            f"a table holds at most {MAX_ENTRIES}",
+            param_hint="--yaws",
+        )
+    entries = [f"{m}@{y:g}" for y in yaws for m in names] if yaws is not None else None
     if keep_current and output.is_file():
         current, why = current_table(output)
+        if current is not None and entries is not None and current.materials != entries:
+            current, why = (
+                None,
+                f"its entries are not {len(names)} materials at {', '.join(f'{y:g}' for y in yaws or [])} degrees",
+            )
         if current is None:
             click.echo(f"{output}: {why}; recording it again", err=True)
         elif current.calibration is None and calibration_sessions > 0:
@@ -353,8 +385,6 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, dep
         else:
             click.echo(f"{output}: current (it has a depth distortion); kept")
             return
-    r = _renderer(device, library)
-    names = [m.strip() for m in materials.split(",")] if materials else list(r.library.names)
     if calibration_sessions > 0 and len(set(names)) < 2:
         raise click.BadParameter(
             "a table of one material has nothing to calibrate a choice on: give --calibration-sessions 0",
@@ -363,17 +393,44 @@ def table_cmd(device: str, library: str, materials: str | None, n_bins: int, dep
     t0 = time.perf_counter()
     bins = database_bins(n_bins, depth_range[0], depth_range[1])
     with progress_bar("recording materials") as progress:
-        table = simulated_table(r, names, bins, yaw_deg=yaw, progress=progress)
+        table = simulated_table(r, names, bins, yaw_deg=yaws[0] if yaws else yaw, progress=progress)
     output.parent.mkdir(parents=True, exist_ok=True)
     recorded = (
         f"{len(names)} materials x 2 rows x {n_bins} bins of {bins.width_mm:.3f} mm from "
         f"{bins.start_mm:g} mm, recorded in {time.perf_counter() - t0:.1f} s"
     )
+    if yaws is not None:
+        _record_angles(r, names, yaws, table, calibration_sessions, output, recorded)
+        return
     if calibration_sessions == 0:
         table.save(str(output))
         click.echo(f"{output}: {recorded}; not calibrated")
         return
     _calibrate_sim_table(table, calibration_sessions, output, recorded)
+
+
+def _record_angles(r: Renderer, names: list[str], yaws: list[float], first: ExemplarTable, sessions: int,
+                   output: Path, what: str) -> None:  # fmt: skip
+    """The table of ``names`` at each of ``yaws`` (evaluation.angle_tables.record_angle_table) with the
+    calibration of ``first`` (the table at the first angle) when ``sessions`` > 0: a material's
+    calibration (its noise, the confidence's temperatures) holds for it at any angle."""
+    from ..evaluation.angle_tables import record_angle_table
+    from .own_table import calibrated
+
+    t0 = time.perf_counter()
+    if sessions > 0:
+        try:
+            with progress_bar("calibrating") as progress:
+                first = calibrated(first, sessions, progress)
+        except (ValueError, RuntimeError) as e:
+            raise click.ClickException(f"calibrating {output}: {e}") from e
+    with progress_bar("recording angles") as progress:
+        table, _ = record_angle_table(names, yaws, first, progress, renderer=r, distortion=True)
+    table.save(str(output))
+    how = f"calibrated on {sessions} sessions a material and split" if sessions > 0 else "not calibrated"
+    click.echo(f"{output}: {len(names)} materials at {', '.join(f'{y:g}' for y in yaws)} degrees, "
+               f"{len(table.materials)} exemplars ({what} at {yaws[0]:g}); {how} in "
+               f"{time.perf_counter() - t0:.1f} s")  # fmt: skip
 
 
 def _calibrate_sim_table(table: ExemplarTable, sessions: int, output: Path, what: str) -> None:
