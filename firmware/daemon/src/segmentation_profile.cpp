@@ -27,6 +27,12 @@ namespace {
 
 static_assert(PixelClassifier::kUnclassified == protocol::kNoLabel, "the label map's 'none' is the classifier's");
 
+std::array<std::uint8_t, protocol::kNoLabel + 1> identity_labels() {
+  std::array<std::uint8_t, protocol::kNoLabel + 1> a{};
+  for (std::size_t i = 0; i < a.size(); ++i) a[i] = static_cast<std::uint8_t>(i);
+  return a;
+}
+
 class SegmentationProfile : public Profile {
  public:
   SegmentationProfile(const ProfileConfig& c, std::shared_ptr<const ExemplarTable> table)
@@ -42,9 +48,16 @@ class SegmentationProfile : public Profile {
         vote_(kWidth, kHeight, kRegionStepQ8, kRegionMinPixels, static_cast<int>(compact_.candidates().size())) {
     if (c.accumulate > 1)
       for (auto& plane : accumulated_) plane.resize(kPixels);
-    // (a label per candidate entry, named by its material: a table's exemplars of one material share a
-    // name; the region vote still counts them apart)
-    for (auto k : compact_.candidates()) names_.push_back(table_->material_of(k));
+    // A label per candidate material: a table's exemplars of one material (cork@0, cork@30) are one
+    // label, so the smoothing majority and the region vote count them together (apart, a region
+    // split between two exemplars of cork could lose to one of another material).
+    for (std::size_t pos = 0; pos < compact_.candidates().size(); ++pos) {
+      const auto& material = table_->material_of(compact_.candidates()[pos]);
+      if (std::find(names_.begin(), names_.end(), material) == names_.end()) names_.push_back(material);
+      const auto id = std::find(names_.begin(), names_.end(), material) - names_.begin();
+      to_material_[pos] = static_cast<std::uint8_t>(id);
+      remap_ = remap_ || to_material_[pos] != pos;
+    }
     for (int b = 0; b < workers_.bands() && config_.smooth > 1; ++b) {
       box_.emplace_back(kWidth, kHeight, config_.smooth);
       majority_.emplace_back(kWidth, kHeight, config_.smooth, static_cast<int>(names_.size()));
@@ -117,8 +130,11 @@ class SegmentationProfile : public Profile {
         f0 = mean_[0].data();
         f1 = mean_[1].data();
       }
+      std::uint8_t* out = (smooth ? unclean_.data() : labels) + at(y0);
       pixels_.classify_range(depth + at(y0), frame_.flags.data() + at(y0), f0 + at(y0), f1 + at(y0), at(y1) - at(y0),
-                             (smooth ? unclean_.data() : labels) + at(y0));
+                             out);
+      if (remap_)  // (candidate entries to materials; kNoLabel stays)
+        for (std::size_t i = 0, n = at(y1) - at(y0); i < n; ++i) out[i] = to_material_[out[i]];
     });
     if (smooth) {
       workers_.run([&](int b) {
@@ -172,7 +188,11 @@ class SegmentationProfile : public Profile {
   // Its means (depth Q8, two features Q16): sized and written only with --accumulate above 1.
   std::array<std::vector<std::int32_t>, 3> accumulated_;
   RegionVote vote_;
-  std::vector<std::string> names_;
+  std::vector<std::string> names_;  // the label map's labels: the candidates' materials
+  // Each candidate entry's label (its position in candidates()) -> its material's in names_; an
+  // identity (remap_ false) for a table of one entry a material.
+  std::array<std::uint8_t, protocol::kNoLabel + 1> to_material_ = identity_labels();
+  bool remap_ = false;
 };
 
 }  // namespace

@@ -60,7 +60,7 @@ class SortingProfile : public Profile {
     // The corrected depth is corrected for this frame's own label.
     const std::int64_t material = c && !frame_matcher_.unknown(*c) ? std::int64_t{c->best().index} : -1;
     RegionMatcher::emit_corrected(d, frame, emit, *table_, [material](std::size_t) { return material; });
-    if (c) frames_.push_back({c->best().index, std::move(d)});
+    if (c) frames_.push_back({table_->material_id(c->best().index), std::move(d)});
     if (--remaining_ > 0) return;
     emit.label(burst_label(frame));
     frames_.clear();
@@ -78,16 +78,18 @@ class SortingProfile : public Profile {
 
  private:
   struct Frame {
-    std::uint32_t label;  // this frame's own Eq. (12) best match
+    // This frame's own Eq. (12) best match, as its material (ExemplarTable::material_id): two
+    // exemplars of one material (cork@0, cork@30) are one vote, not a mixed burst.
+    std::uint32_t material;
     RegionMatcher::Decoded decoded;
   };
 
   protocol::LabelEvent burst_label(const RawFrame& last) {
     protocol::LabelEvent e;
     e.state = "no_target";
-    // The majority of the frames' own labels.
+    // The majority of the frames' own labels (materials).
     std::map<std::uint32_t, std::size_t> votes;
-    for (const auto& f : frames_) ++votes[f.label];
+    for (const auto& f : frames_) ++votes[f.material];
     std::uint32_t majority = 0;
     std::size_t most = 0;
     for (const auto& [label, n] : votes)
@@ -96,10 +98,12 @@ class SortingProfile : public Profile {
       const bool strict = 2 * most > frames_.size();
       matcher_.reset();
       for (const auto& f : frames_)
-        if (!strict || f.label == majority) matcher_.accumulate(f.decoded);
+        if (!strict || f.material == majority) matcher_.accumulate(f.decoded);
       if (const auto c = matcher_.classify()) {
         e = matcher_.label_event(*c, config_.top_k);
-        e.state = matcher_.unknown(*c) ? "unknown" : strict && c->best().index == majority ? "final" : "mixed";
+        e.state = matcher_.unknown(*c)                                         ? "unknown"
+                  : strict && table_->material_id(c->best().index) == majority ? "final"
+                                                                               : "mixed";
         matcher_.learn_sweep();  // (after its label: a sweep teaches the ones after it)
       }
     }
