@@ -363,10 +363,19 @@ def test_the_simulator_rows_against_a_table_of_angles(sim_table: Path) -> None:
     assert [x["method"] for x in rows] == ["eq12", "session", "eq12, table at 10/30 deg", "session, table at 10/30 deg"]
     for x in rows:
         assert x["yaw_deg"] == 30.0 and x["accuracy"] and all(0.0 <= v <= 100.0 for v in x["accuracy"].values())
-    for extra, why in ((["--table-yaws", "10,10"], "must differ"),
-                       (["--table-yaws", "10", "--sweeps-per-session", "2"], "without --sweeps-per-session")):  # fmt: skip
-        bad = CliRunner().invoke(main, [*args, "--session-scales", "0", "--yaws", "30", *extra])
-        assert bad.exit_code != 0 and why in bad.output, bad.output
+    bad = CliRunner().invoke(main, [*args, "--session-scales", "0", "--yaws", "30", "--table-yaws", "10,10"])
+    assert bad.exit_code != 0 and "must differ" in bad.output, bad.output
+    # Sessions of sweeps: the three matchers against the table of angles too, on the same sweeps,
+    # the learner's margin taken against the two others with the same table.
+    r = CliRunner().invoke(main, [*args, "--session-scales", "0", "--yaws", "30", "--table-yaws", "10,30",
+                                  "--sweeps-per-session", "5", "--json"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    angled = [x for x in rows if x["matcher"].endswith(", table at 10/30 deg")]
+    assert {x["matcher"] for x in angled} == {f"{m}, table at 10/30 deg" for m in ("eq12", "session", "learning")}
+    assert len(angled) == len(rows) // 2 and all(x["yaw_deg"] == 30.0 for x in rows)
+    plain = {(x["matcher"], x["stage"]): x["sweeps"] for x in rows if x not in angled}
+    assert all(plain[(x["matcher"].split(",")[0], x["stage"])] == x["sweeps"] for x in angled)  # the same sweeps
     bad = CliRunner().invoke(main, ["evaluate", "--source", "curves", "--session-scales", "1", "--table-yaws", "10"])
     assert bad.exit_code != 0 and "--table-yaws goes with --source sim" in bad.output
 

@@ -166,14 +166,14 @@ def test_on_sessions_of_many_sweeps_the_learner_keeps_up_with_the_better_matcher
     gap = margins(rows)
     # With its prior weights it is near the better of the two at either spread (docs: within 5 points on
     # 5,800 sweeps a scale; 120 a cell here).
-    assert all(gap[(s, None, UNLEARNED)][n] > -8.0 for s in (0.0, 1.0) for n in (10, 30)), gap
+    assert all(gap[(s, None, UNLEARNED, "learning")][n] > -8.0 for s in (0.0, 1.0) for n in (10, 30)), gap
     # Unmoved: Eq. (12) beats the session matcher at 10 bins; from the fifth sweep on the learner
     # is within a few points of it (40 sessions: 80 sweeps a cell), and far above the session matcher.
     assert by[(0.0, "eq12", "5th on")].accuracy[10] > by[(0.0, "session", "5th on")].accuracy[10]
-    assert gap[(0.0, None, "5th on")][10] > -5.0
+    assert gap[(0.0, None, "5th on", "learning")][10] > -5.0
     # Moved by the calibration's spread: Eq. (12) fails, the learner is with the session matcher.
     assert by[(1.0, "eq12", "5th on")].accuracy[30] < 60.0
-    assert gap[(1.0, None, "5th on")][30] > -5.0
+    assert gap[(1.0, None, "5th on", "learning")][30] > -5.0
     for r in rows:
         assert sum(r.sweeps.values()) > 0 and all(0.0 <= a <= 100.0 for a in r.accuracy.values())
 
@@ -233,7 +233,7 @@ def test_sessions_of_rendered_sweeps_hold_their_angle_and_spread(sim_table: Path
     assert {r.yaw_deg for r in rows} == {0.0, 20.0} and {r.matcher for r in rows} == set(MATCHERS)
     assert all(sum(r.sweeps.values()) == 4 * 5 for r in rows if r.stage == UNLEARNED)
     gap = margins(rows)
-    assert set(gap) == {(0.0, y, s) for y in (0.0, 20.0) for s in ("1st", "2nd-4th", "5th on", UNLEARNED)}
+    assert set(gap) == {(0.0, y, s, "learning") for y in (0.0, 20.0) for s in ("1st", "2nd-4th", "5th on", UNLEARNED)}
     assert "| 0 | 20 deg | learning | 5th on |" in format_markdown(rows)
 
 

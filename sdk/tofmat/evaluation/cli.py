@@ -79,7 +79,8 @@ from ..report.cli import resolve_table, table_option
     help="With --source sim --session-scales: also Eq. (12) and the session matcher against a table of the same "
     "materials recorded by the simulated camera at each of these angles, degrees, comma-separated (e.g. "
     "0,10,20,30), each angle's exemplar a candidate of its own: the label is the best exemplar's material, its "
-    "confidence the sum of that material's exemplars' probabilities.",
+    "confidence the sum of that material's exemplars' probabilities. With --sweeps-per-session, the learning "
+    "matcher too, on the same sessions.",
 )
 @click.option(
     "--sweeps-per-session",
@@ -122,8 +123,8 @@ def evaluate(
         raise UserError("--sweeps-per-session goes with --session-scales (e.g. --session-scales 0,0.25,0.5,1,2)")
     if yaws is not None and (session_scales is None or source != "sim"):
         raise UserError("--yaws goes with --source sim --session-scales")
-    if table_yaws is not None and (session_scales is None or source != "sim" or sweeps_per_session is not None):
-        raise UserError("--table-yaws goes with --source sim --session-scales, without --sweeps-per-session")
+    if table_yaws is not None and (session_scales is None or source != "sim"):
+        raise UserError("--table-yaws goes with --source sim --session-scales")
     if session_scales is not None and source == "sim":
         return _evaluate_sim_scales(
             session_scales,
@@ -329,7 +330,13 @@ def _evaluate_sim_scales(
                 text = single.format_markdown(scale_rows)
             else:
                 sequence_rows = sequences.evaluate_sim_sequences(
-                    table, values, angles, sim_sessions * len(table.materials), sweeps_per_session, progress=progress
+                    table,
+                    values,
+                    angles,
+                    sim_sessions * len(table.materials),
+                    sweeps_per_session,
+                    progress=progress,
+                    table_yaws=table_yaws,
                 )
                 rows = sequence_rows
                 text = sequences.format_markdown(sequence_rows)

@@ -19,7 +19,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from .. import Classifier, ExemplarTable
+from .. import ClassificationResult, Classifier, ExemplarTable
 from .._progress import Progress
 from ..tools.sweeps import window_starts
 from .run import LENGTHS, SPLIT_SEEDS, calibrated_json
@@ -42,7 +42,7 @@ MAX_TRIES = 50
 @dataclass(frozen=True)
 class SequenceRow:
     scale: float  # of the calibration's session spreads
-    matcher: str  # one of MATCHERS
+    matcher: str  # one of MATCHERS (", table at 0/10/20/30 deg" after it: against a table of angles)
     stage: str  # one of STAGES' names: which sweeps of their session
     accuracy: dict[int, float]  # % right by sweep length
     confidently_wrong: dict[int, float]  # % of labels wrong with confidence >= 0.9, by sweep length
@@ -130,36 +130,43 @@ def draw_sequences(
     return out
 
 
-def _label(sweeps: list[_Sweep], table: ExemplarTable) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Each matcher's (right, confident) per sweep; the learning one session by session, learning
-    from each sweep after it labels it."""
+def _right(results: list[ClassificationResult], sweeps: list[_Sweep], owner: np.ndarray | None) -> np.ndarray:
+    """Whether each result names its sweep's material: its entry's, ``owner`` mapping a table of
+    angles' entries to the materials (angle_tables.record_angle_table)."""
+    index = np.array([r.index for r in results], dtype=np.int64)
+    if owner is not None:
+        index = np.where(index >= 0, owner[np.clip(index, 0, None)], -1)
+    right: np.ndarray = index == np.array([s.truth for s in sweeps], dtype=np.int64)
+    return right
+
+
+def _label(
+    sweeps: list[_Sweep], table: ExemplarTable, owner: np.ndarray | None = None
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Each matcher's (right, confident) per sweep against ``table`` (with ``owner``: a table of
+    angles, right when the best exemplar is of the sweep's material); the learning one session by
+    session, learning from each sweep after it labels it."""
     eq12 = Classifier(table, method="eq12")
     session = Classifier(table, method="session")
     learning = Classifier(table, method="session", learning=True)
     out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     for name, c in (("eq12", eq12), ("session", session)):
         results = c.classify_batch(np.stack([s.query for s in sweeps]))
-        out[name] = (
-            np.array([r.index == s.truth for r, s in zip(results, sweeps, strict=True)]),
-            np.array([r.confidence >= CONFIDENT for r in results]),
-        )
-    right, sure = [], []
+        out[name] = (_right(results, sweeps, owner), np.array([r.confidence >= CONFIDENT for r in results]))
+    learned, sure = [], []
     current = -1
     for s in sweeps:
         if s.session != current:
             learning.reset_session()
             current = s.session
         r = learning.classify(s.query)
-        right.append(r.index == s.truth)
+        learned.append(r)
         sure.append(r.confidence >= CONFIDENT)
         learning.learn(s.query)
-    out["learning"] = (np.array(right), np.array(sure))
+    out["learning"] = (_right(learned, sweeps, owner), np.array(sure))
     learning.reset_session()
     results = learning.classify_batch(np.stack([s.query for s in sweeps]))  # (classify does not learn)
-    out[UNLEARNED] = (
-        np.array([r.index == s.truth for r, s in zip(results, sweeps, strict=True)]),
-        np.array([r.confidence >= CONFIDENT for r in results]),
-    )
+    out[UNLEARNED] = (_right(results, sweeps, owner), np.array([r.confidence >= CONFIDENT for r in results]))
     return out
 
 
@@ -191,16 +198,23 @@ def evaluate_sim_sequences(
     sweeps_per_session: int = 10,
     lengths: tuple[int, ...] = LENGTHS,
     progress: Progress | None = None,
+    table_yaws: tuple[float, ...] = (),
 ) -> list[SequenceRow]:
     """The same on sweeps the simulated camera renders against ``table`` (its own, recorded at one
     angle: ``tofmat sim table``): sessions drawn with the simulator's calibration spreads times each
     scale, every target of a session at each of ``yaws`` degrees in turn (the same seeds in every
     cell: only the spread and the angle change). Rendered frame by frame: about 0.6 s a session of
-    ten sweeps on one core."""
+    ten sweeps on one core. With ``table_yaws``, the three matchers also label the same sweeps
+    against a table of ``table``'s materials at each of those angles (angle_tables.record_angle_table,
+    ``table``'s calibration carried to every exemplar), in rows of their own ("learning, table at
+    0/10/20/30 deg")."""
+    from .angle_tables import record_angle_table
     from .sim_sessions import SimSessions, sim_session_model
 
     check_scales(scales)
     base = sim_session_model(calibrated_json()[0])
+    angles = record_angle_table(list(table.materials), table_yaws, table, progress) if table_yaws else None
+    tag = "/".join(f"{y:g}" for y in table_yaws)
     rows: list[SequenceRow] = []
     cells = [(s, y) for s in scales for y in yaws]
     for i, (scale, yaw) in enumerate(cells):
@@ -213,15 +227,24 @@ def evaluate_sim_sequences(
 
         sweeps = draw_sequences(_AtAngle(sim, yaw), n_sessions, sweeps_per_session, lengths, SPLIT_SEEDS["test"], step)
         rows.extend(_rows(sweeps, table, scale, sweeps_per_session, yaw))
+        if angles is not None:
+            rows.extend(_rows(sweeps, angles[0], scale, sweeps_per_session, yaw, angles[1], f", table at {tag} deg"))
     return rows
 
 
 def _rows(
-    sweeps: list[_Sweep], table: ExemplarTable, scale: float, sweeps_per_session: int, yaw: float | None
+    sweeps: list[_Sweep],
+    table: ExemplarTable,
+    scale: float,
+    sweeps_per_session: int,
+    yaw: float | None,
+    owner: np.ndarray | None = None,
+    suffix: str = "",
 ) -> list[SequenceRow]:
-    """Every matcher's rows of one cell (a scale, and the simulator's angle): by stage, and unlearned."""
+    """Every matcher's rows of one cell (a scale, and the simulator's angle): by stage, and unlearned;
+    each matcher named with ``suffix`` (the rows against a table of angles)."""
     rows: list[SequenceRow] = []
-    labelled = _label(sweeps, table)
+    labelled = _label(sweeps, table, owner)
     position = np.array([s.position for s in sweeps])
     length = np.array([s.length for s in sweeps])
     for name in MATCHERS:
@@ -229,27 +252,30 @@ def _rows(
         for lo, hi, stage in STAGES:
             in_stage = (position >= lo) & (position < (hi if hi is not None else sweeps_per_session))
             if in_stage.any():
-                rows.append(SequenceRow(scale, name, stage, *by_length(right, sure, length, in_stage), yaw_deg=yaw))
+                rows.append(
+                    SequenceRow(scale, name + suffix, stage, *by_length(right, sure, length, in_stage), yaw_deg=yaw)
+                )
         if sweeps_per_session > 1:  # (with one sweep a session, "1st" is every sweep already)
             right, sure = labelled[UNLEARNED if name == "learning" else name]
-            rows.append(SequenceRow(scale, name, UNLEARNED, *by_length(right, sure, length), yaw_deg=yaw))
+            rows.append(SequenceRow(scale, name + suffix, UNLEARNED, *by_length(right, sure, length), yaw_deg=yaw))
     return rows
 
 
-def margins(rows: list[SequenceRow]) -> dict[tuple[float, float | None, str], dict[int, float]]:
+def margins(rows: list[SequenceRow]) -> dict[tuple[float, float | None, str, str], dict[int, float]]:
     """The learning matcher's accuracy less the better of Eq. (12) and the session matcher on the
-    same sweeps, per (scale, angle, stage) and sweep length, points (the angle None on the real
-    curves)."""
-    out: dict[tuple[float, float | None, str], dict[int, float]] = {}
+    same sweeps (against the same table), per (scale, angle, stage, matcher) and sweep length, points
+    (the angle None on the real curves)."""
+    out: dict[tuple[float, float | None, str, str], dict[int, float]] = {}
     by = {(r.scale, r.yaw_deg, r.matcher, r.stage): r for r in rows}
     for r in rows:
-        if r.matcher != "learning":
+        if not r.matcher.startswith("learning"):
             continue
+        suffix = r.matcher[len("learning") :]
         cells = {}
         for n, a in r.accuracy.items():
-            better = max(by[(r.scale, r.yaw_deg, m, r.stage)].accuracy[n] for m in ("eq12", "session"))
+            better = max(by[(r.scale, r.yaw_deg, m + suffix, r.stage)].accuracy[n] for m in ("eq12", "session"))
             cells[n] = a - better
-        out[(r.scale, r.yaw_deg, r.stage)] = cells
+        out[(r.scale, r.yaw_deg, r.stage, r.matcher)] = cells
     return out
 
 
@@ -270,8 +296,8 @@ def format_markdown(rows: list[SequenceRow]) -> str:
                 cells.append("")
                 continue
             cell = f"{r.accuracy[n]:.1f} %"
-            if r.matcher == "learning":
-                cell += f" ({gap[(r.scale, r.yaw_deg, r.stage)][n]:+.1f})"
+            if r.matcher.startswith("learning"):
+                cell += f" ({gap[(r.scale, r.yaw_deg, r.stage, r.matcher)][n]:+.1f})"
             cells.append(cell)
         worst = max(r.confidently_wrong, key=lambda n: r.confidently_wrong[n])
         where = f"{r.yaw_deg:g} deg | " if angle else ""
