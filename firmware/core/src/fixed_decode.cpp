@@ -256,6 +256,14 @@ FixedDecodedFrame decode_frame_fixed(const std::int16_t* raw, const FixedDecodeT
 
 FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& t,
                                       const PixelRegion& r, const DecodeOptions& options, FixedKernel kernel) {
+  FixedDecodedFrame out;
+  decode_region_fixed(raw, width, height, t, r, out, options, kernel);
+  return out;
+}
+
+void decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& t,
+                         const PixelRegion& r, FixedDecodedFrame& out, const DecodeOptions& options,
+                         FixedKernel kernel) {
   if (width < 1 || height < 1) throw std::invalid_argument("frame size must be positive");
   if (r.x0 < 0 || r.y0 < 0 || r.x1 > width || r.y1 > height || r.x0 >= r.x1 || r.y0 >= r.y1) {
     throw std::invalid_argument("decode region is empty or outside the frame");
@@ -263,9 +271,9 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
   const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height);
   if (t.pixels != n) throw std::invalid_argument("decode tables are for a frame of another size");
   const std::size_t rw = static_cast<std::size_t>(r.x1 - r.x0);
-  FixedDecodedFrame out;
   size_fixed_frame(out, rw * static_cast<std::size_t>(r.y1 - r.y0));
-  for (int y = r.y0; y < r.y1; ++y) {  // a row of the region is contiguous in every plane
+  std::fill(out.flags.begin(), out.flags.end(), std::uint8_t{0});  // (the kernels OR saturation into them)
+  for (int y = r.y0; y < r.y1; ++y) {                              // a row of the region is contiguous in every plane
     const std::size_t src =
         static_cast<std::size_t>(y) * static_cast<std::size_t>(width) + static_cast<std::size_t>(r.x0);
     const std::size_t dst = static_cast<std::size_t>(y - r.y0) * rw;
@@ -276,7 +284,6 @@ FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int he
     }
   }
   finish_pixels(kernel, planes_of(out, 0), out.pixels, fixed_thresholds(options));
-  return out;
 }
 
 }  // namespace tofmat

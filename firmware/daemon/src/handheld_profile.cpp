@@ -22,7 +22,8 @@ class HandheldProfile : public Profile {
   std::optional<PixelRegion> input_region() const override { return config_.roi; }
 
   void process(const RawFrame& frame, const Emitter& emit) override {
-    const auto d = matcher_.decode(frame, config_.roi);
+    matcher_.decode(frame, config_.roi, decoded_);
+    const RegionMatcher::Decoded& d = decoded_;
     RegionMatcher::emit_depths(d, frame, emit);
     // The corrected depth is corrected for this frame's label (none: no target, or unknown).
     const std::int64_t material = label(d, frame, emit);
@@ -110,6 +111,7 @@ class HandheldProfile : public Profile {
   ProfileConfig config_;
   std::shared_ptr<const ExemplarTable> table_;
   RegionMatcher matcher_;
+  RegionMatcher::Decoded decoded_;  // this frame's ROI (its buffers reused frame after frame)
   bool tracking_ = false;
   static constexpr std::uint64_t kOutOfRangeNs = 1'000'000'000ull;
   bool was_out_of_range_ = false;       // the last frame's target was out of the table's range

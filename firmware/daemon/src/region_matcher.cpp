@@ -67,13 +67,21 @@ RegionMatcher RegionMatcher::twin() const {
 
 RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelRegion& region) const {
   Decoded d;
+  decode(frame, region, d);
+  return d;
+}
+
+void RegionMatcher::decode(const RawFrame& frame, const PixelRegion& region, Decoded& d) const {
   d.region = region;
   d.median_mm = std::numeric_limits<double>::quiet_NaN();
   if (backend_ == Backend::kFixed) {
-    auto f = decode_region_fixed(frame.raw.data(), kWidth, kHeight, frame.calibration->fixed_tables, region);
+    if (!std::holds_alternative<FixedDecodedFrame>(d.frame)) d.frame = FixedDecodedFrame{};
+    auto& f = std::get<FixedDecodedFrame>(d.frame);
+    decode_region_fixed(frame.raw.data(), kWidth, kHeight, frame.calibration->fixed_tables, region, f);
     d.pixels = f.pixels;
     // The median in Q8 mm, converted once (exact: the order of the integers is that of the depths).
-    std::vector<std::int32_t> depths(f.pixels);
+    std::vector<std::int32_t>& depths = d.depths_q8;
+    depths.resize(f.pixels);
     std::size_t n = 0;
     for (std::size_t i = 0; i < f.pixels; ++i) {
       depths[n] = f.combined_q8[i];
@@ -82,7 +90,6 @@ RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelR
     depths.resize(n);
     d.valid = n;
     if (n > 0) d.median_mm = median_of(depths) / 256.0;
-    d.frame = std::move(f);
   } else {
     auto f = decode_region(frame.raw.data(), kWidth, kHeight, frame.calibration->float_tables, region);
     d.pixels = f.pixels;
@@ -94,7 +101,6 @@ RegionMatcher::Decoded RegionMatcher::decode(const RawFrame& frame, const PixelR
     if (!depths.empty()) d.median_mm = median_of(depths);
     d.frame = std::move(f);
   }
-  return d;
 }
 
 void RegionMatcher::accumulate(const Decoded& d) {

@@ -61,6 +61,11 @@ void decode_frame_fixed(const std::int16_t* raw, const FixedDecodeTables& tables
 FixedDecodedFrame decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& tables,
                                       const PixelRegion& region, const DecodeOptions& options = {},
                                       FixedKernel kernel = FixedKernel::kBest);
+// The same into `out`, whose buffers are reused (a handheld ROI decoded every
+// frame: its planes are not allocated again).
+void decode_region_fixed(const std::int16_t* raw, int width, int height, const FixedDecodeTables& tables,
+                         const PixelRegion& region, FixedDecodedFrame& out, const DecodeOptions& options = {},
+                         FixedKernel kernel = FixedKernel::kBest);
 
 // The phase/amplitude kernels over n pixels of one group: samples m0, m1, m2
 // (the group's three sub-images), p0 in Q32 turns; writes phase (Q32 turns),

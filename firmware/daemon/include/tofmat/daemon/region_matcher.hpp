@@ -4,10 +4,12 @@
 // fixed-point path (the default) or the float reference: what the handheld
 // and sorting profiles share.
 #pragma once
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <optional>
 #include <variant>
+#include <vector>
 
 #include "tofmat/core/classifier.hpp"
 #include "tofmat/core/confidence.hpp"
@@ -41,9 +43,13 @@ class RegionMatcher {
     std::variant<DecodedFrame, FixedDecodedFrame> frame;
     PixelRegion region;
     std::size_t pixels = 0, valid = 0;
-    double median_mm = 0.0;  // combined depth of the valid pixels (NaN if none)
+    double median_mm = 0.0;               // combined depth of the valid pixels (NaN if none)
+    std::vector<std::int32_t> depths_q8;  // (the median's work, kept with the frame's buffers)
   };
   Decoded decode(const RawFrame& frame, const PixelRegion& region) const;
+  // The same into `into`, reusing its buffers on the fixed-point backend (a
+  // profile that decodes its ROI every frame and keeps no frame past it).
+  void decode(const RawFrame& frame, const PixelRegion& region, Decoded& into) const;
   // Adds the region's surface (its valid pixels near the median depth) as one
   // observation at its mean depth (FixedSurfaceMean says why not pixel by pixel).
   void accumulate(const Decoded& d);
