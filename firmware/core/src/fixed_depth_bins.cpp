@@ -109,29 +109,62 @@ FixedSurfaceMean surface_mean(const FixedDecodedFrame& f, std::int32_t centre_q8
     const std::int32_t z = f.combined_q8[i];
     return f.flags[i] == 0 && z != kFixedInvalid && z >= lo && z <= hi;
   };
-  // The reference features: the counted pixel nearest the centre's depth.
+  const std::int32_t* const z = f.combined_q8.data();
+  const std::uint8_t* const flags = f.flags.data();
+  const std::int32_t* const f0 = f.features_q16[0].data();
+  const std::int32_t* const f1 = f.features_q16[1].data();
+  // The reference features: the counted pixel nearest the centre's depth (the
+  // first of the nearest). The profiles' centre is the region's median, a
+  // valid pixel's depth: the first pixel at it is that one, found without
+  // measuring every gap (blocks of 16 tested branch-free, then the block).
   std::size_t ref = n;
-  std::int64_t nearest = std::numeric_limits<std::int64_t>::max();
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::int64_t gap = std::llabs(static_cast<std::int64_t>(f.combined_q8[i]) - centre_q8);
-    if (counts(i) && gap < nearest) {
-      nearest = gap;
-      ref = i;
+  if (centre_q8 != kFixedInvalid) {
+    constexpr std::size_t kBlock = 16;
+    std::size_t i = 0;
+    for (; i + kBlock <= n && ref == n; i += kBlock) {
+      unsigned hit = 0;
+      for (std::size_t j = i; j < i + kBlock; ++j) hit |= static_cast<unsigned>((flags[j] == 0) & (z[j] == centre_q8));
+      if (hit == 0) continue;
+      for (std::size_t j = i; j < i + kBlock; ++j) {
+        if (flags[j] == 0 && z[j] == centre_q8) {
+          ref = j;
+          break;
+        }
+      }
+    }
+    for (; i < n && ref == n; ++i)
+      if (flags[i] == 0 && z[i] == centre_q8) ref = i;
+  }
+  if (ref == n) {
+    std::int64_t nearest = std::numeric_limits<std::int64_t>::max();
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::int64_t gap = std::llabs(static_cast<std::int64_t>(z[i]) - centre_q8);
+      if (counts(i) && gap < nearest) {
+        nearest = gap;
+        ref = i;
+      }
     }
   }
   if (ref == n) return s;
   constexpr std::int64_t kSameWrapQ16 = static_cast<std::int64_t>(kSurfaceSameWrapMm) * 65536;
-  const std::int64_t r0 = f.features_q16[0][ref], r1 = f.features_q16[1][ref];
+  const std::int64_t r0 = f0[ref], r1 = f1[ref];
+  // (branch-free: the compiler keeps it in vector lanes)
   std::int64_t depth_sum = 0;  // |depth| < 2^31 each, at most 2^32 pixels: below 2^63
+  std::int64_t sum0 = 0, sum1 = 0;
+  std::uint64_t pixels = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    if (!counts(i) || std::llabs(f.features_q16[0][i] - r0) > kSameWrapQ16 ||
-        std::llabs(f.features_q16[1][i] - r1) > kSameWrapQ16)
-      continue;
-    depth_sum += f.combined_q8[i];
-    s.sum_q16[0] += f.features_q16[0][i];
-    s.sum_q16[1] += f.features_q16[1][i];
-    ++s.pixels;
+    const std::int64_t zi = z[i], d0 = f0[i] - r0, d1 = f1[i] - r1;
+    const bool in = (flags[i] == 0) & (zi != kFixedInvalid) & (zi >= lo) & (zi <= hi) & (d0 >= -kSameWrapQ16) &
+                    (d0 <= kSameWrapQ16) & (d1 >= -kSameWrapQ16) & (d1 <= kSameWrapQ16);
+    const std::int64_t keep = -static_cast<std::int64_t>(in);  // all ones or zero
+    depth_sum += zi & keep;
+    sum0 += f0[i] & keep;
+    sum1 += f1[i] & keep;
+    pixels += static_cast<std::uint64_t>(in);
   }
+  s.sum_q16[0] = sum0;
+  s.sum_q16[1] = sum1;
+  s.pixels = pixels;
   // Floor division (the mean lies between the pixels' depths: it fits int32).
   const auto count = static_cast<std::int64_t>(s.pixels);
   std::int64_t q = depth_sum / count;
