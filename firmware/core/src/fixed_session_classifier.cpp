@@ -169,6 +169,10 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
   for (std::uint32_t r = 0; r < rows; ++r) {
     QueryRow& qr = qrows[r];
     const std::size_t lo = p.first[r] * kCompactBlock, hi = p.last[r] * kCompactBlock;
+    const std::size_t span = hi > lo ? hi - lo : 0;  // (a row the query leaves empty has last < first)
+    qr.bins.reserve(span);                           // (one allocation each, not one per doubling)
+    qr.at.reserve(span);
+    qr.q.reserve(span);
     for (std::size_t b = lo; b < hi && b < table.n_bins(); ++b) {
       const std::size_t i = static_cast<std::size_t>(r) * pb + b;
       if (!has(p.mask.data(), i)) continue;
@@ -197,6 +201,8 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
     if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
   }
   std::vector<double> total(n_priors), energy(n_priors);  // per prior, over the candidate's rows
+  for (std::size_t j = 0; j < n_priors; ++j)
+    if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
     const std::uint32_t index = ct.candidates()[c];
     const std::int16_t* values = ct.values(c);
@@ -300,6 +306,8 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
             const bool last = !huber || it + 1 == prior.iterations;
             sums = pass_(x, k, B.data(), noise.threshold, !last);
             if (last) break;
+            // No outlier in the first pass: the next system is this one (all weights 1), the fit the same.
+            if (it == 0 && sums.n_beyond == 0) break;
             session_detail::NormalSums next = all;
             for (std::size_t s = 0; s < K; ++s) {
               next.h[s] -= sums.shortfall.h[s];
