@@ -58,6 +58,67 @@ struct QueryRow {
   Gram gram{};
 };
 
+// One row's nuisance fit of a candidate under one prior: the reweighting
+// passes, and what the score takes from the last (its sums, the fit's penalty
+// and log det P). Instantiated for each count of terms, so that the K x K
+// work is unrolled (K = the basis's terms, 1..3).
+struct RowFit {
+  session_detail::SessionPassSums sums;
+  double penalty = 0.0, log_det_p = 0.0;
+};
+
+template <int K>
+RowFit fit_row(const SessionElements& x, const session_detail::NormalSums& all, const std::array<double, kMaxTerms>& pv,
+               double v, int iterations, bool huber, std::int32_t threshold, session_detail::SessionPassFn pass) {
+  RowFit out;
+  session_detail::NormalSums normal = all;
+  std::array<double, kMaxTerms> beta{}, diagonal{};
+  std::array<std::int32_t, kMaxTerms> B{};
+  for (int it = 0; it < iterations; ++it) {
+    std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
+    std::array<double, kMaxTerms> rhs{};
+    for (int s = 0; s < K; ++s) {
+      rhs[s] = static_cast<double>(normal.h[s]) * kWeightBasisUnit / v;
+      for (int t = 0; t <= s; ++t) {
+        const double g = static_cast<double>(normal.G[s][t]) * kWeightBasisUnit2 / v;
+        P[s][t] = g;
+        P[t][s] = g;
+      }
+      P[s][s] += 1.0 / pv[s];
+    }
+    session_detail::cholesky_factor_solve(P, K, rhs, beta, diagonal);
+    for (int s = 0; s < K; ++s) B[s] = static_cast<std::int32_t>(clamp_round(beta[s] * kFitScale, kMaxCoefficient));
+    // The residuals of this fit give the data term and the next pass's weights.
+    const bool last = !huber || it + 1 == iterations;
+    out.sums = pass(x, K, B.data(), threshold, !last);
+    if (last) break;
+    // No outlier in the first pass: the next system is this one (all weights 1), the fit the same.
+    if (it == 0 && out.sums.n_beyond == 0) break;
+    session_detail::NormalSums next = all;
+    for (int s = 0; s < K; ++s) {
+      next.h[s] -= out.sums.shortfall.h[s];
+      for (int t = 0; t <= s; ++t) next.G[s][t] -= out.sums.shortfall.G[s][t];
+    }
+    if (next == normal) break;  // the same system again would give the same fit
+    normal = next;
+  }
+  out.log_det_p = session_detail::cholesky_log_det(diagonal, K);
+  for (int s = 0; s < K; ++s) out.penalty += 0.5 * beta[s] * beta[s] / pv[s];
+  return out;
+}
+
+using RowFitFn = RowFit (*)(const SessionElements&, const session_detail::NormalSums&,
+                            const std::array<double, kMaxTerms>&, double, int, bool, std::int32_t,
+                            session_detail::SessionPassFn);
+
+RowFitFn row_fit(int k) {
+  switch (k) {
+    case 1: return fit_row<1>;
+    case 2: return fit_row<2>;
+    default: return fit_row<3>;
+  }
+}
+
 }  // namespace
 
 FixedSessionClassifier::FixedSessionClassifier(const std::shared_ptr<const ExemplarTable>& table, SessionPrior prior,
@@ -163,6 +224,7 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
   const bool vector = kernel_ == FixedKernel::kBest;  // NEON on aarch64; the scalar kernels elsewhere
   const session_detail::SessionPassFn pass_ = session_detail::session_pass(vector);
   const session_detail::SessionMomentsFn moments_ = session_detail::session_moments(vector);
+  const RowFitFn fit_ = row_fit(k);  // (used only for a prior with terms: k >= 1)
 
   // What does not depend on the candidate: per row the query's bins, their basis and Gram matrix.
   std::vector<QueryRow> qrows(rows);
@@ -283,41 +345,10 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
         SessionPassSums sums;
         double penalty = 0.0, logdet = 0.0;
         if (ps.terms > 0) {
-          session_detail::NormalSums normal = all;
-          const auto& pv = ps.var[r];
-          std::array<double, kMaxTerms> beta{}, diagonal{};
-          std::array<std::int32_t, kMaxTerms> B{};
-          for (int it = 0; it < prior.iterations; ++it) {
-            std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
-            std::array<double, kMaxTerms> rhs{};
-            for (std::size_t s = 0; s < K; ++s) {
-              rhs[s] = static_cast<double>(normal.h[s]) * kWeightBasisUnit / v;
-              for (std::size_t t = 0; t <= s; ++t) {
-                const double g = static_cast<double>(normal.G[s][t]) * kWeightBasisUnit2 / v;
-                P[s][t] = g;
-                P[t][s] = g;
-              }
-              P[s][s] += 1.0 / pv[s];
-            }
-            session_detail::cholesky_factor_solve(P, k, rhs, beta, diagonal);
-            for (std::size_t s = 0; s < K; ++s)
-              B[s] = static_cast<std::int32_t>(clamp_round(beta[s] * kFitScale, kMaxCoefficient));
-            // The residuals of this fit give the data term and the next pass's weights.
-            const bool last = !huber || it + 1 == prior.iterations;
-            sums = pass_(x, k, B.data(), noise.threshold, !last);
-            if (last) break;
-            // No outlier in the first pass: the next system is this one (all weights 1), the fit the same.
-            if (it == 0 && sums.n_beyond == 0) break;
-            session_detail::NormalSums next = all;
-            for (std::size_t s = 0; s < K; ++s) {
-              next.h[s] -= sums.shortfall.h[s];
-              for (std::size_t t = 0; t <= s; ++t) next.G[s][t] -= sums.shortfall.G[s][t];
-            }
-            if (next == normal) break;  // the same system again would give the same fit
-            normal = next;
-          }
-          logdet = session_detail::cholesky_log_det(diagonal, k) + ps.log_det[r];
-          for (std::size_t s = 0; s < K; ++s) penalty += 0.5 * beta[s] * beta[s] / pv[s];
+          const RowFit fit = fit_(x, all, ps.var[r], v, prior.iterations, huber, noise.threshold, pass_);
+          sums = fit.sums;
+          penalty = fit.penalty;
+          logdet = fit.log_det_p + ps.log_det[r];
         } else {
           const std::int32_t none[kMaxTerms] = {};
           sums = pass_(x, 0, none, noise.threshold, false);
