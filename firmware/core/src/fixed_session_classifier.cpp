@@ -56,6 +56,21 @@ struct QueryRow {
   std::vector<std::int32_t> q;                         // the quantised query there
   std::array<std::vector<std::int32_t>, kMaxTerms> a;
   Gram gram{};
+  void clear() {  // (keeps the vectors' storage)
+    bins.clear();
+    at.clear();
+    q.clear();
+    for (auto& v : f) v.clear();
+    for (auto& v : a) v.clear();
+    gram = Gram{};
+  }
+};
+
+// score()'s buffers, one set a thread.
+struct ScoreScratch {
+  std::vector<QueryRow> rows;
+  std::vector<std::int32_t> e;
+  std::array<std::vector<std::int32_t>, kMaxTerms> a_held, f_held;
 };
 
 // One row's nuisance fit of a candidate under one prior: the reweighting
@@ -226,10 +241,15 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
   const session_detail::SessionMomentsFn moments_ = session_detail::session_moments(vector);
   const RowFitFn fit_ = row_fit(k);  // (used only for a prior with terms: k >= 1)
 
+  // This thread's buffers, kept from query to query (a handheld frame is one
+  // query or two: no allocation once they have grown).
+  thread_local ScoreScratch scratch;
   // What does not depend on the candidate: per row the query's bins, their basis and Gram matrix.
-  std::vector<QueryRow> qrows(rows);
+  std::vector<QueryRow>& qrows = scratch.rows;
+  qrows.resize(rows);
   for (std::uint32_t r = 0; r < rows; ++r) {
     QueryRow& qr = qrows[r];
+    qr.clear();
     const std::size_t lo = p.first[r] * kCompactBlock, hi = p.last[r] * kCompactBlock;
     const std::size_t span = hi > lo ? hi - lo : 0;  // (a row the query leaves empty has last < first)
     qr.bins.reserve(span);                           // (one allocation each, not one per doubling)
@@ -255,9 +275,9 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
         for (std::size_t t = 0; t <= s; ++t) qr.gram[s][t] += std::int64_t{qr.a[s][j]} * qr.a[t][j];
   }
 
-  std::vector<std::int32_t> e;  // query - candidate, steps: |e| <= 65534
+  std::vector<std::int32_t>& e = scratch.e;  // query - candidate, steps: |e| <= 65534
   // The bases of the compared bins when some are missing.
-  std::array<std::vector<std::int32_t>, kMaxTerms> a_held, f_held;
+  std::array<std::vector<std::int32_t>, kMaxTerms>&a_held = scratch.a_held, &f_held = scratch.f_held;
   for (std::size_t j = 0; j < n_priors; ++j) {
     out[j].ranking.clear();
     if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
