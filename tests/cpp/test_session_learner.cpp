@@ -271,6 +271,48 @@ TEST(SessionLearner, AnUnmovedSessionSettlesOnScaleZeroAndTellsTwinsApart) {
   }
 }
 
+// A material's exemplars share its weight: a table holding a three times (three
+// identical exemplars a@1, a@2, a@3) learns what the table holding it once
+// learns from the same sweeps, weights and offsets alike; counted per entry,
+// a's three copies would weigh it three times in every sweep's evidence.
+TEST(SessionLearner, AMaterialWeighsTheSameHoweverManyExemplarsItHas) {
+  Twins t;
+  const std::uint32_t bins = t.table->n_bins();
+  std::vector<float> v;
+  for (int copy = 0; copy < 3; ++copy)
+    v.insert(v.end(), t.table->material_values(0), t.table->material_values(0) + 2 * bins);
+  v.insert(v.end(), t.table->material_values(1), t.table->material_values(1) + 2 * bins);
+  const auto uneven = std::make_shared<const ExemplarTable>(std::vector<std::string>{"a@1", "a@2", "a@3", "b"},
+                                                            std::vector<RowSpec>{{16, 120}, {80, 120}},
+                                                            BinSpec{600.0, 10.0, bins}, std::move(v));
+  for (bool fixed : {false, true}) {
+    auto once = SessionLearner::make(t.table, twins_prior(), fixed);
+    auto thrice = SessionLearner::make(uneven, twins_prior(), fixed);
+    std::mt19937 rng(5);
+    for (int i = 0; i < 6; ++i) {
+      // a session that moved row 0 by 0.6 mm: half way to b, where the scales' evidence differs
+      const auto q = t.sweep(i % 3 == 2 ? 1 : 0, 0.6, rng);
+      const auto s1 = once->classify(q.data(), q.size(), true);
+      const auto s3 = thrice->classify(q.data(), q.size(), true);
+      ASSERT_EQ(s1.evidence.size(), s3.evidence.size());
+      for (std::size_t k = 0; k + 1 < s1.evidence.size(); ++k)  // (differences: a common factor is no evidence)
+        EXPECT_NEAR(s3.evidence[k] - s3.evidence.back(), s1.evidence[k] - s1.evidence.back(), 1e-9) << k;
+      once->learn(s1);
+      thrice->learn(s3);
+    }
+    const auto a = once->state(), b = thrice->state();
+    for (std::size_t k = 0; k < a.weights.size(); ++k) EXPECT_NEAR(b.weights[k], a.weights[k], 1e-9) << k;
+    ASSERT_EQ(a.offsets_mm.size(), b.offsets_mm.size());
+    for (std::size_t r = 0; r < a.offsets_mm.size(); ++r) EXPECT_NEAR(b.offsets_mm[r], a.offsets_mm[r], 1e-9) << r;
+    EXPECT_GT(std::abs(a.offsets_mm[0]), 0.05) << "the sweeps moved the offsets (else the test shows nothing)";
+  }
+  // A ranked index without a material is refused.
+  SessionLearner bad(two_scales(),
+                     std::vector<SessionLearner::Scorer>{fixed_scores({1, 2, 3}), fixed_scores({1, 2, 3})}, 1, nullptr,
+                     {0, 0});
+  EXPECT_THROW(bad.classify(kQuery, 1), std::invalid_argument);
+}
+
 TEST(SessionLearner, AMovedSessionSettlesOnAWideScaleWithoutLearningItsOffsets) {
   Twins t;
   SessionLearning weights_only;

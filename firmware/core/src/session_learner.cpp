@@ -91,16 +91,29 @@ SessionLearner::ScaledScorer each_scale(const SessionLearning& settings, std::ve
   };
 }
 
+// Each entry's material, as the table numbers them.
+std::vector<std::uint32_t> materials_of(const ExemplarTable& table) {
+  std::vector<std::uint32_t> out(table.n_materials());
+  for (std::size_t m = 0; m < out.size(); ++m) out[m] = table.material_id(m);
+  return out;
+}
+
 }  // namespace
 
 SessionLearner::SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows,
-                               std::shared_ptr<const SessionClassifier> offsets)
-    : SessionLearner(settings, each_scale(settings, std::move(scorers)), n_rows, std::move(offsets)) {}
+                               std::shared_ptr<const SessionClassifier> offsets, std::vector<std::uint32_t> materials)
+    : SessionLearner(settings, each_scale(settings, std::move(scorers)), n_rows, std::move(offsets),
+                     std::move(materials)) {}
 
 SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows,
-                               std::shared_ptr<const SessionClassifier> offsets)
-    : settings_(std::move(settings)), scorer_(std::move(scorer)), n_rows_(n_rows) {
+                               std::shared_ptr<const SessionClassifier> offsets, std::vector<std::uint32_t> materials)
+    : settings_(std::move(settings)), scorer_(std::move(scorer)), n_rows_(n_rows), materials_(std::move(materials)) {
   settings_.validate();
+  {
+    std::vector<std::uint32_t> sorted = materials_;
+    std::sort(sorted.begin(), sorted.end());
+    one_each_ = std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end();
+  }
   if (!scorer_) throw std::invalid_argument("session learning: no scorer");
   if (n_rows_ == 0) throw std::invalid_argument("session learning: a query has at least one row");
   if (offsets && settings_.learn_offsets) {
@@ -132,7 +145,7 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
     // (the fixed matcher's float reference is at the calibration's prior: it learns the offsets)
     std::shared_ptr<const SessionClassifier> reference(c, &c->reference());
     return std::make_shared<SessionLearner>(std::move(settings), std::move(scorer), table->n_rows(),
-                                            std::move(reference));
+                                            std::move(reference), materials_of(*table));
   }
   std::vector<Scorer> scorers;
   for (double s : settings.scales) {
@@ -141,7 +154,7 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
   }
   auto reference = std::make_shared<const SessionClassifier>(table, prior, noise_mm, candidates);
   return std::make_shared<SessionLearner>(std::move(settings), std::move(scorers), table->n_rows(),
-                                          std::move(reference));
+                                          std::move(reference), materials_of(*table));
 }
 
 SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t n, bool every_scale) const {
@@ -244,6 +257,31 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   const auto mismatch = [] {
     return std::logic_error("session learning: the scales' scorers rank different candidates");
   };
+  // Each candidate's share of its material's prior weight, as a log (0 for a
+  // material of one candidate): log(n_most / n), n its material's candidates
+  // in the ranking, n_most the most any material has. (Relative: a common
+  // factor moves every scale's evidence alike; tables of as many exemplars a
+  // material as each other give 0 throughout.)
+  std::vector<double> log_share(m_count, 0.0);
+  if (!materials_.empty()) {
+    for (std::size_t i = 0; i < m_count; ++i) {
+      if (order[i] >= materials_.size())
+        throw std::invalid_argument("session learning: candidate " + std::to_string(order[i]) + " has no material");
+    }
+  }
+  if (!one_each_) {
+    std::vector<std::uint32_t> of(m_count);
+    std::uint32_t top_material = 0;
+    for (std::size_t i = 0; i < m_count; ++i) {
+      of[i] = materials_[order[i]];
+      top_material = std::max(top_material, of[i]);
+    }
+    std::vector<std::uint32_t> members(std::size_t{top_material} + 1, 0);
+    for (const std::uint32_t g : of) ++members[g];
+    const std::uint32_t most = *std::max_element(members.begin(), members.end());
+    for (std::size_t i = 0; i < m_count; ++i)
+      if (members[of[i]] != most) log_share[i] = std::log(static_cast<double>(most) / members[of[i]]);
+  }
   for (std::size_t k = 0; k < k_count; ++k) {
     neg_score[k].assign(m_count, -kInf);
     if (!scored[k]) continue;
@@ -256,7 +294,9 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       neg_score[k][at] = -m.distance;
       in_ranking[k][at] = j;
     }
+    for (std::size_t i = 0; i < m_count; ++i) neg_score[k][i] += log_share[i];
     out.evidence[k] = log_sum_exp(neg_score[k]);
+    for (std::size_t i = 0; i < m_count; ++i) neg_score[k][i] -= log_share[i];
   }
   out.mixture.ranking.reserve(m_count);
   std::vector<double> terms(k_count);
@@ -278,11 +318,14 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
     return a.distance < b.distance || (a.distance == b.distance && a.index < b.index);
   });
   if (every_scale && offsets_ && !out.mixture.ranking.empty()) {
-    // Each candidate's posterior share under the mixture (the candidates equally likely).
-    const double best = out.mixture.ranking.front().distance;
+    // Each candidate's posterior share under the mixture (the materials equally likely, a
+    // material's candidates sharing its weight), relative to the largest.
+    const auto weighed_distance = [&](const Match& m) { return m.distance - log_share[place[m.index]]; };
+    double best = kInf;
+    for (const Match& m : out.mixture.ranking) best = std::min(best, weighed_distance(m));
     std::vector<std::pair<std::uint32_t, double>> shares;
     for (const Match& m : out.mixture.ranking) {
-      const double share = std::exp(best - m.distance);
+      const double share = std::exp(best - weighed_distance(m));
       if (share >= SessionOffsets::kNegligibleShare) shares.emplace_back(m.index, share);
     }
     std::lock_guard<std::mutex> lock(mutex_);

@@ -15,8 +15,9 @@
 //   D(m) = -log sum_k w_k exp(-D_k(m)),
 // D_k(m) the session matcher's score (a negative log-likelihood) of candidate
 // m under scale s_k. After each finished sweep, with
-//   E_k = log sum_m exp(-D_k(m))
-// (the sweep's evidence for scale k, candidates equally likely a priori),
+//   E_k = log sum_m exp(-D_k(m)) / n(m)
+// (the sweep's evidence for scale k: the materials equally likely a priori,
+// n(m) the exemplars of m's material, which share its weight),
 //   log w_k <- forget * log w_k + min(E_k - max_j E_j, ...) ,
 // the evidence capped at `evidence_cap` nats below the best scale, so that
 // no one sweep (a material outside the table, a bad region) settles the
@@ -111,13 +112,20 @@ class SessionLearner {
   // calibration's prior to learn the session's offsets with (null, or
   // settings.learn_offsets false: only the weights are learned); its table's
   // rows must be n_rows.
+  // `materials`: per candidate index the scorers rank, its material (a table's
+  // material_id: a material's exemplars share one), so that each material
+  // weighs the same in a sweep's evidence and in the offsets' shares however
+  // many exemplars it has (its exemplars share its weight); empty: each
+  // candidate is a material of its own. std::invalid_argument when a ranked
+  // index has none.
   SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows,
-                 std::shared_ptr<const SessionClassifier> offsets = nullptr);
+                 std::shared_ptr<const SessionClassifier> offsets = nullptr, std::vector<std::uint32_t> materials = {});
   // One scorer for every scale of `settings`; the same errors but the count.
   SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows,
-                 std::shared_ptr<const SessionClassifier> offsets = nullptr);
+                 std::shared_ptr<const SessionClassifier> offsets = nullptr, std::vector<std::uint32_t> materials = {});
 
-  // Session classifiers of the table under prior x each scale, on the float
+  // Session classifiers of the table under prior x each scale (the table's
+  // materials as the learner's: see the constructor), on the float
   // path (one SessionClassifier a scale) or the fixed-point one (one
   // FixedSessionClassifier for every scale), with noise_mm and candidates as
   // SessionClassifier's (the same errors as their constructors).
@@ -168,6 +176,8 @@ class SessionLearner {
   SessionLearning settings_;
   ScaledScorer scorer_;
   std::uint32_t n_rows_;
+  std::vector<std::uint32_t> materials_;  // per candidate index, its material (empty: its own)
+  bool one_each_ = true;                  // no two candidates share a material: every share is 1
   // settings_.long_sweeps as (bins, the index of its scale in the scales)
   std::vector<std::pair<std::uint32_t, std::size_t>> long_tiers_;
   std::vector<double> log_prior_;            // log prior_weights (0 each for equal weights)
