@@ -283,8 +283,6 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
     if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
   }
   std::vector<double> total(n_priors), energy(n_priors);  // per prior, over the candidate's rows
-  for (std::size_t j = 0; j < n_priors; ++j)
-    if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
     const std::uint32_t index = ct.candidates()[c];
     const std::int16_t* values = ct.values(c);

@@ -294,9 +294,13 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       neg_score[k][at] = -m.distance;
       in_ranking[k][at] = j;
     }
-    for (std::size_t i = 0; i < m_count; ++i) neg_score[k][i] += log_share[i];
-    out.evidence[k] = log_sum_exp(neg_score[k]);
-    for (std::size_t i = 0; i < m_count; ++i) neg_score[k][i] -= log_share[i];
+    if (one_each_) {
+      out.evidence[k] = log_sum_exp(neg_score[k]);
+    } else {
+      std::vector<double> shared = neg_score[k];
+      for (std::size_t i = 0; i < m_count; ++i) shared[i] += log_share[i];
+      out.evidence[k] = log_sum_exp(shared);
+    }
   }
   out.mixture.ranking.reserve(m_count);
   std::vector<double> terms(k_count);
