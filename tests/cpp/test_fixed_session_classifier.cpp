@@ -210,6 +210,29 @@ TEST(FixedSessionClassifier, ScoresUnderEveryScaleAsEachScaledMatcherDoesToTheBi
               continue;
             }
             ASSERT_EQ(got.size(), scales.size());
+            // Unranked (for a mixture): the same matches in candidates() order.
+            const std::vector<Classification> unranked = all.classify_scaled(q.data(), q.size(), wanted, false);
+            ASSERT_EQ(unranked.size(), scales.size());
+            for (std::size_t j = 0; j < scales.size(); ++j) {
+              Classification sorted = unranked[j];
+              std::vector<std::ptrdiff_t> order;  // each match's place among candidates()
+              for (const Match& match : sorted.ranking) {
+                const auto& c = all.candidates();
+                order.push_back(std::find(c.begin(), c.end(), match.index) - c.begin());
+              }
+              EXPECT_TRUE(std::is_sorted(order.begin(), order.end())) << j;
+              if (!wanted[j]) {
+                EXPECT_TRUE(sorted.ranking.empty()) << j;
+                continue;
+              }
+              rank(sorted);
+              ASSERT_EQ(sorted.ranking.size(), got[j].ranking.size()) << j;
+              for (std::size_t i = 0; i < sorted.ranking.size(); ++i) {
+                EXPECT_EQ(sorted.ranking[i].index, got[j].ranking[i].index) << j;
+                EXPECT_EQ(sorted.ranking[i].distance, got[j].ranking[i].distance) << j;
+                EXPECT_EQ(sorted.ranking[i].fit, got[j].ranking[i].fit) << j;
+              }
+            }
             for (std::size_t j = 0; j < scales.size(); ++j) {
               const std::string what = std::string(s.name) + ", scale " + std::to_string(scales[j]) + ", " +
                                        std::to_string(length) + " bins";

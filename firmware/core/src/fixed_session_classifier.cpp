@@ -207,7 +207,8 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
 }
 
 std::vector<Classification> FixedSessionClassifier::classify_scaled(const float* query, std::size_t n,
-                                                                    const std::vector<bool>& wanted) const {
+                                                                    const std::vector<bool>& wanted,
+                                                                    bool ranked) const {
   if (wanted.size() != scales_.size()) {
     throw std::invalid_argument("fixed session matcher: " + std::to_string(wanted.size()) + " flags for " +
                                 std::to_string(scales_.size()) + " scales");
@@ -216,12 +217,12 @@ std::vector<Classification> FixedSessionClassifier::classify_scaled(const float*
   for (std::size_t j = 0; j < scales_.size(); ++j)
     if (wanted[j]) priors[j] = &scaled_[j];
   std::vector<Classification> out(scales_.size());
-  score(query, n, priors, out);
+  score(query, n, priors, out, ranked);
   return out;
 }
 
 void FixedSessionClassifier::score(const float* query, std::size_t n, const std::vector<const PriorSteps*>& priors,
-                                   std::vector<Classification>& out) const {
+                                   std::vector<Classification>& out, bool ranked) const {
   const FixedClassifier::Prepared p = eq12_.prepare(query, n);  // validated, quantised
   const CompactTable& ct = eq12_.compact();
   const ExemplarTable& table = reference_.table();
@@ -360,22 +361,24 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
       for (std::size_t j = 0; j < n_priors; ++j) {
         if (priors[j] == nullptr) continue;
         const PriorSteps& ps = *priors[j];
-        SessionPassSums sums;
-        double penalty = 0.0, logdet = 0.0;
-        if (ps.terms > 0) {
+        // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
+        const auto data_term = [&](const SessionPassSums& sums) {
+          double d = static_cast<double>(sums.squares) * (kSquareUnit / 2.0) / v;
+          if (huber)
+            d += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
+                 0.5 * hk * hk * static_cast<double>(sums.n_beyond);
+          return d;
+        };
+        double data = 0.0, penalty = 0.0, logdet = 0.0;
+        if (ps.terms > 0) {  // (the sums read where the fit left them, not copied)
           const RowFit fit = fit_(x, all, ps.var[r], v, prior.iterations, huber, noise.threshold, pass_);
-          sums = fit.sums;
+          data = data_term(fit.sums);
           penalty = fit.penalty;
           logdet = fit.log_det_p + ps.log_det[r];
         } else {
           const std::int32_t none[kMaxTerms] = {};
-          sums = pass_(x, 0, none, noise.threshold, false);
+          data = data_term(pass_(x, 0, none, noise.threshold, false));
         }
-        // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
-        double data = static_cast<double>(sums.squares) * (kSquareUnit / 2.0) / v;
-        if (huber)
-          data += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
-                  0.5 * hk * hk * static_cast<double>(sums.n_beyond);
         energy[j] += data + penalty;
         total[j] += data + static_cast<double>(nr) * noise.log_norm + penalty + 0.5 * logdet +
                     static_cast<double>(asked - nr) * (0.5 + noise.log_norm);
@@ -387,8 +390,14 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
         out[j].ranking.push_back(Match{index, total[j], compared, chi_square_deviate(2.0 * energy[j], compared)});
     }
   }
-  for (std::size_t j = 0; j < n_priors; ++j)
-    if (priors[j] != nullptr) rank(out[j]);
+  for (std::size_t j = 0; j < n_priors; ++j) {
+    if (priors[j] == nullptr) continue;
+    if (ranked) {
+      rank(out[j]);
+    } else if (out[j].ranking.empty()) {  // (rank()'s error, without its sort)
+      throw std::invalid_argument("query shares no valid element with any candidate material");
+    }
+  }
 }
 
 }  // namespace tofmat

@@ -139,8 +139,9 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
   if (fixed_point) {
     auto c = std::make_shared<const FixedSessionClassifier>(table, prior, noise_mm, candidates, FixedKernel::kBest,
                                                             settings.scales);
+    // (unranked: the learner ranks the mixture, not each scale)
     ScaledScorer scorer = [c](const float* q, std::size_t n, const std::vector<bool>& wanted) {
-      return c->classify_scaled(q, n, wanted);
+      return c->classify_scaled(q, n, wanted, false);
     };
     // (the fixed matcher's float reference is at the calibration's prior: it learns the offsets)
     std::shared_ptr<const SessionClassifier> reference(c, &c->reference());
@@ -240,7 +241,8 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   // Per candidate (as the first scale ranks them), its score under every scale.
   const std::size_t m_count = by_scale[first].ranking.size();
   Scored out;
-  out.evidence.assign(k_count, -kInf);
+  // (the evidence only for a sweep to learn from: a frame's label needs none of it)
+  if (every_scale) out.evidence.assign(k_count, -kInf);
   std::vector<std::vector<double>> neg_score(k_count);  // -D_k(m), in the first scale's order
   std::vector<std::uint32_t> order;
   order.reserve(m_count);
@@ -269,7 +271,7 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
         throw std::invalid_argument("session learning: candidate " + std::to_string(order[i]) + " has no material");
     }
   }
-  if (!one_each_) {
+  if (!one_each_ && every_scale) {
     std::vector<std::uint32_t> of(m_count);
     std::uint32_t top_material = 0;
     for (std::size_t i = 0; i < m_count; ++i) {
@@ -294,6 +296,7 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       neg_score[k][at] = -m.distance;
       in_ranking[k][at] = j;
     }
+    if (!every_scale) continue;
     if (one_each_) {
       out.evidence[k] = log_sum_exp(neg_score[k]);
     } else {

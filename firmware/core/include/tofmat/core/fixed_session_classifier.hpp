@@ -59,7 +59,10 @@ class FixedSessionClassifier {
   // FixedSessionClassifier of that scaled prior's classify gives, to the
   // bit; an empty ranking for a scale not wanted. The same errors as
   // classify, and std::invalid_argument for another count of flags.
-  std::vector<Classification> classify_scaled(const float* query, std::size_t n, const std::vector<bool>& wanted) const;
+  // ranked false: each scale's candidates in candidates() order, not sorted
+  // (for a caller that ranks a mixture of the scales itself: SessionLearner).
+  std::vector<Classification> classify_scaled(const float* query, std::size_t n, const std::vector<bool>& wanted,
+                                              bool ranked = true) const;
   const std::vector<double>& scales() const { return scales_; }
 
   // The float reference it shares its prior, noise and nuisance terms with.
@@ -91,9 +94,10 @@ class FixedSessionClassifier {
     std::vector<double> log_det;
   };
   PriorSteps prior_steps(const SessionClassifier& reference) const;
-  // Scores the query under each prior of `priors` (null: not scored) into `out`, one Classification each.
+  // Scores the query under each prior of `priors` (null: not scored) into `out`, one Classification each
+  // (ranked false: in candidates() order).
   void score(const float* query, std::size_t n, const std::vector<const PriorSteps*>& priors,
-             std::vector<Classification>& out) const;
+             std::vector<Classification>& out, bool ranked = true) const;
 
   PriorSteps prior_;                // the prior's own
   std::vector<double> scales_;      // classify_scaled's

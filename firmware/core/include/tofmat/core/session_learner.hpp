@@ -102,7 +102,8 @@ class SessionLearner {
   using Scorer = std::function<Classification(const float*, std::size_t)>;
   // Scores a query under every scale whose flag is set (one flag per scale),
   // an empty Classification for the others: FixedSessionClassifier::
-  // classify_scaled, which shares the work the scales have in common.
+  // classify_scaled, which shares the work the scales have in common. A
+  // scale's candidates may come in any order (the learner ranks the mixture).
   using ScaledScorer = std::function<std::vector<Classification>(const float*, std::size_t, const std::vector<bool>&)>;
 
   // One scorer per scale of `settings`, for queries of n_rows rows (a
@@ -137,12 +138,14 @@ class SessionLearner {
 
   struct Scored {
     Classification mixture;            // the ranking by the mixture's score D(m), fit from m's likeliest scale
-    std::vector<double> evidence;      // E_k per scale
+    std::vector<double> evidence;      // E_k per scale (every_scale only: empty for a frame's label)
     SessionOffsets::Evidence offsets;  // on the session's terms (every_scale, when it learns them)
   };
   // The query under the weights learned so far. A scale whose weight is
   // under e^-kNegligibleNats of the largest adds nothing to D(m) and is not
-  // scored (its evidence is -infinity) unless every_scale: a handheld frame
+  // scored unless every_scale (then every scale is scored and its evidence
+  // and the offsets' are given, for learn(); without it the evidence is
+  // empty and only the mixture is ranked): a handheld frame
   // then costs about one session matcher once the session is learned. In a
   // long sweep, scales above its tier's scale enter D(m) with that scale's
   // scores (and are scored only for their evidence, when every_scale).
