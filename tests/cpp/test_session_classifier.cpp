@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -145,6 +146,37 @@ TEST(SessionClassifier, UsesTheTablesNoiseWhereItHoldsOne) {
   // An explicit noise still wins over the table's.
   SessionClassifier given(stored, SessionPrior::tuned(*stored), {0.5, 0.25});
   EXPECT_EQ(given.noise_mm(), (std::vector<double>{0.5, 0.25}));
+}
+
+TEST(SessionClassifier, TheCubeRootIsTheLibrarysWithinAFewUlp) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> exponent(-300.0, 300.0), sign(-1.0, 1.0);
+  double worst = 0.0;
+  for (int i = 0; i < 200000; ++i) {
+    const double x = std::copysign(std::pow(10.0, exponent(rng)), sign(rng));
+    const double want = std::cbrt(x), got = cube_root(x);
+    const double ulp = std::nextafter(std::fabs(want), std::numeric_limits<double>::infinity()) - std::fabs(want);
+    worst = std::max(worst, std::fabs(got - want) / ulp);
+  }
+  EXPECT_LE(worst, 5.0);  // (4 ulp of the true root, std::cbrt's within 1)
+  // Exact cubes, the ends of the normal range, and the exponent's residues 0, 1, 2 either side of 1.
+  for (const double x :
+       {1.0, 8.0, 27.0, -64.0, 0.125, std::numeric_limits<double>::min(), std::numeric_limits<double>::max(),
+        -std::numeric_limits<double>::max(), 2.0, 4.0, 0.5, 0.25}) {
+    const double want = std::cbrt(x);
+    const double ulp = std::nextafter(std::fabs(want), std::numeric_limits<double>::infinity()) - std::fabs(want);
+    EXPECT_LE(std::fabs(cube_root(x) - want), 4.0 * ulp) << x;
+  }
+  EXPECT_EQ(cube_root(8.0), 2.0);
+  EXPECT_EQ(cube_root(-27.0), -3.0);
+  // The library's own rules outside the normal numbers.
+  EXPECT_EQ(cube_root(0.0), 0.0);
+  EXPECT_TRUE(std::signbit(cube_root(-0.0)));
+  EXPECT_EQ(cube_root(std::numeric_limits<double>::infinity()), std::numeric_limits<double>::infinity());
+  EXPECT_EQ(cube_root(-std::numeric_limits<double>::infinity()), -std::numeric_limits<double>::infinity());
+  EXPECT_TRUE(std::isnan(cube_root(std::nan(""))));
+  volatile double tiny = std::numeric_limits<double>::denorm_min();  // (at run time: the compiler folds a constant's
+  EXPECT_EQ(cube_root(tiny), std::cbrt(tiny));                       // cbrt correctly rounded, glibc's within 1 ulp)
 }
 
 TEST(SessionClassifier, AFitIsTheChiSquaresDeviate) {

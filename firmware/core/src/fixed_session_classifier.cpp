@@ -75,11 +75,13 @@ struct ScoreScratch {
 
 // One row's nuisance fit of a candidate under one prior: the reweighting
 // passes, and what the score takes from the last (its sums, the fit's penalty
-// and log det P). Instantiated for each count of terms, so that the K x K
+// and P's Cholesky diagonal, whose product over a candidate's rows gives
+// their log det P with one log: cholesky_log_det). Instantiated for each count of terms, so that the K x K
 // work is unrolled (K = the basis's terms, 1..3).
 struct RowFit {
   session_detail::SessionPassSums sums;
-  double penalty = 0.0, log_det_p = 0.0;
+  double penalty = 0.0;
+  std::array<double, kMaxTerms> diagonal{};
 };
 
 template <int K>
@@ -117,7 +119,7 @@ RowFit fit_row(const SessionElements& x, const session_detail::NormalSums& all, 
     if (next == normal) break;  // the same system again would give the same fit
     normal = next;
   }
-  out.log_det_p = session_detail::cholesky_log_det(diagonal, K);
+  out.diagonal = diagonal;
   for (int s = 0; s < K; ++s) out.penalty += 0.5 * beta[s] * beta[s] / pv[s];
   return out;
 }
@@ -284,12 +286,18 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
     if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
   }
   std::vector<double> total(n_priors), energy(n_priors);  // per prior, over the candidate's rows
+  // Per prior, the candidate's rows' Cholesky diagonals: their product (kept
+  // while it is a normal number) and the logs of those it could not hold,
+  // so that log det P costs one log a candidate, not one a row.
+  std::vector<double> det_root(n_priors), log_det(n_priors);
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
     const std::uint32_t index = ct.candidates()[c];
     const std::int16_t* values = ct.values(c);
     const std::uint8_t* valid = ct.validity(c);
     std::fill(total.begin(), total.end(), 0.0);
     std::fill(energy.begin(), energy.end(), 0.0);
+    std::fill(det_root.begin(), det_root.end(), 1.0);
+    std::fill(log_det.begin(), log_det.end(), 0.0);
     std::uint32_t compared = 0;
     for (std::uint32_t r = 0; r < rows; ++r) {
       const QueryRow& qr = qrows[r];
@@ -374,7 +382,14 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
           const RowFit fit = fit_(x, all, ps.var[r], v, prior.iterations, huber, noise.threshold, pass_);
           data = data_term(fit.sums);
           penalty = fit.penalty;
-          logdet = fit.log_det_p + ps.log_det[r];
+          logdet = ps.log_det[r];
+          double product = det_root[j];
+          for (int t = 0; t < k; ++t) product *= fit.diagonal[static_cast<std::size_t>(t)];
+          if (std::isnormal(product)) {
+            det_root[j] = product;
+          } else {  // (never with a prior's variances in their range: kept exact all the same)
+            log_det[j] += session_detail::cholesky_log_det(fit.diagonal, k);
+          }
         } else {
           const std::int32_t none[kMaxTerms] = {};
           data = data_term(pass_(x, 0, none, noise.threshold, false));
@@ -386,8 +401,10 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
     }
     if (compared == 0) continue;
     for (std::size_t j = 0; j < n_priors; ++j) {
-      if (priors[j] != nullptr)
-        out[j].ranking.push_back(Match{index, total[j], compared, chi_square_deviate(2.0 * energy[j], compared)});
+      if (priors[j] == nullptr) continue;
+      // (half of log det P over the rows: log of the diagonals' product, half the logs kept apart)
+      const double t = priors[j]->terms > 0 ? total[j] + (std::log(det_root[j]) + 0.5 * log_det[j]) : total[j];
+      out[j].ranking.push_back(Match{index, t, compared, chi_square_deviate(2.0 * energy[j], compared)});
     }
   }
   for (std::size_t j = 0; j < n_priors; ++j) {

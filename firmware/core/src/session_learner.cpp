@@ -17,15 +17,16 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-// log sum exp(v), -inf for no finite term.
-double log_sum_exp(const std::vector<double>& v) {
+// log sum exp of v[0..n), -inf for no finite term.
+double log_sum_exp(const double* v, std::size_t n) {
   double top = -kInf;
-  for (double x : v) top = std::max(top, x);
+  for (std::size_t i = 0; i < n; ++i) top = std::max(top, v[i]);
   if (!std::isfinite(top)) return top;
   double s = 0.0;
-  for (double x : v) s += std::exp(x - top);
+  for (std::size_t i = 0; i < n; ++i) s += std::exp(v[i] - top);
   return top + std::log(s);
 }
+double log_sum_exp(const std::vector<double>& v) { return log_sum_exp(v.data(), v.size()); }
 
 // How many bins of a query of n_rows rows have a value in any row.
 std::uint32_t bins_covered(const float* query, std::size_t n, std::uint32_t n_rows) {
@@ -243,7 +244,8 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   Scored out;
   // (the evidence only for a sweep to learn from: a frame's label needs none of it)
   if (every_scale) out.evidence.assign(k_count, -kInf);
-  std::vector<std::vector<double>> neg_score(k_count);  // -D_k(m), in the first scale's order
+  // -D_k(m) at [k * m_count + i], i in the first scale's order (one buffer: a frame's label allocates little)
+  std::vector<double> neg_score(k_count * m_count, -kInf);
   std::vector<std::uint32_t> order;
   order.reserve(m_count);
   std::uint32_t top_index = 0;
@@ -255,7 +257,7 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
   std::vector<std::size_t> place(std::size_t{top_index} + 1, kNone);
   for (std::size_t i = 0; i < m_count; ++i) place[order[i]] = i;
-  std::vector<std::vector<std::size_t>> in_ranking(k_count);
+  std::vector<std::size_t> in_ranking(k_count * m_count, kNone);  // (as neg_score)
   const auto mismatch = [] {
     return std::logic_error("session learning: the scales' scorers rank different candidates");
   };
@@ -264,7 +266,8 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   // in the ranking, n_most the most any material has. (Relative: a common
   // factor moves every scale's evidence alike; tables of as many exemplars a
   // material as each other give 0 throughout.)
-  std::vector<double> log_share(m_count, 0.0);
+  std::vector<double> log_share;  // (a sweep to learn from only: the evidence and the offsets' shares)
+  if (every_scale) log_share.assign(m_count, 0.0);
   if (!materials_.empty()) {
     for (std::size_t i = 0; i < m_count; ++i) {
       if (order[i] >= materials_.size())
@@ -285,22 +288,22 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       if (members[of[i]] != most) log_share[i] = std::log(static_cast<double>(most) / members[of[i]]);
   }
   for (std::size_t k = 0; k < k_count; ++k) {
-    neg_score[k].assign(m_count, -kInf);
     if (!scored[k]) continue;
     if (by_scale[k].ranking.size() != m_count) throw mismatch();
-    in_ranking[k].assign(m_count, kNone);
+    double* const neg_k = neg_score.data() + k * m_count;
+    std::size_t* const in_k = in_ranking.data() + k * m_count;
     for (std::size_t j = 0; j < m_count; ++j) {
       const Match& m = by_scale[k].ranking[j];
       const std::size_t at = m.index <= top_index ? place[m.index] : kNone;
-      if (at == kNone || in_ranking[k][at] != kNone) throw mismatch();
-      neg_score[k][at] = -m.distance;
-      in_ranking[k][at] = j;
+      if (at == kNone || in_k[at] != kNone) throw mismatch();
+      neg_k[at] = -m.distance;
+      in_k[at] = j;
     }
     if (!every_scale) continue;
     if (one_each_) {
-      out.evidence[k] = log_sum_exp(neg_score[k]);
+      out.evidence[k] = log_sum_exp(neg_k, m_count);
     } else {
-      std::vector<double> shared = neg_score[k];
+      std::vector<double> shared(neg_k, neg_k + m_count);
       for (std::size_t i = 0; i < m_count; ++i) shared[i] += log_share[i];
       out.evidence[k] = log_sum_exp(shared);
     }
@@ -311,13 +314,13 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
     std::size_t likeliest = first;
     double top = -kInf;
     for (std::size_t k = 0; k < k_count; ++k) {
-      terms[k] = weighed[k] ? log_w[k] + neg_score[scored_as[k]][i] : -kInf;
+      terms[k] = weighed[k] ? log_w[k] + neg_score[scored_as[k] * m_count + i] : -kInf;
       if (terms[k] > top) {
         top = terms[k];
         likeliest = scored_as[k];
       }
     }
-    Match m = by_scale[likeliest].ranking[in_ranking[likeliest][i]];
+    Match m = by_scale[likeliest].ranking[in_ranking[likeliest * m_count + i]];
     m.distance = -log_sum_exp(terms);
     out.mixture.ranking.push_back(m);
   }

@@ -88,6 +88,9 @@ std::vector<double> curve_roughness(const ExemplarTable& table);
 
 // The Wilson-Hilferty normal deviate of a chi-square value q with n degrees of freedom (n >= 1).
 double chi_square_deviate(double q, double n);
+// The real cube root of x, within 4 ulp (std::cbrt's rules for 0,
+// subnormals, infinities and NaN), in a third of std::cbrt's instructions.
+double cube_root(double x);
 
 // How vague each material is as a candidate (n_materials values, each >= 1):
 // the mean over rows of its element variance, (noise_scale sigma_m,r)^2 +
