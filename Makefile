@@ -249,6 +249,19 @@ bench-profiles-cross: cross check-db
 	cmake --build $(BENCH_DIR) -j$(JOBS) --target qemu_insn_count
 	tests/bench/profile_counts.sh $(QEMU_PLUGIN) $(CROSS)/tests/bench/tofmat_bench_profiles $(DB)
 
+# Where one profile's aarch64 instructions go, per function (tests/bench/profile_frame.sh):
+#   make profile-frame PROFILE=handheld PROFILE_OPTIONS="--kernel best --no-truth"
+PROFILE ?= handheld
+PROFILE_OPTIONS ?= --kernel best --no-truth
+PROFILE_TABLE ?= $(DB)
+.PHONY: profile-frame
+profile-frame: cross check-db
+	cmake -S . -B $(BENCH_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_BUILD_TESTS=OFF \
+	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
+	cmake --build $(BENCH_DIR) -j$(JOBS) --target qemu_tb_profile
+	tests/bench/profile_frame.sh $(BENCH_DIR)/tests/bench/qemu_tb_profile.so $(CROSS)/tests/bench/tofmat_bench_profiles \
+	  $(PROFILE_TABLE) $(PROFILE) 2 -- $(PROFILE_OPTIONS)
+
 bench-cross: cross check-db
 	cmake -S . -B $(BENCH_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release -DTOFMAT_BUILD_TESTS=OFF \
 	  -DTOFMAT_WITH_SIM=OFF -DTOFMAT_WITH_LIBUSB=OFF -DTOFMAT_DB_DIR=$(DB) >/dev/null
