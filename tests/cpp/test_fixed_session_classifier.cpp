@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "test_util.hpp"
+#include "tofmat/core/session_classifier.hpp"
 
 namespace {
 
@@ -196,6 +197,7 @@ TEST(FixedSessionClassifier, ScoresUnderEveryScaleAsEachScaledMatcherDoesToTheBi
         each.reserve(scales.size());
         for (const double x : scales)
           each.emplace_back(table, scaled(s.prior, x), std::vector<double>{}, candidates, kernel);
+        std::vector<Classification> kept;  // (classify_scaled into it, call after call)
         for (std::uint32_t length : {1u, 3u, 10u, 30u, 100u, 200u}) {
           for (std::size_t m = 0; m < table->n_materials(); m += 7) {
             const auto q = session_sweep(*table, m, length, rng);
@@ -213,6 +215,21 @@ TEST(FixedSessionClassifier, ScoresUnderEveryScaleAsEachScaledMatcherDoesToTheBi
             // Unranked (for a mixture): the same matches in candidates() order.
             const std::vector<Classification> unranked = all.classify_scaled(q.data(), q.size(), wanted, false);
             ASSERT_EQ(unranked.size(), scales.size());
+            // Into a kept vector (last filled under other flags), the fits as chi-square statistics:
+            // the same matches, and each statistic's deviate the fit.
+            all.classify_scaled(q.data(), q.size(), wanted, kept, false, false);
+            ASSERT_EQ(kept.size(), scales.size());
+            for (std::size_t j = 0; j < scales.size(); ++j) {
+              ASSERT_EQ(kept[j].ranking.size(), unranked[j].ranking.size()) << j;
+              for (std::size_t i = 0; i < kept[j].ranking.size(); ++i) {
+                const Match &a = kept[j].ranking[i], &b = unranked[j].ranking[i];
+                EXPECT_EQ(a.index, b.index) << j;
+                EXPECT_EQ(a.distance, b.distance) << j;
+                EXPECT_EQ(a.valid, b.valid) << j;
+                EXPECT_GE(a.fit, 0.0) << j;
+                EXPECT_EQ(chi_square_deviate(a.fit, a.valid), b.fit) << j;
+              }
+            }
             for (std::size_t j = 0; j < scales.size(); ++j) {
               Classification sorted = unranked[j];
               std::vector<std::ptrdiff_t> order;  // each match's place among candidates()

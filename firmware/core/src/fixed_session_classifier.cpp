@@ -71,6 +71,7 @@ struct ScoreScratch {
   std::vector<QueryRow> rows;
   std::vector<std::int32_t> e;
   std::array<std::vector<std::int32_t>, kMaxTerms> a_held, f_held;
+  std::vector<double> total, energy, det_root, log_det;  // per prior (score() says what they hold)
 };
 
 // One row's nuisance fit of a candidate under one prior: the reweighting
@@ -79,7 +80,9 @@ struct ScoreScratch {
 // their log det P with one log: cholesky_log_det). Instantiated for each count of terms, so that the K x K
 // work is unrolled (K = the basis's terms, 1..3).
 struct RowFit {
-  session_detail::SessionPassSums sums;
+  // The last pass's data-term sums (SessionPassSums's, without the shortfall: the score never reads it).
+  std::uint64_t squares = 0;
+  std::int64_t beyond = 0, n_beyond = 0;
   double penalty = 0.0;
   std::array<double, kMaxTerms> diagonal{};
 };
@@ -91,6 +94,7 @@ RowFit fit_row(const SessionElements& x, const session_detail::NormalSums& all, 
   session_detail::NormalSums normal = all;
   std::array<double, kMaxTerms> beta{}, diagonal{};
   std::array<std::int32_t, kMaxTerms> B{};
+  session_detail::SessionPassSums sums;
   for (int it = 0; it < iterations; ++it) {
     std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
     std::array<double, kMaxTerms> rhs{};
@@ -107,18 +111,21 @@ RowFit fit_row(const SessionElements& x, const session_detail::NormalSums& all, 
     for (int s = 0; s < K; ++s) B[s] = static_cast<std::int32_t>(clamp_round(beta[s] * kFitScale, kMaxCoefficient));
     // The residuals of this fit give the data term and the next pass's weights.
     const bool last = !huber || it + 1 == iterations;
-    out.sums = pass(x, K, B.data(), threshold, !last);
+    sums = pass(x, K, B.data(), threshold, !last);
     if (last) break;
     // No outlier in the first pass: the next system is this one (all weights 1), the fit the same.
-    if (it == 0 && out.sums.n_beyond == 0) break;
+    if (it == 0 && sums.n_beyond == 0) break;
     session_detail::NormalSums next = all;
     for (int s = 0; s < K; ++s) {
-      next.h[s] -= out.sums.shortfall.h[s];
-      for (int t = 0; t <= s; ++t) next.G[s][t] -= out.sums.shortfall.G[s][t];
+      next.h[s] -= sums.shortfall.h[s];
+      for (int t = 0; t <= s; ++t) next.G[s][t] -= sums.shortfall.G[s][t];
     }
     if (next == normal) break;  // the same system again would give the same fit
     normal = next;
   }
+  out.squares = sums.squares;
+  out.beyond = sums.beyond;
+  out.n_beyond = sums.n_beyond;
   out.diagonal = diagonal;
   for (int s = 0; s < K; ++s) out.penalty += 0.5 * beta[s] * beta[s] / pv[s];
   return out;
@@ -211,20 +218,27 @@ Classification FixedSessionClassifier::classify(const float* query, std::size_t 
 std::vector<Classification> FixedSessionClassifier::classify_scaled(const float* query, std::size_t n,
                                                                     const std::vector<bool>& wanted,
                                                                     bool ranked) const {
+  std::vector<Classification> out;
+  classify_scaled(query, n, wanted, out, ranked);
+  return out;
+}
+
+void FixedSessionClassifier::classify_scaled(const float* query, std::size_t n, const std::vector<bool>& wanted,
+                                             std::vector<Classification>& out, bool ranked, bool deviates) const {
   if (wanted.size() != scales_.size()) {
     throw std::invalid_argument("fixed session matcher: " + std::to_string(wanted.size()) + " flags for " +
                                 std::to_string(scales_.size()) + " scales");
   }
-  std::vector<const PriorSteps*> priors(scales_.size(), nullptr);
+  thread_local std::vector<const PriorSteps*> priors;  // (kept: a frame's label allocates nothing here)
+  priors.assign(scales_.size(), nullptr);
   for (std::size_t j = 0; j < scales_.size(); ++j)
     if (wanted[j]) priors[j] = &scaled_[j];
-  std::vector<Classification> out(scales_.size());
-  score(query, n, priors, out, ranked);
-  return out;
+  out.resize(scales_.size());
+  score(query, n, priors, out, ranked, deviates);
 }
 
 void FixedSessionClassifier::score(const float* query, std::size_t n, const std::vector<const PriorSteps*>& priors,
-                                   std::vector<Classification>& out, bool ranked) const {
+                                   std::vector<Classification>& out, bool ranked, bool deviates) const {
   const FixedClassifier::Prepared p = eq12_.prepare(query, n);  // validated, quantised
   const CompactTable& ct = eq12_.compact();
   const ExemplarTable& table = reference_.table();
@@ -285,19 +299,25 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
     out[j].ranking.clear();
     if (priors[j] != nullptr) out[j].ranking.reserve(ct.n_candidates());
   }
-  std::vector<double> total(n_priors), energy(n_priors);  // per prior, over the candidate's rows
+  // (raw pointers into the scratch, held in locals: through the vectors, every
+  // opaque call in the loop below would make the compiler load them again)
+  for (std::vector<double>* v : {&scratch.total, &scratch.energy, &scratch.det_root, &scratch.log_det})
+    v->resize(n_priors);
+  double* const total = scratch.total.data();    // per prior, over the candidate's rows
+  double* const energy = scratch.energy.data();  // (the same)
   // Per prior, the candidate's rows' Cholesky diagonals: their product (kept
   // while it is a normal number) and the logs of those it could not hold,
   // so that log det P costs one log a candidate, not one a row.
-  std::vector<double> det_root(n_priors), log_det(n_priors);
+  double* const det_root = scratch.det_root.data();
+  double* const log_det = scratch.log_det.data();
   for (std::size_t c = 0; c < ct.n_candidates(); ++c) {
     const std::uint32_t index = ct.candidates()[c];
     const std::int16_t* values = ct.values(c);
     const std::uint8_t* valid = ct.validity(c);
-    std::fill(total.begin(), total.end(), 0.0);
-    std::fill(energy.begin(), energy.end(), 0.0);
-    std::fill(det_root.begin(), det_root.end(), 1.0);
-    std::fill(log_det.begin(), log_det.end(), 0.0);
+    std::fill(total, total + n_priors, 0.0);
+    std::fill(energy, energy + n_priors, 0.0);
+    std::fill(det_root, det_root + n_priors, 1.0);
+    std::fill(log_det, log_det + n_priors, 0.0);
     std::uint32_t compared = 0;
     for (std::uint32_t r = 0; r < rows; ++r) {
       const QueryRow& qr = qrows[r];
@@ -370,17 +390,17 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
         if (priors[j] == nullptr) continue;
         const PriorSteps& ps = *priors[j];
         // The data term: inliers' squares in Q8 (saturating), outliers' magnitudes in Q16.
-        const auto data_term = [&](const SessionPassSums& sums) {
-          double d = static_cast<double>(sums.squares) * (kSquareUnit / 2.0) / v;
+        const auto data_term = [&](std::uint64_t squares, std::int64_t beyond, std::int64_t n_beyond) {
+          double d = static_cast<double>(squares) * (kSquareUnit / 2.0) / v;
           if (huber)
-            d += hk * (static_cast<double>(sums.beyond) * kFitUnit) / noise.sd -
-                 0.5 * hk * hk * static_cast<double>(sums.n_beyond);
+            d += hk * (static_cast<double>(beyond) * kFitUnit) / noise.sd -
+                 0.5 * hk * hk * static_cast<double>(n_beyond);
           return d;
         };
         double data = 0.0, penalty = 0.0, logdet = 0.0;
         if (ps.terms > 0) {  // (the sums read where the fit left them, not copied)
           const RowFit fit = fit_(x, all, ps.var[r], v, prior.iterations, huber, noise.threshold, pass_);
-          data = data_term(fit.sums);
+          data = data_term(fit.squares, fit.beyond, fit.n_beyond);
           penalty = fit.penalty;
           logdet = ps.log_det[r];
           double product = det_root[j];
@@ -392,7 +412,8 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
           }
         } else {
           const std::int32_t none[kMaxTerms] = {};
-          data = data_term(pass_(x, 0, none, noise.threshold, false));
+          const SessionPassSums sums = pass_(x, 0, none, noise.threshold, false);
+          data = data_term(sums.squares, sums.beyond, sums.n_beyond);
         }
         energy[j] += data + penalty;
         total[j] += data + static_cast<double>(nr) * noise.log_norm + penalty + 0.5 * logdet +
@@ -404,7 +425,8 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
       if (priors[j] == nullptr) continue;
       // (half of log det P over the rows: log of the diagonals' product, half the logs kept apart)
       const double t = priors[j]->terms > 0 ? total[j] + (std::log(det_root[j]) + 0.5 * log_det[j]) : total[j];
-      out[j].ranking.push_back(Match{index, t, compared, chi_square_deviate(2.0 * energy[j], compared)});
+      const double q = 2.0 * energy[j];  // (the chi-square statistic)
+      out[j].ranking.push_back(Match{index, t, compared, deviates ? chi_square_deviate(q, compared) : q});
     }
   }
   for (std::size_t j = 0; j < n_priors; ++j) {

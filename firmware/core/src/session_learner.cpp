@@ -10,6 +10,7 @@
 #include <string>
 
 #include "tofmat/core/fixed_session_classifier.hpp"
+#include "tofmat/core/session_classifier.hpp"
 
 namespace tofmat {
 
@@ -42,6 +43,20 @@ std::uint32_t bins_covered(const float* query, std::size_t n, std::uint32_t n_ro
   }
   return covered;
 }
+
+// classify()'s buffers, one set a thread, kept from query to query: a
+// frame's label then allocates only the ranking it returns. (classify()
+// says what each holds.)
+struct ClassifyScratch {
+  std::vector<std::size_t> scored_as;
+  std::vector<double> log_w;
+  std::vector<float> shifted;
+  std::vector<bool> weighed, scored, as_is, moved;
+  std::vector<Classification> by_scale, plain;
+  std::vector<double> neg_score, terms;
+  std::vector<std::uint32_t> order;
+  std::vector<std::size_t> place, in_ranking;
+};
 
 }  // namespace
 
@@ -84,11 +99,16 @@ SessionLearner::ScaledScorer each_scale(const SessionLearning& settings, std::ve
     throw std::invalid_argument("session learning: " + std::to_string(scorers.size()) + " scorers for " +
                                 std::to_string(settings.scales.size()) + " scales");
   }
-  return [scorers = std::move(scorers)](const float* q, std::size_t n, const std::vector<bool>& wanted) {
-    std::vector<Classification> out(scorers.size());
-    for (std::size_t k = 0; k < scorers.size(); ++k)
-      if (wanted[k]) out[k] = scorers[k](q, n);
-    return out;
+  return [scorers = std::move(scorers)](const float* q, std::size_t n, const std::vector<bool>& wanted,
+                                        std::vector<Classification>& out) {
+    out.resize(scorers.size());
+    for (std::size_t k = 0; k < scorers.size(); ++k) {
+      if (wanted[k]) {
+        out[k] = scorers[k](q, n);
+      } else {
+        out[k].ranking.clear();
+      }
+    }
   };
 }
 
@@ -107,8 +127,13 @@ SessionLearner::SessionLearner(const SessionLearning& settings, std::vector<Scor
                      std::move(materials)) {}
 
 SessionLearner::SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows,
-                               std::shared_ptr<const SessionClassifier> offsets, std::vector<std::uint32_t> materials)
-    : settings_(std::move(settings)), scorer_(std::move(scorer)), n_rows_(n_rows), materials_(std::move(materials)) {
+                               std::shared_ptr<const SessionClassifier> offsets, std::vector<std::uint32_t> materials,
+                               bool statistic_fits)
+    : settings_(std::move(settings)),
+      scorer_(std::move(scorer)),
+      n_rows_(n_rows),
+      materials_(std::move(materials)),
+      statistic_fits_(statistic_fits) {
   settings_.validate();
   {
     std::vector<std::uint32_t> sorted = materials_;
@@ -140,14 +165,15 @@ std::shared_ptr<SessionLearner> SessionLearner::make(const std::shared_ptr<const
   if (fixed_point) {
     auto c = std::make_shared<const FixedSessionClassifier>(table, prior, noise_mm, candidates, FixedKernel::kBest,
                                                             settings.scales);
-    // (unranked: the learner ranks the mixture, not each scale)
-    ScaledScorer scorer = [c](const float* q, std::size_t n, const std::vector<bool>& wanted) {
-      return c->classify_scaled(q, n, wanted, false);
+    // (unranked: the learner ranks the mixture, not each scale; the fits as statistics: it keeps one a candidate)
+    ScaledScorer scorer = [c](const float* q, std::size_t n, const std::vector<bool>& wanted,
+                              std::vector<Classification>& out) {
+      c->classify_scaled(q, n, wanted, out, false, false);
     };
     // (the fixed matcher's float reference is at the calibration's prior: it learns the offsets)
     std::shared_ptr<const SessionClassifier> reference(c, &c->reference());
     return std::make_shared<SessionLearner>(std::move(settings), std::move(scorer), table->n_rows(),
-                                            std::move(reference), materials_of(*table));
+                                            std::move(reference), materials_of(*table), true);
   }
   std::vector<Scorer> scorers;
   for (double s : settings.scales) {
@@ -177,10 +203,14 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       widest = index;
     }
   }
-  std::vector<std::size_t> scored_as(k_count);
+  thread_local ClassifyScratch scratch;
+  std::vector<std::size_t>& scored_as = scratch.scored_as;
+  scored_as.resize(k_count);
   for (std::size_t k = 0; k < k_count; ++k) scored_as[k] = std::min(k, widest);
-  std::vector<double> log_w;
-  std::vector<float> shifted;  // the query less the learned offsets (empty: nothing learned, or not shifted)
+  std::vector<double>& log_w = scratch.log_w;
+  std::vector<float>& shifted =
+      scratch.shifted;  // the query less the learned offsets (empty: nothing learned, or not shifted)
+  shifted.clear();
   {
     std::lock_guard<std::mutex> lock(mutex_);
     log_w = log_weight_;
@@ -201,8 +231,10 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   for (double& w : log_w) w -= norm;
   double heaviest = -kInf;
   for (double w : log_w) heaviest = std::max(heaviest, w);
-  std::vector<bool> weighed(k_count);  // enters the mixture
-  std::vector<bool> scored(k_count);   // its scorer runs
+  std::vector<bool>& weighed = scratch.weighed;  // enters the mixture
+  std::vector<bool>& scored = scratch.scored;    // its scorer runs
+  weighed.assign(k_count, false);
+  scored.assign(k_count, false);
   for (std::size_t k = 0; k < k_count; ++k) {
     weighed[k] = log_w[k] >= heaviest - kNegligibleNats;
     if (weighed[k]) scored[scored_as[k]] = true;
@@ -211,16 +243,17 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
 
   // Scale 0 is the table's own session, offsets and all: it scores the query as it is; the other
   // scales score it less the learned offsets (session_offsets.hpp).
-  const auto score = [&](const float* q, const std::vector<bool>& wanted) {
-    std::vector<Classification> r = scorer_(q, n, wanted);
-    if (r.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
-    return r;
+  const auto score = [&](const float* q, const std::vector<bool>& wanted, std::vector<Classification>& into) {
+    scorer_(q, n, wanted, into);
+    if (into.size() != k_count) throw std::logic_error("session learning: a scorer gave another count of scales");
   };
-  std::vector<Classification> by_scale;
+  std::vector<Classification>& by_scale = scratch.by_scale;
   if (shifted.empty()) {
-    by_scale = score(query, scored);
+    score(query, scored, by_scale);
   } else {
-    std::vector<bool> as_is(k_count, false), moved = scored;
+    std::vector<bool>&as_is = scratch.as_is, &moved = scratch.moved;
+    as_is.assign(k_count, false);
+    moved = scored;
     for (std::size_t k = 0; k < k_count; ++k) {
       if (settings_.scales[k] == 0.0) {
         as_is[k] = scored[k];
@@ -228,11 +261,17 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
       }
     }
     const auto any = [](const std::vector<bool>& v) { return std::find(v.begin(), v.end(), true) != v.end(); };
-    by_scale = any(moved) ? score(shifted.data(), moved) : std::vector<Classification>(k_count);
+    if (any(moved)) {
+      score(shifted.data(), moved, by_scale);
+    } else {
+      by_scale.resize(k_count);
+      for (Classification& c : by_scale) c.ranking.clear();
+    }
     if (any(as_is)) {
-      std::vector<Classification> plain = score(query, as_is);
+      std::vector<Classification>& plain = scratch.plain;
+      score(query, as_is, plain);
       for (std::size_t k = 0; k < k_count; ++k)
-        if (as_is[k]) by_scale[k] = std::move(plain[k]);
+        if (as_is[k]) std::swap(by_scale[k].ranking, plain[k].ranking);  // (both keep storage for the next query)
     }
   }
   std::size_t first = k_count;  // the first scored scale: its ranking gives the candidates' order
@@ -244,10 +283,11 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   Scored out;
   // (the evidence only for a sweep to learn from: a frame's label needs none of it)
   if (every_scale) out.evidence.assign(k_count, -kInf);
-  // -D_k(m) at [k * m_count + i], i in the first scale's order (one buffer: a frame's label allocates little)
-  std::vector<double> neg_score(k_count * m_count, -kInf);
-  std::vector<std::uint32_t> order;
-  order.reserve(m_count);
+  // -D_k(m) at [k * m_count + i], i in the first scale's order
+  std::vector<double>& neg_score = scratch.neg_score;
+  neg_score.assign(k_count * m_count, -kInf);
+  std::vector<std::uint32_t>& order = scratch.order;
+  order.clear();
   std::uint32_t top_index = 0;
   for (const Match& m : by_scale[first].ranking) {
     order.push_back(m.index);
@@ -255,9 +295,11 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   }
   // Each candidate's place in that order (kNone: not a candidate), and per scale where it sits in that scale's ranking.
   constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
-  std::vector<std::size_t> place(std::size_t{top_index} + 1, kNone);
+  std::vector<std::size_t>& place = scratch.place;
+  place.assign(std::size_t{top_index} + 1, kNone);
   for (std::size_t i = 0; i < m_count; ++i) place[order[i]] = i;
-  std::vector<std::size_t> in_ranking(k_count * m_count, kNone);  // (as neg_score)
+  std::vector<std::size_t>& in_ranking = scratch.in_ranking;  // (as neg_score)
+  in_ranking.assign(k_count * m_count, kNone);
   const auto mismatch = [] {
     return std::logic_error("session learning: the scales' scorers rank different candidates");
   };
@@ -309,7 +351,8 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
     }
   }
   out.mixture.ranking.reserve(m_count);
-  std::vector<double> terms(k_count);
+  std::vector<double>& terms = scratch.terms;
+  terms.resize(k_count);
   for (std::size_t i = 0; i < m_count; ++i) {
     std::size_t likeliest = first;
     double top = -kInf;
@@ -322,6 +365,7 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
     }
     Match m = by_scale[likeliest].ranking[in_ranking[likeliest * m_count + i]];
     m.distance = -log_sum_exp(terms);
+    if (statistic_fits_) m.fit = chi_square_deviate(m.fit, m.valid);
     out.mixture.ranking.push_back(m);
   }
   std::sort(out.mixture.ranking.begin(), out.mixture.ranking.end(), [](const Match& a, const Match& b) {

@@ -63,6 +63,15 @@ class FixedSessionClassifier {
   // (for a caller that ranks a mixture of the scales itself: SessionLearner).
   std::vector<Classification> classify_scaled(const float* query, std::size_t n, const std::vector<bool>& wanted,
                                               bool ranked = true) const;
+  // The same into `out` (resized to the scales), whose rankings' storage is
+  // kept from call to call: a caller that keeps `out` allocates nothing once
+  // it has grown (SessionLearner: a frame's label). deviates false: each
+  // Match::fit holds the chi-square statistic Q instead of its deviate, and
+  // chi_square_deviate(Q, valid) gives the deviate (for a caller that keeps
+  // one scale's fit of each candidate: SessionLearner, which then takes one
+  // cube root a candidate instead of one a candidate and scale).
+  void classify_scaled(const float* query, std::size_t n, const std::vector<bool>& wanted,
+                       std::vector<Classification>& out, bool ranked = true, bool deviates = true) const;
   const std::vector<double>& scales() const { return scales_; }
 
   // The float reference it shares its prior, noise and nuisance terms with.
@@ -95,9 +104,9 @@ class FixedSessionClassifier {
   };
   PriorSteps prior_steps(const SessionClassifier& reference) const;
   // Scores the query under each prior of `priors` (null: not scored) into `out`, one Classification each
-  // (ranked false: in candidates() order).
+  // (ranked false: in candidates() order; deviates: as classify_scaled's).
   void score(const float* query, std::size_t n, const std::vector<const PriorSteps*>& priors,
-             std::vector<Classification>& out, bool ranked = true) const;
+             std::vector<Classification>& out, bool ranked = true, bool deviates = true) const;
 
   PriorSteps prior_;                // the prior's own
   std::vector<double> scales_;      // classify_scaled's

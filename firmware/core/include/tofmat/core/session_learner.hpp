@@ -100,11 +100,15 @@ class SessionLearner {
   // FixedSessionClassifier::classify): every scorer must rank the same
   // candidates.
   using Scorer = std::function<Classification(const float*, std::size_t)>;
-  // Scores a query under every scale whose flag is set (one flag per scale),
-  // an empty Classification for the others: FixedSessionClassifier::
-  // classify_scaled, which shares the work the scales have in common. A
-  // scale's candidates may come in any order (the learner ranks the mixture).
-  using ScaledScorer = std::function<std::vector<Classification>(const float*, std::size_t, const std::vector<bool>&)>;
+  // Scores a query under every scale whose flag is set (one flag per scale)
+  // into `out` (resized to the scales), an empty Classification for the
+  // others: FixedSessionClassifier::classify_scaled, which shares the work the
+  // scales have in common. A scale's candidates may come in any order (the
+  // learner ranks the mixture). The learner hands the same `out` again from
+  // query to query, so that a scorer that keeps its rankings' storage
+  // allocates nothing once it has grown.
+  using ScaledScorer =
+      std::function<void(const float*, std::size_t, const std::vector<bool>&, std::vector<Classification>& out)>;
 
   // One scorer per scale of `settings`, for queries of n_rows rows (a
   // query's n elements are n_rows rows of n / n_rows bins, as the table's).
@@ -122,8 +126,12 @@ class SessionLearner {
   SessionLearner(const SessionLearning& settings, std::vector<Scorer> scorers, std::uint32_t n_rows,
                  std::shared_ptr<const SessionClassifier> offsets = nullptr, std::vector<std::uint32_t> materials = {});
   // One scorer for every scale of `settings`; the same errors but the count.
+  // statistic_fits: the scorer's Match::fit is the chi-square statistic, not
+  // its deviate (FixedSessionClassifier::classify_scaled with deviates
+  // false): the learner takes the deviate of the one fit it keeps.
   SessionLearner(SessionLearning settings, ScaledScorer scorer, std::uint32_t n_rows,
-                 std::shared_ptr<const SessionClassifier> offsets = nullptr, std::vector<std::uint32_t> materials = {});
+                 std::shared_ptr<const SessionClassifier> offsets = nullptr, std::vector<std::uint32_t> materials = {},
+                 bool statistic_fits = false);
 
   // Session classifiers of the table under prior x each scale (the table's
   // materials as the learner's: see the constructor), on the float
@@ -181,6 +189,7 @@ class SessionLearner {
   std::uint32_t n_rows_;
   std::vector<std::uint32_t> materials_;  // per candidate index, its material (empty: its own)
   bool one_each_ = true;                  // no two candidates share a material: every share is 1
+  bool statistic_fits_ = false;           // the scorer's fits are chi-square statistics
   // settings_.long_sweeps as (bins, the index of its scale in the scales)
   std::vector<std::pair<std::uint32_t, std::size_t>> long_tiers_;
   std::vector<double> log_prior_;            // log prior_weights (0 each for equal weights)
