@@ -16,8 +16,8 @@
 //      into a reused 9 x kPixels buffer (nothing when it is nullopt: sorting
 //      between bursts; the frame then carries an empty region)
 //   -> profile->process(frame, emitter)
-//   -> the emitter encodes the event as the daemon's does: protocol::encode_label /
-//      encode_label_map, then protocol::encode (wire.hpp), the bytes
+//   -> the emitter encodes the event as the daemon's does: protocol::encode_label_wire,
+//      or encode_label_map then protocol::encode (wire.hpp), the bytes
 //      Server::publish queues for a subscriber. No client wants depth images
 //      (wants_depth is false): label and label-map subscribers only.
 //
@@ -389,7 +389,7 @@ struct Run {
     frame.raw.assign(9 * kPixels, 0);
     emit.label = [this](const protocol::LabelEvent& e) {
       const auto t0 = timing ? Clock::now() : Clock::time_point{};
-      const std::vector<std::uint8_t> wire = protocol::encode(protocol::encode_label(e));
+      const std::vector<std::uint8_t> wire = protocol::encode_label_wire(e);
       bytes += wire.size();
       g_sink = g_sink + wire.back();
       if (timing) encode_s += seconds_since(t0);

@@ -100,7 +100,7 @@ Daemon::Daemon(DaemonOptions options) : options_(std::move(options)) {
   Emitter emit;
   emit.label = [this](const protocol::LabelEvent& e) {
     if (line_) line_->label(e);
-    server_->publish("labels", protocol::encode_label(e));
+    server_->publish("labels", protocol::encode_label_wire(e));
   };
   emit.label_map = [this](const protocol::LabelMapEvent& e) {
     server_->publish("label_map", protocol::encode_label_map(e));

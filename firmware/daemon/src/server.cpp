@@ -53,6 +53,15 @@ Bytes encoded(const protocol::Message& m) {
   return std::make_shared<const std::vector<std::uint8_t>>(protocol::encode(m));
 }
 
+// The one message `wire` holds (bytes this daemon encoded).
+protocol::Message decoded(const std::vector<std::uint8_t>& wire) {
+  protocol::MessageReader reader;
+  reader.feed(wire.data(), wire.size());
+  auto m = reader.next();
+  if (!m || reader.buffered() != 0) throw protocol::ProtocolError("an encoded event is not one whole message");
+  return std::move(*m);
+}
+
 std::string unknown_stream(const std::string& s) {
   std::string names;
   for (const auto& n : protocol::stream_names()) names += (names.empty() ? "" : ", ") + n;
@@ -139,19 +148,25 @@ void Server::publish(const std::string& stream, const protocol::Message& message
   // What this build publishes follows the schema to the letter (debug builds and the tests).
   protocol::check_event(message, true);
 #endif
-  if (protocol::pollable_stream(stream)) {  // kept for `latest`, subscribers or not
-    std::lock_guard<std::mutex> lock(inbox_mutex_);
-    latest_[stream] = message.meta;
-  }
-  if (!has_subscribers(stream)) return;
-  auto bytes = encoded(message);
+  // (Encoded once for `latest` and the subscribers alike, and not at all when neither wants it.)
+  if (!protocol::pollable_stream(stream) && !has_subscribers(stream)) return;
+  publish(stream, protocol::encode(message));
+}
+
+void Server::publish(const std::string& stream, std::vector<std::uint8_t> wire) {
+#ifndef NDEBUG
+  protocol::check_event(decoded(wire), true);
+#endif
+  const Bytes bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(wire));
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
+    if (protocol::pollable_stream(stream)) latest_[stream] = bytes;  // kept for `latest`, subscribers or not
+    if (subscribed_.count(stream) == 0) return;
     if (inbox_.size() >= kInboxLimit) {
       inbox_.erase(inbox_.begin());
       ++inbox_dropped_;
     }
-    inbox_.emplace_back(stream, std::move(bytes));
+    inbox_.emplace_back(stream, bytes);
   }
   wake();
 }
@@ -404,11 +419,13 @@ void Server::handle(Connection& c, const protocol::Message& m) {
       return refuse(protocol::codes::kInvalidArgument,
                     "\"" + stream + "\" carries images: subscribe to it; `latest` serves the streams without", false);
     r.result = protocol::Json::object();
+    Bytes last;
     {
       std::lock_guard<std::mutex> lock(inbox_mutex_);
       const auto it = latest_.find(stream);
-      if (it != latest_.end()) r.result["event"] = it->second;  // (none yet: left out)
+      if (it != latest_.end()) last = it->second;
     }
+    if (last) r.result["event"] = decoded(*last).meta;  // (none yet: left out)
     return reply(c, r);
   }
   // (The daemon's handler reports its own errors as replies; anything that

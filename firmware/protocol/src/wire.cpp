@@ -35,11 +35,14 @@ const char* message_type_name(MessageType type) {
 
 std::vector<std::uint8_t> encode(const Message& message) {
   if (!message.meta.is_object()) throw ProtocolError("message metadata must be a JSON object");
-  const std::string meta = message.meta.dump(-1, ' ', false, Json::error_handler_t::replace);
+  return encode_text(message.type, message.meta.dump(-1, ' ', false, Json::error_handler_t::replace), message.blob);
+}
+
+std::vector<std::uint8_t> encode_text(MessageType type, std::string_view meta, const std::vector<std::uint8_t>& blob) {
   if (meta.size() > kMaxMetaBytes)
     throw ProtocolError("message metadata is " + std::to_string(meta.size()) + " bytes, more than the " +
                         std::to_string(kMaxMetaBytes) + " allowed");
-  const std::size_t payload = 4 + meta.size() + message.blob.size();
+  const std::size_t payload = 4 + meta.size() + blob.size();
   if (payload > kMaxPayloadBytes)
     throw ProtocolError("message payload is " + std::to_string(payload) + " bytes, more than the " +
                         std::to_string(kMaxPayloadBytes) + " allowed");
@@ -47,12 +50,12 @@ std::vector<std::uint8_t> encode(const Message& message) {
   out.reserve(kHeaderBytes + payload);
   out.insert(out.end(), kMagic, kMagic + 4);
   put_u16(out, kProtocolVersion);
-  out.push_back(static_cast<std::uint8_t>(message.type));
+  out.push_back(static_cast<std::uint8_t>(type));
   out.push_back(0);  // flags, none defined in version 1
   put_u32(out, static_cast<std::uint32_t>(payload));
   put_u32(out, static_cast<std::uint32_t>(meta.size()));
   out.insert(out.end(), meta.begin(), meta.end());
-  out.insert(out.end(), message.blob.begin(), message.blob.end());
+  out.insert(out.end(), blob.begin(), blob.end());
   return out;
 }
 

@@ -73,6 +73,9 @@ class Server {
 
   // Any thread: queue a message for every subscriber of `stream`.
   void publish(const std::string& stream, const protocol::Message& message);
+  // The same for a message already encoded (protocol::encode_label_wire):
+  // kept as bytes for `latest` too, decoded only when a client polls.
+  void publish(const std::string& stream, std::vector<std::uint8_t> wire);
   // Any thread: `latest` has no event of `stream` until the next is published
   // (after a reset or a new table, the last label is no longer what the
   // daemon would say).
@@ -109,8 +112,9 @@ class Server {
   // Published messages waiting for the server thread (bounded, oldest dropped).
   mutable std::mutex inbox_mutex_;
   std::vector<std::pair<std::string, std::shared_ptr<const std::vector<std::uint8_t>>>> inbox_;
-  std::set<std::string> subscribed_;              // union of all clients' streams (under inbox_mutex_)
-  std::map<std::string, protocol::Json> latest_;  // the last event of each pollable stream (under inbox_mutex_)
+  std::set<std::string> subscribed_;  // union of all clients' streams (under inbox_mutex_)
+  // The last event of each pollable stream, as published (under inbox_mutex_).
+  std::map<std::string, std::shared_ptr<const std::vector<std::uint8_t>>> latest_;
   // Counters.
   std::atomic<std::uint64_t> accepted_{0}, rejected_{0}, protocol_errors_{0}, auth_failures_{0}, auth_throttled_{0},
       not_permitted_{0}, idle_closed_{0}, dropped_events_{0}, inbox_dropped_{0};

@@ -93,6 +93,9 @@ struct LabelEvent {
   std::optional<double> fit;
 };
 Message encode_label(const LabelEvent& e);
+// encode(encode_label(e)) to the byte, written from the fields without a JSON
+// tree: what the daemon publishes every frame (label_wire.cpp says why).
+std::vector<std::uint8_t> encode_label_wire(const LabelEvent& e);
 LabelEvent decode_label(const Message& m);
 
 struct LabelMapEvent {

@@ -71,6 +71,11 @@ class VersionError : public ProtocolError {
 // Header + payload. Throws ProtocolError if meta is not an object or the
 // message would exceed kMaxMetaBytes / kMaxPayloadBytes.
 std::vector<std::uint8_t> encode(const Message& message);
+// The same for metadata that is already JSON text, one object as Json::dump
+// writes it (encode() is this after its dump; encode_label_wire writes its
+// text without a JSON tree). Throws ProtocolError on the same bounds.
+std::vector<std::uint8_t> encode_text(MessageType type, std::string_view meta,
+                                      const std::vector<std::uint8_t>& blob = {});
 
 // Incremental decoder of a byte stream: feed() what the socket gave, then
 // take messages with next() until it returns nothing. Throws ProtocolError on
