@@ -105,6 +105,21 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     try_decoder(m, decode_request, encode_request, true);
     try_decoder(m, decode_reply, encode_reply, true);
     try_decoder(m, decode_label, encode_label);
+    // The daemon's direct label encoding writes what the tree does, for any label a peer could send.
+    try {
+      const LabelEvent e = decode_label(m);
+      std::optional<Bytes> tree, direct;
+      try {
+        tree = encode(encode_label(e));
+      } catch (const ProtocolError&) {
+      }
+      try {
+        direct = encode_label_wire(e);
+      } catch (const ProtocolError&) {
+      }
+      if (tree != direct) __builtin_trap();
+    } catch (const ProtocolError&) {
+    }
     try_decoder(m, decode_label_map, encode_label_map);
     try_decoder(m, decode_depth, encode_depth);
     try {
