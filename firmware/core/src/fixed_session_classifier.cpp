@@ -80,9 +80,8 @@ struct ScoreScratch {
 // their log det P with one log: cholesky_log_det). Instantiated for each count of terms, so that the K x K
 // work is unrolled (K = the basis's terms, 1..3).
 struct RowFit {
-  // The last pass's data-term sums (SessionPassSums's, without the shortfall: the score never reads it).
-  std::uint64_t squares = 0;
-  std::int64_t beyond = 0, n_beyond = 0;
+  // The last pass's sums. (Whole: copying three of its fields out instead cost more than it saved.)
+  session_detail::SessionPassSums sums;
   double penalty = 0.0;
   std::array<double, kMaxTerms> diagonal{};
 };
@@ -94,7 +93,7 @@ RowFit fit_row(const SessionElements& x, const session_detail::NormalSums& all, 
   session_detail::NormalSums normal = all;
   std::array<double, kMaxTerms> beta{}, diagonal{};
   std::array<std::int32_t, kMaxTerms> B{};
-  session_detail::SessionPassSums sums;
+  session_detail::SessionPassSums& sums = out.sums;
   for (int it = 0; it < iterations; ++it) {
     std::array<std::array<double, kMaxTerms>, kMaxTerms> P{};
     std::array<double, kMaxTerms> rhs{};
@@ -123,9 +122,6 @@ RowFit fit_row(const SessionElements& x, const session_detail::NormalSums& all, 
     if (next == normal) break;  // the same system again would give the same fit
     normal = next;
   }
-  out.squares = sums.squares;
-  out.beyond = sums.beyond;
-  out.n_beyond = sums.n_beyond;
   out.diagonal = diagonal;
   for (int s = 0; s < K; ++s) out.penalty += 0.5 * beta[s] * beta[s] / pv[s];
   return out;
@@ -400,7 +396,7 @@ void FixedSessionClassifier::score(const float* query, std::size_t n, const std:
         double data = 0.0, penalty = 0.0, logdet = 0.0;
         if (ps.terms > 0) {  // (the sums read where the fit left them, not copied)
           const RowFit fit = fit_(x, all, ps.var[r], v, prior.iterations, huber, noise.threshold, pass_);
-          data = data_term(fit.squares, fit.beyond, fit.n_beyond);
+          data = data_term(fit.sums.squares, fit.sums.beyond, fit.sums.n_beyond);
           penalty = fit.penalty;
           logdet = ps.log_det[r];
           double product = det_root[j];
