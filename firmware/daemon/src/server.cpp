@@ -150,14 +150,17 @@ void Server::publish(const std::string& stream, const protocol::Message& message
 #endif
   // (Encoded once for `latest` and the subscribers alike, and not at all when neither wants it.)
   if (!protocol::pollable_stream(stream) && !has_subscribers(stream)) return;
-  publish(stream, protocol::encode(message));
+  keep_and_queue(stream, encoded(message));
 }
 
 void Server::publish(const std::string& stream, std::vector<std::uint8_t> wire) {
 #ifndef NDEBUG
   protocol::check_event(decoded(wire), true);
 #endif
-  const Bytes bytes = std::make_shared<const std::vector<std::uint8_t>>(std::move(wire));
+  keep_and_queue(stream, std::make_shared<const std::vector<std::uint8_t>>(std::move(wire)));
+}
+
+void Server::keep_and_queue(const std::string& stream, const Bytes& bytes) {
   {
     std::lock_guard<std::mutex> lock(inbox_mutex_);
     if (protocol::pollable_stream(stream)) latest_[stream] = bytes;  // kept for `latest`, subscribers or not

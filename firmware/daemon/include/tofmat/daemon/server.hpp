@@ -96,6 +96,8 @@ class Server {
   void handle(Connection& c, const protocol::Message& m);
   void reply(Connection& c, const protocol::Reply& r);
   void enqueue(Connection& c, std::shared_ptr<const std::vector<std::uint8_t>> bytes, bool event);
+  // A published event's bytes: kept for `latest` (a pollable stream) and queued for its subscribers.
+  void keep_and_queue(const std::string& stream, const std::shared_ptr<const std::vector<std::uint8_t>>& bytes);
   void write_to(Connection& c);
   void refresh_subscriptions();
   void count_clients();  // the counts status() reads (clients_, unix_clients_, tcp_clients_)
