@@ -365,36 +365,47 @@ TEST(SessionLearner, LearnsWhereTheSessionMovedAndThenTellsTwinsApart) {
   }
 }
 
-TEST(SessionLearner, ScaleZeroAndLongSweepsScoreTheQueryAsItIsTheOtherScalesLessTheLearnedOffsets) {
+TEST(SessionLearner, ScaleZeroAndSweepsThatPinTheirOffsetsScoreTheQueryAsItIsTheOtherScalesLessTheLearnedOffsets) {
   Twins t;
   const SessionPrior prior = twins_prior();
-  SessionLearning settings = two_scales(0.9);  // (long sweeps from 20 bins)
-  std::vector<float> seen(2, std::nanf(""));   // what each scale's scorer saw at row 0, bin 15
-  std::vector<SessionLearner::Scorer> scorers;
-  for (std::size_t k = 0; k < 2; ++k) {
-    auto c = std::make_shared<const SessionClassifier>(t.table, scaled(prior, settings.scales[k]));
-    scorers.emplace_back([c, k, &seen](const float* q, std::size_t n) {
-      seen[k] = q[15];
-      return c->classify(q, n);
-    });
+  // pins_offsets: the bins from which a sweep is scored as it is (0: never); the first long-sweep
+  // tier at 10 bins, below it, caps the scales without pinning the offsets.
+  for (std::uint32_t pins_offsets : {20u, 0u}) {
+    SessionLearning settings = two_scales(0.9);
+    settings.long_sweeps = {{10, 1.0}};
+    settings.pins_offsets_bins = pins_offsets;
+    std::vector<float> seen(2, std::nanf(""));  // what each scale's scorer saw at row 0, bin 15
+    std::vector<SessionLearner::Scorer> scorers;
+    for (std::size_t k = 0; k < 2; ++k) {
+      auto c = std::make_shared<const SessionClassifier>(t.table, scaled(prior, settings.scales[k]));
+      scorers.emplace_back([c, k, &seen](const float* q, std::size_t n) {
+        seen[k] = q[15];
+        return c->classify(q, n);
+      });
+    }
+    SessionLearner l(settings, std::move(scorers), 2, std::make_shared<const SessionClassifier>(t.table, prior));
+    std::mt19937 rng(3);
+    for (int i = 0; i < 8; ++i) {
+      const auto q = t.sweep(i % 2, 2.4, rng);
+      l.learn(l.classify(q.data(), q.size(), true));
+    }
+    const double learned = l.state().offsets_mm[0];
+    ASSERT_GT(learned, 1.0) << pins_offsets;
+    // A 10-bin sweep reaches the long-sweep tier and is still scored less the learned offsets.
+    auto q = t.sweep(0, 2.4, rng);
+    l.classify(q.data(), q.size(), true);
+    EXPECT_EQ(seen[0], q[15]) << pins_offsets;
+    EXPECT_NEAR(seen[1], q[15] - learned, 1e-5) << pins_offsets;
+    // A 25-bin sweep (from bin 0) pins its own offsets: scored as it is at every scale, unless
+    // no sweep pins them.
+    for (std::uint32_t j = 0; j < 25; ++j) q[j] = t.table->material_values(0)[j] + 2.4f, q[40 + j] = 3.0f;
+    l.classify(q.data(), q.size(), true);
+    EXPECT_EQ(seen[0], q[15]) << pins_offsets;
+    if (pins_offsets > 0)
+      EXPECT_EQ(seen[1], q[15]);
+    else
+      EXPECT_NEAR(seen[1], q[15] - learned, 1e-5);
   }
-  SessionLearner l(settings, std::move(scorers), 2, std::make_shared<const SessionClassifier>(t.table, prior));
-  std::mt19937 rng(3);
-  for (int i = 0; i < 8; ++i) {
-    const auto q = t.sweep(i % 2, 2.4, rng);
-    l.learn(l.classify(q.data(), q.size(), true));
-  }
-  const double learned = l.state().offsets_mm[0];
-  ASSERT_GT(learned, 1.0);
-  auto q = t.sweep(0, 2.4, rng);
-  l.classify(q.data(), q.size(), true);
-  EXPECT_EQ(seen[0], q[15]);
-  EXPECT_NEAR(seen[1], q[15] - learned, 1e-5);
-  // A long sweep (the 25 bins from 0) is scored as it is at every scale.
-  for (std::uint32_t j = 0; j < 25; ++j) q[j] = t.table->material_values(0)[j] + 2.4f, q[40 + j] = 3.0f;
-  l.classify(q.data(), q.size(), true);
-  EXPECT_EQ(seen[0], q[15]);
-  EXPECT_EQ(seen[1], q[15]);
 }
 
 TEST(SessionOffsets, TheMeanIsThePosteriorMeanOfTheSharedTermsAndForgets) {

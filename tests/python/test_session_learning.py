@@ -65,11 +65,12 @@ def test_the_score_is_the_mixture_of_the_scaled_session_matchers(real_table: tof
     by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
     # Before any sweep the weights are the prior's and nothing is learned of where the session is;
     # after three sweeps they are what the sweeps' evidence made them, and the scales above 0 score
-    # the query less the offsets learned so far (scale 0 as it is: the table's own session).
+    # the query less the offsets learned so far (scale 0 as it is: the table's own session). Sweeps
+    # of 9 bins: from 10 a sweep is long and its scales above 1 are scored as scale 1.
     assert learning.session["weights"] == pytest.approx(PRIOR_WEIGHTS)
     assert learning.session["offsets_mm"] == [0.0] * real_table.n_rows
     for k in range(4):
-        q = sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 12, rng, offset=(0.8, -0.3))
+        q = sweep(real_table, ["cork", "wood", "paper", "acryl"][k], 40 + 5 * k, 9, rng, offset=(0.8, -0.3))
         got = {r.material: r.distance for r in learning.classify(q).ranking}
         w = np.array(learning.session["weights"])
         moved = q - learned_shift(real_table, learning.session)
@@ -101,12 +102,12 @@ def test_an_unmoved_session_settles_on_scale_zero(real_table: tofmat.ExemplarTab
 
 
 def test_a_long_sweep_is_scored_no_wider_than_its_tiers_scale(real_table: tofmat.ExemplarTable) -> None:
-    # From 20 bins on, the scales above 1 enter the mixture with scale 1's scores, from 40 those
-    # above 0.5 with scale 0.5's; under 20 every scale with its own.
+    # From 10 bins on, the scales above 1 enter the mixture with scale 1's scores, from 40 those
+    # above 0.5 with scale 0.5's; under 10 every scale with its own.
     rng = np.random.default_rng(4)
     prior = tofmat.SessionPrior.tuned(real_table)
     by_scale = [tofmat.Classifier(real_table, prior=scaled(prior, s)) for s in SCALES]
-    for n, widest in ((19, None), (20, 1.0), (39, 1.0), (40, 0.5)):
+    for n, widest in ((9, None), (10, 1.0), (39, 1.0), (40, 0.5)):
         learning = tofmat.Classifier(real_table, learning=True)
         q = sweep(real_table, "wood", 50, n, rng, offset=(1.5, 0.5))
         per = [{r.material: r.distance for r in c.classify(q).ranking} for c in by_scale]

@@ -194,14 +194,14 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
   // (scored_as[k]: whose scores scale k enters the mixture with; itself but in a long sweep, where
   // it is no wider than the scale of the last tier the query reaches)
   std::size_t widest = k_count - 1;
-  bool long_sweep = false;
-  if (!long_tiers_.empty()) {
+  bool pins_offsets = false;  // scored as it is: it places its own session
+  if (!long_tiers_.empty() || settings_.pins_offsets_bins > 0) {
     const std::uint32_t covered = bins_covered(query, n, n_rows_);
     for (const auto& [bins, index] : long_tiers_) {
       if (covered < bins) break;
-      long_sweep = true;
       widest = index;
     }
+    pins_offsets = settings_.pins_offsets_bins > 0 && covered >= settings_.pins_offsets_bins;
   }
   thread_local ClassifyScratch scratch;
   std::vector<std::size_t>& scored_as = scratch.scored_as;
@@ -220,8 +220,7 @@ SessionLearner::Scored SessionLearner::classify(const float* query, std::size_t 
         throw std::invalid_argument("session learning: a query of " + std::to_string(n) +
                                     " elements, the table's have " + std::to_string(shift.size()));
       }
-      // A long sweep pins its own offsets: it is scored as it is.
-      if (!long_sweep && std::any_of(shift.begin(), shift.end(), [](float v) { return v != 0.0F; })) {
+      if (!pins_offsets && std::any_of(shift.begin(), shift.end(), [](float v) { return v != 0.0F; })) {
         shifted.assign(query, query + n);
         for (std::size_t i = 0; i < n; ++i) shifted[i] -= shift[i];
       }

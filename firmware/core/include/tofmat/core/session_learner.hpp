@@ -25,22 +25,32 @@
 // (the last 1 / (1 - forget) sweeps count). The weights start at
 // `prior_weights` and start again there at reset (a new session).
 //
-// Two choices were made on the real curves' tuning split (docs/evaluation.md,
-// "Sessions of many sweeps"), never on the test split:
+// Two choices were made on the tuning splits (docs/evaluation.md,
+// "Sessions of many sweeps"), never on the test splits:
 // - The prior weights lean on the calibration's own scale (1) and twice it:
 //   one short sweep cannot tell the scales apart. Scored unlearned, equal
 //   weights lost up to 9.4 points (3 bins) to the better of Eq. (12) and the
 //   session matcher on that split at some spread from 0 to 2 x the
 //   calibration's; these weights lose at most 2.8 there.
-// - A long sweep pins its own offsets and drift down, and there a prior
+// - A long sweep constrains its own offsets and drift, and there a prior
 //   wider than the calibration's costs labels (at twice the spread, 100-bin
 //   sweeps scored under scale 2 are 2.4 points under scale 1), the more so
-//   the longer the sweep: from 20 bins its scales above 1 are scored as 1,
+//   the longer the sweep: from 10 bins its scales above 1 are scored as 1,
 //   from 40 bins those above 0.5 as 0.5 (on 45- to 100-bin sweeps, against
 //   the better of Eq. (12) and the session matcher: from the fifth sweep -0.8
 //   to +3.6 points, on a first one -3.3 to +6.6; scored no wider than 1
-//   there, -0.3 to +0.1 and 0.0 to +0.8). What the weights learn is
-//   unchanged: every scale's own evidence.
+//   there, -0.3 to +0.1 and 0.0 to +0.8). The first tier's 10 bins were
+//   chosen on the simulator's tuning split too (sessions of ten rendered
+//   sweeps at 1 and 2 x the spread, 0 and 10 degrees): with it at 20 bins,
+//   10- to 19-bin sweeps gave their material differences to the 2 and 4 x
+//   scales, where the rendered sweeps' misfit puts the weight, and from the
+//   fifth sweep the learner was 1.7 to 3.9 points under the better of the
+//   two at 10 bins; from 10 bins (a sweep scored as it is from 20), 0.3 to
+//   1.7 ahead at 10 bins and at worst 0.6 under at any length from 3 bins
+//   (on the curves' tuning split at worst 0.0 under). What the weights learn
+//   is unchanged: every scale's own evidence. The tiers do not decide
+//   whether the learned mean is taken out of a sweep (`pins_offsets_bins`,
+//   20): a 10-bin sweep still needs it where the session moved.
 //
 // Beside the weights (how far the session moved) it learns where it moved:
 // the mean of the session's offsets and drift (session_offsets.hpp), taken
@@ -48,8 +58,8 @@
 // far the session sits from that mean. Scale 0 stays the table's own session
 // and scores the query as it is: where the session did not move, the learned
 // mean is only the labels' noise, and shifting scale 0 by it costs labels
-// (docs/evaluation.md). A long sweep pins its own offsets and is scored as it
-// is at every scale.
+// (docs/evaluation.md). A sweep of 20 bins or more pins its own offsets and
+// is scored as it is at every scale (`pins_offsets_bins`).
 #pragma once
 
 #include <array>
@@ -85,7 +95,14 @@ struct SessionLearning {
     std::uint32_t bins;
     double scale;
   };
-  std::vector<LongSweep> long_sweeps{{20, 1.0}, {40, 0.5}};
+  std::vector<LongSweep> long_sweeps{{10, 1.0}, {40, 0.5}};
+  // A query covering at least this many bins (any row) pins its own offsets
+  // and drift: every scale scores it as it is, without the learned mean taken
+  // out. 0: no query does. Apart from the tiers: a 10- to 19-bin sweep is
+  // still too short to place a session that moved, and scored as it is it
+  // loses the labels the learned mean gives it (twins 1.2 mm apart in a
+  // session that moved 2.4 mm, tests/cpp/test_session_learner.cpp).
+  std::uint32_t pins_offsets_bins = 20;
   // Learn the session's offsets and drift too (session_offsets.hpp), where
   // the learner is given a session matcher to learn them with (make() does).
   bool learn_offsets = true;
